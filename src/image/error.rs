@@ -1,0 +1,24 @@
+use std::path::PathBuf;
+
+/// Everything that can be wrong with an exemplar image a user gives us.
+#[derive(Debug, thiserror::Error)]
+pub enum ImageError {
+    /// The file could not be read or decoded.
+    #[error("cannot load image {path}: {message}")]
+    Load { path: PathBuf, message: String },
+    /// The image has no pixels or an unsupported layout.
+    #[error("image {path}: {message}")]
+    Invalid { path: PathBuf, message: String },
+    /// The exemplar is smaller than a configured neighbourhood or patch.
+    #[error("exemplar {name} is {width}x{height} pixels, smaller than the {what} of {needed}x{needed} pixels; use a larger exemplar or a smaller {what}")]
+    TooSmall {
+        name: String,
+        width: u32,
+        height: u32,
+        what: String,
+        needed: u32,
+    },
+    /// A builtin exemplar name or option is wrong.
+    #[error("builtin exemplar {name:?}: {message}")]
+    Builtin { name: String, message: String },
+}

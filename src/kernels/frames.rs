@@ -1,0 +1,1 @@
+//! Tangent frames (s, t, n) per vertex.

@@ -1,0 +1,4 @@
+//! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
+
+pub mod frames;
+pub mod metrics;

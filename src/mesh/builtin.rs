@@ -1,0 +1,1 @@
+//! Procedural meshes (helper fills this in).

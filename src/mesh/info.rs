@@ -1,0 +1,1 @@
+//! Mesh statistics for `surfsynth mesh-info` (helper fills this in).

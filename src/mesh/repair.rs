@@ -1,0 +1,1 @@
+//! Load-time repairs (helper fills this in).

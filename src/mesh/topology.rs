@@ -1,0 +1,281 @@
+//! Derived connectivity of a [`PolyMesh`]: unique edges, one-rings, boundaries,
+//! non-manifold edges and connected components. Works on any polygon soup that
+//! satisfies the mesh invariant, including non-manifold and multi-component meshes.
+
+use super::PolyMesh;
+
+/// Edge and vertex adjacency of a mesh, in CSR arrays.
+#[derive(Clone, Debug, Default)]
+pub struct Topology {
+    /// Unique undirected edges `[a, b]` with `a < b`, sorted.
+    pub edges: Vec<[u32; 2]>,
+    /// CSR offsets into `edge_face_list`; `edges.len() + 1` entries.
+    pub edge_face_start: Vec<u32>,
+    /// Faces incident to each edge.
+    pub edge_face_list: Vec<u32>,
+    /// CSR offsets into `neighbour_list`; `vertex_count + 1` entries.
+    pub neighbour_start: Vec<u32>,
+    /// Sorted one-ring neighbours of each vertex.
+    pub neighbour_list: Vec<u32>,
+    /// CSR offsets into `vertex_face_list`.
+    pub vertex_face_start: Vec<u32>,
+    /// Faces incident to each vertex.
+    pub vertex_face_list: Vec<u32>,
+    /// For each corner, the edge from its vertex to the next corner's vertex.
+    pub corner_edge: Vec<u32>,
+}
+
+fn csr_from_pairs(n: usize, pairs: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; n + 1];
+    for &(k, _) in pairs {
+        start[k as usize + 1] += 1;
+    }
+    for i in 0..n {
+        start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut list = vec![0u32; pairs.len()];
+    for &(k, v) in pairs {
+        list[fill[k as usize] as usize] = v;
+        fill[k as usize] += 1;
+    }
+    (start, list)
+}
+
+impl Topology {
+    /// Builds the adjacency of `mesh`. O(corners · log corners).
+    pub fn build(mesh: &PolyMesh) -> Self {
+        let nv = mesh.vertex_count();
+        // Sides keyed by their undirected edge, remembering the corner.
+        let mut sides: Vec<(u64, u32)> = Vec::with_capacity(mesh.corner_count());
+        for f in 0..mesh.face_count() {
+            let r = mesh.face_corners(f);
+            let n = r.len();
+            for (i, c) in r.clone().enumerate() {
+                let a = mesh.corner_vertex[c];
+                let b = mesh.corner_vertex[r.start + (i + 1) % n];
+                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                sides.push((((lo as u64) << 32) | hi as u64, c as u32));
+            }
+        }
+        sides.sort_unstable();
+        let mut corner_face = vec![0u32; mesh.corner_count()];
+        for f in 0..mesh.face_count() {
+            for c in mesh.face_corners(f) {
+                corner_face[c] = f as u32;
+            }
+        }
+        let mut edges: Vec<[u32; 2]> = Vec::new();
+        let mut edge_face_pairs: Vec<(u32, u32)> = Vec::with_capacity(sides.len());
+        let mut corner_edge = vec![0u32; mesh.corner_count()];
+        for (key, c) in &sides {
+            let e = [(*key >> 32) as u32, *key as u32];
+            if edges.last() != Some(&e) {
+                edges.push(e);
+            }
+            let ei = edges.len() as u32 - 1;
+            corner_edge[*c as usize] = ei;
+            edge_face_pairs.push((ei, corner_face[*c as usize]));
+        }
+        let (edge_face_start, edge_face_list) = csr_from_pairs(edges.len(), &edge_face_pairs);
+
+        let mut nb_pairs: Vec<(u32, u32)> = Vec::with_capacity(edges.len() * 2);
+        for e in &edges {
+            if e[0] != e[1] {
+                nb_pairs.push((e[0], e[1]));
+                nb_pairs.push((e[1], e[0]));
+            }
+        }
+        nb_pairs.sort_unstable();
+        let (neighbour_start, neighbour_list) = csr_from_pairs(nv, &nb_pairs);
+
+        let mut vf_pairs: Vec<(u32, u32)> = Vec::with_capacity(mesh.corner_count());
+        for f in 0..mesh.face_count() {
+            for &v in mesh.face(f) {
+                vf_pairs.push((v, f as u32));
+            }
+        }
+        vf_pairs.sort_unstable();
+        vf_pairs.dedup();
+        let (vertex_face_start, vertex_face_list) = csr_from_pairs(nv, &vf_pairs);
+
+        Self {
+            edges,
+            edge_face_start,
+            edge_face_list,
+            neighbour_start,
+            neighbour_list,
+            vertex_face_start,
+            vertex_face_list,
+            corner_edge,
+        }
+    }
+
+    /// Number of vertices the topology was built for.
+    pub fn vertex_count(&self) -> usize {
+        self.neighbour_start.len().saturating_sub(1)
+    }
+
+    /// Sorted one-ring neighbours of `v`.
+    #[inline]
+    pub fn neighbours(&self, v: u32) -> &[u32] {
+        let v = v as usize;
+        &self.neighbour_list[self.neighbour_start[v] as usize..self.neighbour_start[v + 1] as usize]
+    }
+
+    /// Faces incident to `v`.
+    #[inline]
+    pub fn vertex_faces(&self, v: u32) -> &[u32] {
+        let v = v as usize;
+        &self.vertex_face_list
+            [self.vertex_face_start[v] as usize..self.vertex_face_start[v + 1] as usize]
+    }
+
+    /// Faces incident to edge `e`.
+    #[inline]
+    pub fn edge_faces(&self, e: u32) -> &[u32] {
+        let e = e as usize;
+        &self.edge_face_list[self.edge_face_start[e] as usize..self.edge_face_start[e + 1] as usize]
+    }
+
+    /// The edge joining `a` and `b`, if any.
+    pub fn find_edge(&self, a: u32, b: u32) -> Option<u32> {
+        let key = if a < b { [a, b] } else { [b, a] };
+        self.edges.binary_search(&key).ok().map(|e| e as u32)
+    }
+
+    /// Edges with exactly one incident face.
+    pub fn boundary_edges(&self) -> impl Iterator<Item = u32> + '_ {
+        (0..self.edges.len() as u32).filter(|&e| self.edge_faces(e).len() == 1)
+    }
+
+    /// Edges with more than two incident faces.
+    pub fn non_manifold_edges(&self) -> impl Iterator<Item = u32> + '_ {
+        (0..self.edges.len() as u32).filter(|&e| self.edge_faces(e).len() > 2)
+    }
+
+    /// True when `v` lies on a boundary edge.
+    pub fn is_boundary_vertex(&self, v: u32) -> bool {
+        self.neighbours(v).iter().any(|&w| {
+            self.find_edge(v, w)
+                .is_some_and(|e| self.edge_faces(e).len() == 1)
+        })
+    }
+
+    /// Per-vertex boundary flags.
+    pub fn boundary_vertex_flags(&self) -> Vec<bool> {
+        let mut flags = vec![false; self.vertex_count()];
+        for e in self.boundary_edges() {
+            let [a, b] = self.edges[e as usize];
+            flags[a as usize] = true;
+            flags[b as usize] = true;
+        }
+        flags
+    }
+
+    /// Closed loops of boundary edges, each as a vertex sequence. Boundary
+    /// vertices shared by several loops (pinch points) are walked greedily, so
+    /// every boundary edge lands in exactly one loop.
+    pub fn boundary_loops(&self) -> Vec<Vec<u32>> {
+        let boundary: Vec<u32> = self.boundary_edges().collect();
+        let mut pairs: Vec<(u32, u32)> = Vec::with_capacity(boundary.len() * 2);
+        for &e in &boundary {
+            let [a, b] = self.edges[e as usize];
+            pairs.push((a, e));
+            pairs.push((b, e));
+        }
+        pairs.sort_unstable();
+        let (start, list) = csr_from_pairs(self.vertex_count(), &pairs);
+        let mut used = vec![false; self.edges.len()];
+        let mut loops = Vec::new();
+        for &e0 in &boundary {
+            if used[e0 as usize] {
+                continue;
+            }
+            used[e0 as usize] = true;
+            let [first, mut cur] = self.edges[e0 as usize];
+            let mut lp = vec![first];
+            // Each step consumes one unused edge, so the walk ends.
+            while cur != first {
+                lp.push(cur);
+                let inc = &list[start[cur as usize] as usize..start[cur as usize + 1] as usize];
+                let Some(&next_e) = inc.iter().find(|&&e| !used[e as usize]) else {
+                    break;
+                };
+                used[next_e as usize] = true;
+                let [a, b] = self.edges[next_e as usize];
+                cur = if a == cur { b } else { a };
+            }
+            loops.push(lp);
+        }
+        loops
+    }
+
+    /// Connected components over edges: `(count, component id per vertex)`.
+    /// Isolated vertices form components of their own.
+    pub fn components(&self) -> (usize, Vec<u32>) {
+        let n = self.vertex_count();
+        let mut comp = vec![u32::MAX; n];
+        let mut count = 0u32;
+        let mut stack = Vec::new();
+        for s in 0..n {
+            if comp[s] != u32::MAX {
+                continue;
+            }
+            comp[s] = count;
+            stack.push(s as u32);
+            while let Some(v) = stack.pop() {
+                for &w in self.neighbours(v) {
+                    if comp[w as usize] == u32::MAX {
+                        comp[w as usize] = count;
+                        stack.push(w);
+                    }
+                }
+            }
+            count += 1;
+        }
+        (count as usize, comp)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3;
+
+    fn two_quads() -> PolyMesh {
+        let p = (0..6)
+            .map(|i| Vec3::new((i % 3) as f32, (i / 3) as f32, 0.0))
+            .collect();
+        PolyMesh::from_polygons(p, [&[0u32, 1, 4, 3][..], &[1, 2, 5, 4][..]])
+    }
+
+    #[test]
+    fn quad_strip_has_one_boundary_loop_and_seven_edges() {
+        let m = two_quads();
+        let t = Topology::build(&m);
+        assert_eq!(t.edges.len(), 7);
+        assert_eq!(t.boundary_edges().count(), 6);
+        let loops = t.boundary_loops();
+        assert_eq!(loops.len(), 1);
+        assert_eq!(loops[0].len(), 6);
+        assert_eq!(t.neighbours(1), &[0, 2, 4]);
+        assert_eq!(t.components().0, 1);
+        assert_eq!(t.vertex_faces(4), &[0, 1]);
+    }
+
+    #[test]
+    fn corner_edges_join_consecutive_corners() {
+        let m = two_quads();
+        let t = Topology::build(&m);
+        for f in 0..m.face_count() {
+            let face = m.face(f);
+            for (i, c) in m.face_corners(f).enumerate() {
+                let e = t.edges[t.corner_edge[c] as usize];
+                let a = face[i];
+                let b = face[(i + 1) % face.len()];
+                assert_eq!(e, [a.min(b), a.max(b)]);
+            }
+        }
+    }
+}

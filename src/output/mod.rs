@@ -1,0 +1,88 @@
+//! Exporters: meshes (PLY, OBJ+MTL+PNG), images, the preview renderer, metrics.
+//!
+//! Architecture invariant: every file is written through [`write_atomic`], to a
+//! temporary name in the destination folder and renamed, so a failed run never
+//! leaves a half-written file that looks complete.
+
+mod error;
+pub mod obj;
+pub mod ply;
+pub mod render;
+
+pub use error::OutputError;
+
+use std::io::Write;
+use std::path::Path;
+
+/// Writes `path` atomically: the closure writes into a temporary file next to
+/// `path`, which is renamed over `path` only when the closure succeeded.
+pub fn write_atomic(
+    path: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), OutputError> {
+    let io_err = |source| OutputError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    std::fs::create_dir_all(&dir).map_err(io_err)?;
+    let file_name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "output".to_string());
+    let tmp = dir.join(format!(".{file_name}.{}.tmp", std::process::id()));
+    let result = (|| {
+        let file = std::fs::File::create(&tmp)?;
+        let mut buf = std::io::BufWriter::new(file);
+        write(&mut buf)?;
+        let file = buf.into_inner().map_err(|e| e.into_error())?;
+        file.sync_all()?;
+        std::fs::rename(&tmp, path)
+    })();
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(io_err)
+}
+
+/// Writes bytes atomically.
+pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    write_atomic(path, |w| w.write_all(bytes))
+}
+
+/// Encodes an image (values clamped to `[0, 1]`, 1–4 channels; more are cut to
+/// the first three) as 8-bit PNG bytes.
+pub fn encode_png(img: &crate::image::Image) -> Result<Vec<u8>, OutputError> {
+    use image::ImageEncoder;
+    let c = img.channels as usize;
+    let (out_c, color) = match c {
+        1 => (1, image::ExtendedColorType::L8),
+        2 => (2, image::ExtendedColorType::La8),
+        3 => (3, image::ExtendedColorType::Rgb8),
+        4 => (4, image::ExtendedColorType::Rgba8),
+        _ => (3, image::ExtendedColorType::Rgb8),
+    };
+    let mut bytes = Vec::with_capacity(img.pixel_count() * out_c);
+    for px in img.data.chunks_exact(c.max(1)) {
+        for v in &px[..out_c] {
+            bytes.push((v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+        }
+    }
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(&bytes, img.width, img.height, color)
+        .map_err(|e| OutputError::Encode {
+            what: "PNG".into(),
+            message: e.to_string(),
+        })?;
+    Ok(out)
+}
+
+/// Writes an image as an 8-bit PNG, atomically.
+pub fn write_png(path: &Path, img: &crate::image::Image) -> Result<(), OutputError> {
+    let bytes = encode_png(img)?;
+    write_bytes_atomic(path, &bytes)
+}
