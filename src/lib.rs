@@ -4,8 +4,19 @@
 //! mesh, with the four classic methods (Wei & Levoy 2001, Bangay & Morkel 2006,
 //! Praun, Finkelstein & Hoppe 2000, Zelinka & Garland 2004) as schedulable
 //! stages of one `bevy_ecs` world. See `ARCHITECTURE.md` for the map.
+//!
+//! * [`mesh`], [`image`]: data models, loaders, procedural inputs.
+//! * [`kernels`]: the algorithms, pure functions over slices (no bevy).
+//! * [`stages`]: the world model and one folder per stage (settings, systems).
+//! * [`config`], [`pipeline`]: TOML configs into a validated schedule; running it.
+//! * [`output`]: exporters, preview renderer, atomic writes.
 
+pub mod config;
 pub mod image;
 pub mod kernels;
 pub mod mesh;
 pub mod output;
+pub mod pipeline;
+pub mod progress;
+pub mod stages;
+pub mod telemetry;

@@ -10,7 +10,9 @@ pub enum ImageError {
     #[error("image {path}: {message}")]
     Invalid { path: PathBuf, message: String },
     /// The exemplar is smaller than a configured neighbourhood or patch.
-    #[error("exemplar {name} is {width}x{height} pixels, smaller than the {what} of {needed}x{needed} pixels; use a larger exemplar or a smaller {what}")]
+    #[error(
+        "exemplar {name} is {width}x{height} pixels, smaller than the {what} of {needed}x{needed} pixels; use a larger exemplar or a smaller {what}"
+    )]
     TooSmall {
         name: String,
         width: u32,

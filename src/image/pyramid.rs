@@ -108,8 +108,14 @@ mod tests {
         let s = gaussian_stack(&img, 4, Wrap::Repeat);
         assert!(s.iter().all(|l| l.width == 32 && l.height == 32));
         for w in s.windows(2) {
-            assert!(energy(&w[1]) < 0.7 * energy(&w[0]), "each level is smoother");
-            assert!((w[1].mean()[0] - w[0].mean()[0]).abs() < 1e-4, "toroidal blur keeps the mean");
+            assert!(
+                energy(&w[1]) < 0.7 * energy(&w[0]),
+                "each level is smoother"
+            );
+            assert!(
+                (w[1].mean()[0] - w[0].mean()[0]).abs() < 1e-4,
+                "toroidal blur keeps the mean"
+            );
         }
     }
 }

@@ -5,6 +5,7 @@
 //! leaves a half-written file that looks complete.
 
 mod error;
+pub mod export;
 pub mod obj;
 pub mod ply;
 pub mod render;

@@ -1,0 +1,289 @@
+//! Pipeline configuration: raw TOML types (serde, unknown keys rejected),
+//! `--set` overrides, and the source text kept for line numbers in errors.
+//!
+//! The typed, validated form of each stage lives with the stage
+//! (`crate::stages`); [`crate::pipeline::Pipeline::from_config`] turns a
+//! [`RawConfig`] into it.
+
+mod error;
+pub mod params;
+
+pub use error::ConfigError;
+pub use params::{ParamDoc, ParamRange, StageSettings};
+
+use crate::image::sample::Wrap;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// The config file's text and where it came from.
+#[derive(Clone, Debug)]
+pub struct ConfigSource {
+    /// Name shown in messages (the path as given).
+    pub file: String,
+    /// The TOML text (after `--set` overrides, if any).
+    pub text: String,
+    /// Folder against which relative input paths are resolved: the current
+    /// working directory, so paths behave as on the command line.
+    pub base_dir: PathBuf,
+}
+
+impl ConfigSource {
+    /// Reads a config file.
+    pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Ok(Self {
+            file: path.display().to_string(),
+            text,
+            base_dir: PathBuf::from("."),
+        })
+    }
+
+    /// A config given as text (tests, embedded configs).
+    pub fn from_text(name: &str, text: &str) -> Self {
+        Self {
+            file: name.to_string(),
+            text: text.to_string(),
+            base_dir: PathBuf::from("."),
+        }
+    }
+
+    /// 1-based line of a byte offset into the text.
+    pub fn line_of(&self, offset: usize) -> usize {
+        1 + self
+            .text
+            .as_bytes()
+            .iter()
+            .take(offset)
+            .filter(|&&b| b == b'\n')
+            .count()
+    }
+
+    /// Applies `--set PATH=VALUE` overrides. PATH is the dotted TOML path;
+    /// `stage.N` addresses the N-th `[[stage]]` (1-based, as messages count
+    /// them). VALUE is parsed as a TOML value, or taken as a string when it is
+    /// not one (`--set input.mesh=../x.obj`). Line numbers in later messages
+    /// then refer to the config as rewritten with the overrides.
+    pub fn apply_overrides(&mut self, overrides: &[String]) -> Result<(), ConfigError> {
+        if overrides.is_empty() {
+            return Ok(());
+        }
+        let mut table: toml::Table =
+            toml::from_str(&self.text).map_err(|e| ConfigError::Syntax {
+                file: self.file.clone(),
+                message: e.to_string(),
+            })?;
+        for assignment in overrides {
+            apply_override(&mut table, assignment)?;
+        }
+        self.text = toml::to_string(&table).map_err(|e| ConfigError::Override {
+            assignment: overrides.join(" "),
+            message: e.to_string(),
+        })?;
+        self.file = format!("{} (with --set overrides)", self.file);
+        Ok(())
+    }
+
+    /// Parses the text into the raw config.
+    pub fn parse(&self) -> Result<RawConfig, ConfigError> {
+        toml::from_str(&self.text).map_err(|e| ConfigError::Syntax {
+            file: self.file.clone(),
+            message: e.to_string().trim_end().to_string(),
+        })
+    }
+}
+
+fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), ConfigError> {
+    let err = |message: String| ConfigError::Override {
+        assignment: assignment.to_string(),
+        message,
+    };
+    let (path, value_text) = assignment
+        .split_once('=')
+        .ok_or_else(|| err("expected PATH=VALUE, e.g. stage.2.iterations=50".into()))?;
+    let path = path.trim();
+    let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value_text}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(value_text.to_string()));
+    let segments: Vec<&str> = path.split('.').collect();
+    if segments.iter().any(|s| s.is_empty()) {
+        return Err(err(format!("PATH {path:?} has an empty segment")));
+    }
+    let mut cur = table;
+    let (last, parents) = segments
+        .split_last()
+        .ok_or_else(|| err("empty PATH".into()))?;
+    let mut i = 0;
+    while i < parents.len() {
+        let seg = parents[i];
+        if seg == "stage" {
+            let idx_text = segments
+                .get(i + 1)
+                .ok_or_else(|| err("`stage` must be followed by a stage number".into()))?;
+            let n: usize = idx_text
+                .parse()
+                .map_err(|_| err(format!("stage number {idx_text:?} is not a number")))?;
+            let stages = cur
+                .get_mut("stage")
+                .and_then(|v| v.as_array_mut())
+                .ok_or_else(|| err("the config has no [[stage]] entries".into()))?;
+            let count = stages.len();
+            let entry = n
+                .checked_sub(1)
+                .and_then(|k| stages.get_mut(k))
+                .ok_or_else(|| err(format!("stage {n} does not exist; stages are 1..={count}")))?;
+            if i + 1 == parents.len() {
+                let t = entry
+                    .as_table_mut()
+                    .ok_or_else(|| err(format!("stage {n} is not a table")))?;
+                t.insert(last.to_string(), value);
+                return Ok(());
+            }
+            cur = entry
+                .as_table_mut()
+                .ok_or_else(|| err(format!("stage {n} is not a table")))?;
+            i += 2;
+            continue;
+        }
+        let next = cur
+            .entry(seg.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        cur = next
+            .as_table_mut()
+            .ok_or_else(|| err(format!("`{seg}` is a value, not a table")))?;
+        i += 1;
+    }
+    cur.insert(last.to_string(), value);
+    Ok(())
+}
+
+/// The config file as written, before validation.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawConfig {
+    /// Seed of every random choice in the run. Default 0.
+    #[serde(default)]
+    pub seed: u64,
+    /// What to texture with what.
+    pub input: RawInput,
+    /// The stages, in order.
+    #[serde(default)]
+    pub stage: Vec<Spanned<BTreeMap<Spanned<String>, toml::Value>>>,
+    /// Where results go.
+    #[serde(default)]
+    pub output: RawOutput,
+}
+
+/// `[input]`: the mesh and the exemplar.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawInput {
+    /// `builtin:NAME` or a path to .obj, .ply, .off or .stl.
+    pub mesh: String,
+    /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga.
+    pub exemplar: String,
+    /// Options of a builtin mesh (`surfsynth stages` lists them).
+    #[serde(default)]
+    pub mesh_options: toml::Table,
+    /// Options of a builtin exemplar.
+    #[serde(default)]
+    pub exemplar_options: toml::Table,
+    /// Merge vertices at identical positions on load (scans exported with split vertices).
+    #[serde(default)]
+    pub merge_duplicates: bool,
+    /// Whether the exemplar tiles: `repeat` (toroidal neighbourhoods) or `clamp`.
+    #[serde(default)]
+    pub exemplar_wrap: Wrap,
+}
+
+/// `[output]`: the output folder and run-wide output settings.
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RawOutput {
+    /// Output folder (created). Default `out/run`.
+    pub dir: String,
+    /// Neighbourhood width of the texture-energy metric, texels (odd, 3..=15).
+    pub metric_neighbourhood: u32,
+    /// Sampled locations of the texture-energy metric (10..=100000).
+    pub metric_samples: usize,
+}
+
+impl Default for RawOutput {
+    fn default() -> Self {
+        Self {
+            dir: "out/run".into(),
+            metric_neighbourhood: 7,
+            metric_samples: 1000,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const TEXT: &str = r#"
+seed = 1
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+
+[[stage]]
+kind = "orientation"
+mode = "global"
+
+[[stage]]
+kind = "init_colours"
+"#;
+
+    #[test]
+    fn overrides_address_stages_from_one_and_create_tables() {
+        let mut src = ConfigSource::from_text("t.toml", TEXT);
+        src.apply_overrides(&[
+            "stage.1.mode=random".into(),
+            "seed=3".into(),
+            "input.mesh=../shared/data/meshes/knot.off".into(),
+            "input.mesh_options.subdivisions=2".into(),
+        ])
+        .unwrap();
+        let raw = src.parse().unwrap();
+        assert_eq!(raw.seed, 3);
+        assert_eq!(raw.input.mesh, "../shared/data/meshes/knot.off");
+        assert_eq!(raw.input.mesh_options["subdivisions"].as_integer(), Some(2));
+        let mode = raw.stage[0]
+            .get_ref()
+            .iter()
+            .find(|(k, _)| k.get_ref() == "mode")
+            .map(|(_, v)| v.clone());
+        assert_eq!(mode, Some(toml::Value::String("random".into())));
+    }
+
+    #[test]
+    fn override_errors_name_the_problem() {
+        let mut src = ConfigSource::from_text("t.toml", TEXT);
+        let e = src.apply_overrides(&["stage.5.x=1".into()]).unwrap_err();
+        assert!(e.to_string().contains("stages are 1..=2"), "{e}");
+        let e = src.apply_overrides(&["seed".into()]).unwrap_err();
+        assert!(e.to_string().contains("PATH=VALUE"), "{e}");
+    }
+
+    #[test]
+    fn unknown_top_level_key_is_rejected_with_its_line() {
+        let src = ConfigSource::from_text("t.toml", &format!("bogus = 1\n{TEXT}"));
+        let e = src.parse().unwrap_err().to_string();
+        assert!(e.contains("bogus") && e.contains("t.toml"), "{e}");
+    }
+
+    #[test]
+    fn stage_keys_carry_spans() {
+        let src = ConfigSource::from_text("t.toml", TEXT);
+        let raw = src.parse().unwrap();
+        let (key, _) = raw.stage[0].get_ref().iter().next().unwrap();
+        assert_eq!(src.line_of(key.span().start), 8);
+    }
+}

@@ -1,0 +1,194 @@
+//! Builds a `bevy_ecs` schedule from a validated config and runs it.
+//!
+//! One system set per stage, chained in config order; each set is bracketed
+//! by a begin system (opens the stage's tracing span, starts its clock) and an
+//! end system (records its wall time). The executor is single-threaded: the
+//! stages parallelise inside their kernels with rayon, so two thread pools
+//! never fight over the cores.
+
+mod error;
+mod input;
+pub mod registry;
+mod report;
+mod run;
+
+pub use error::PipelineError;
+pub use input::{LoadedInput, load_input};
+pub use registry::{Datum, Stage, StageCtx, StageInfo, StagePlan, registry};
+pub use report::{describe_stages, format_report};
+pub use run::{
+    RunOptions, RunReport, StageSet, build_schedule, peak_rss_bytes, run, run_in_world, setup_world,
+};
+
+use crate::config::{ConfigError, ConfigSource, RawInput, RawOutput};
+use std::collections::HashSet;
+
+/// A validated pipeline: every stage parsed into typed settings, the order
+/// of stages checked against what each needs.
+pub struct Pipeline {
+    /// Where the config came from (for messages).
+    pub source: ConfigSource,
+    /// Seed of every random stream.
+    pub seed: u64,
+    /// `[input]`.
+    pub input: RawInput,
+    /// `[output]`.
+    pub output: RawOutput,
+    /// The stages, in order.
+    pub stages: Vec<Box<dyn StagePlan>>,
+}
+
+impl std::fmt::Debug for Pipeline {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Pipeline")
+            .field("file", &self.source.file)
+            .field("seed", &self.seed)
+            .field(
+                "stages",
+                &self.stages.iter().map(|s| s.kind()).collect::<Vec<_>>(),
+            )
+            .finish()
+    }
+}
+
+impl Pipeline {
+    /// Parses and validates a config: unknown stages, keys, types and ranges,
+    /// and stages whose inputs no earlier stage produces, are errors naming
+    /// the file, the line and what is allowed.
+    pub fn from_source(source: ConfigSource) -> Result<Self, ConfigError> {
+        let raw = source.parse()?;
+        let file = source.file.clone();
+        let value_err = |key: &str, message: String| ConfigError::Value {
+            file: file.clone(),
+            key: key.to_string(),
+            message,
+        };
+        if raw.output.dir.trim().is_empty() {
+            return Err(value_err("output.dir", "must name a folder".into()));
+        }
+        let n = raw.output.metric_neighbourhood;
+        if !(3..=15).contains(&n) || n % 2 == 0 {
+            return Err(value_err(
+                "output.metric_neighbourhood",
+                format!("{n} is not allowed; allowed: odd, 3..=15"),
+            ));
+        }
+        if !(10..=100_000).contains(&raw.output.metric_samples) {
+            return Err(value_err(
+                "output.metric_samples",
+                format!(
+                    "{} is out of range; allowed: 10..=100000",
+                    raw.output.metric_samples
+                ),
+            ));
+        }
+        let all = registry();
+        let allowed_kinds = all.iter().map(|s| s.kind).collect::<Vec<_>>().join(", ");
+        let mut stages = Vec::with_capacity(raw.stage.len());
+        let mut available: HashSet<Datum> = HashSet::new();
+        for (i, spanned) in raw.stage.iter().enumerate() {
+            let index = i + 1;
+            let table_line = source.line_of(spanned.span().start);
+            let entries = spanned.get_ref();
+            let kind_value = entries.iter().find(|(k, _)| k.get_ref() == "kind");
+            let Some((kind_key, kind_value)) = kind_value else {
+                return Err(ConfigError::UnknownStage {
+                    file: file.clone(),
+                    line: table_line,
+                    index,
+                    kind: String::new(),
+                    allowed: format!("a `kind = \"...\"` line with one of: {allowed_kinds}"),
+                });
+            };
+            let kind_line = source.line_of(kind_key.span().start);
+            let kind = kind_value.as_str().unwrap_or_default().to_string();
+            let Some(info) = all.iter().find(|s| s.kind == kind) else {
+                return Err(ConfigError::UnknownStage {
+                    file: file.clone(),
+                    line: kind_line,
+                    index,
+                    kind,
+                    allowed: allowed_kinds,
+                });
+            };
+            let mut table = toml::Table::new();
+            for (k, v) in entries {
+                if k.get_ref() != "kind" {
+                    table.insert(k.get_ref().clone(), v.clone());
+                }
+            }
+            let plan = (info.parse)(table).map_err(|(param, message)| {
+                let line = entries
+                    .iter()
+                    .find(|(k, _)| k.get_ref() == &param)
+                    .map(|(k, _)| source.line_of(k.span().start))
+                    .unwrap_or(table_line);
+                ConfigError::Param {
+                    file: file.clone(),
+                    line,
+                    index,
+                    kind: kind.clone(),
+                    param,
+                    message,
+                }
+            })?;
+            for need in plan.requires() {
+                if !available.contains(&need) {
+                    let producers = need.producers();
+                    return Err(ConfigError::MissingInput {
+                        file: file.clone(),
+                        line: kind_line,
+                        index,
+                        kind,
+                        needs: need.describe().to_string(),
+                        hint: format!(
+                            "add {} before it",
+                            producers
+                                .iter()
+                                .map(|p| format!("`{p}`"))
+                                .collect::<Vec<_>>()
+                                .join(" or ")
+                        ),
+                    });
+                }
+            }
+            available.extend(plan.produces());
+            stages.push(plan);
+        }
+        Ok(Self {
+            seed: raw.seed,
+            input: raw.input,
+            output: raw.output,
+            stages,
+            source,
+        })
+    }
+
+    /// The config with every default filled in, as written to `<out>/config.toml`.
+    pub fn resolved_toml(&self) -> String {
+        let mut root = toml::Table::new();
+        root.insert("seed".into(), toml::Value::Integer(self.seed as i64));
+        if let Ok(t) = toml::Table::try_from(&self.input) {
+            root.insert("input".into(), toml::Value::Table(t));
+        }
+        let stages = self
+            .stages
+            .iter()
+            .map(|s| {
+                let mut t = toml::Table::new();
+                t.insert("kind".into(), toml::Value::String(s.kind().into()));
+                t.extend(s.resolved());
+                toml::Value::Table(t)
+            })
+            .collect();
+        root.insert("stage".into(), toml::Value::Array(stages));
+        if let Ok(t) = toml::Table::try_from(&self.output) {
+            root.insert("output".into(), toml::Value::Table(t));
+        }
+        format!(
+            "# Resolved configuration of this run (defaults filled in).\n# Source: {}\n\n{}",
+            self.source.file,
+            toml::to_string(&root).unwrap_or_default()
+        )
+    }
+}

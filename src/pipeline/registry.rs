@@ -1,0 +1,193 @@
+//! The stage registry: every stage kind, its documented settings, what it
+//! needs and makes, and how it adds its systems to the schedule.
+
+use crate::config::params::{ParamDoc, StageSettings, check_range, defaults_table};
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+
+/// Data a stage reads or writes, for validating the order of stages.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Datum {
+    /// Per-vertex tangent frames on the active mesh.
+    Frames,
+    /// Per-vertex colours on the active mesh.
+    Colours,
+    /// A multi-level mesh pyramid (retile, √2 subdivision).
+    MeshPyramid,
+    /// Per-corner texture coordinates on the active mesh.
+    CornerUvs,
+    /// The jump map of the exemplar.
+    JumpMap,
+    /// Lapped-texture pastes.
+    Patches,
+}
+
+impl Datum {
+    /// What it is, for messages.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Datum::Frames => "tangent frames",
+            Datum::Colours => "vertex colours",
+            Datum::MeshPyramid => "a mesh pyramid",
+            Datum::CornerUvs => "per-corner texture coordinates",
+            Datum::JumpMap => "a jump map",
+            Datum::Patches => "lapped-texture pastes",
+        }
+    }
+
+    /// Which stages produce it.
+    pub fn producers(self) -> Vec<&'static str> {
+        registry()
+            .iter()
+            .filter(|s| (s.produces_any)().contains(&self))
+            .map(|s| s.kind)
+            .collect()
+    }
+}
+
+/// Context handed to a stage when it builds its systems.
+#[derive(Clone, Copy, Debug)]
+pub struct StageCtx {
+    /// 0-based position in the pipeline (metrics and RNG streams use it).
+    pub index: usize,
+}
+
+/// A stage kind: its settings and its systems.
+pub trait Stage: 'static {
+    /// The `kind` in `[[stage]]`.
+    const KIND: &'static str;
+    /// One line: what it does.
+    const SUMMARY: &'static str;
+    /// Paper and section it implements.
+    const PAPER: &'static str;
+    /// Its typed settings.
+    type Settings: StageSettings;
+    /// Data it needs from earlier stages.
+    fn requires(settings: &Self::Settings) -> Vec<Datum>;
+    /// Data it produces (for any settings, used in hints).
+    fn produces(settings: &Self::Settings) -> Vec<Datum>;
+    /// Its systems, run in order inside the stage's system set.
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem>;
+}
+
+/// A configured stage, type-erased.
+pub trait StagePlan: Send + Sync {
+    /// Stage kind.
+    fn kind(&self) -> &'static str;
+    /// Data it needs.
+    fn requires(&self) -> Vec<Datum>;
+    /// Data it makes.
+    fn produces(&self) -> Vec<Datum>;
+    /// The resolved settings (defaults filled in), for `config.toml` in the output.
+    fn resolved(&self) -> toml::Table;
+    /// Its systems.
+    fn systems(&self, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem>;
+}
+
+struct Plan<S: Stage>(S::Settings);
+
+impl<S: Stage> StagePlan for Plan<S> {
+    fn kind(&self) -> &'static str {
+        S::KIND
+    }
+    fn requires(&self) -> Vec<Datum> {
+        S::requires(&self.0)
+    }
+    fn produces(&self) -> Vec<Datum> {
+        S::produces(&self.0)
+    }
+    fn resolved(&self) -> toml::Table {
+        toml::Table::try_from(&self.0).unwrap_or_default()
+    }
+    fn systems(&self, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        S::systems(self.0.clone(), ctx)
+    }
+}
+
+/// A parameter error: `(parameter, message)`.
+pub type ParamError = (String, String);
+
+/// Everything the registry knows about a stage kind.
+pub struct StageInfo {
+    /// The `kind` string.
+    pub kind: &'static str,
+    /// One line: what it does.
+    pub summary: &'static str,
+    /// Paper and section.
+    pub paper: &'static str,
+    /// Parameter documentation.
+    pub params: &'static [ParamDoc],
+    /// Default settings as TOML.
+    pub defaults: fn() -> toml::Table,
+    /// Data produced with default settings.
+    pub produces_any: fn() -> Vec<Datum>,
+    /// Parses and checks settings from the stage's table (without `kind`).
+    pub parse: fn(toml::Table) -> Result<Box<dyn StagePlan>, ParamError>,
+}
+
+fn parse_stage<S: Stage>(table: toml::Table) -> Result<Box<dyn StagePlan>, ParamError> {
+    for (key, value) in &table {
+        let Some(doc) = S::Settings::PARAMS.iter().find(|p| p.name == key) else {
+            let allowed: Vec<&str> = S::Settings::PARAMS.iter().map(|p| p.name).collect();
+            return Err((
+                key.clone(),
+                format!(
+                    "unknown parameter; allowed: {}",
+                    if allowed.is_empty() {
+                        "none".to_string()
+                    } else {
+                        allowed.join(", ")
+                    }
+                ),
+            ));
+        };
+        check_range(value, &doc.range).map_err(|m| (key.clone(), m))?;
+    }
+    let settings: S::Settings = table.clone().try_into().map_err(|e: toml::de::Error| {
+        // serde names the type but not always the key: find the key that
+        // fails on its own over the defaults.
+        let culprit = table.iter().find(|(k, v)| {
+            let mut alone = defaults_table::<S::Settings>();
+            alone.insert((*k).clone(), (*v).clone());
+            alone.try_into::<S::Settings>().is_err()
+        });
+        let param = culprit
+            .map(|(k, _)| k.clone())
+            .unwrap_or_else(|| "?".into());
+        (param, e.message().trim_end().to_string())
+    })?;
+    settings.check()?;
+    Ok(Box::new(Plan::<S>(settings)))
+}
+
+fn produces_default<S: Stage>() -> Vec<Datum> {
+    S::produces(&S::Settings::default())
+}
+
+/// The registry entry of stage `S`.
+pub fn entry<S: Stage>() -> StageInfo {
+    StageInfo {
+        kind: S::KIND,
+        summary: S::SUMMARY,
+        paper: S::PAPER,
+        params: S::Settings::PARAMS,
+        defaults: defaults_table::<S::Settings>,
+        produces_any: produces_default::<S>,
+        parse: parse_stage::<S>,
+    }
+}
+
+/// Every stage, in the order `surfsynth stages` lists them.
+pub fn registry() -> Vec<StageInfo> {
+    use crate::stages::*;
+    vec![
+        entry::<orientation::Orientation>(),
+        entry::<init_colours::InitColours>(),
+        entry::<export::Export>(),
+    ]
+}
+
+/// Looks a stage kind up.
+pub fn find(kind: &str) -> Option<StageInfo> {
+    registry().into_iter().find(|s| s.kind == kind)
+}

@@ -1,0 +1,233 @@
+//! Running a pipeline: inputs into a fresh `World`, the schedule, the result
+//! metrics, then the files.
+
+use super::{LoadedInput, Pipeline, PipelineError, StageCtx, load_input};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::SingleThreadedExecutor;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// The system set of stage `i` (0-based).
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct StageSet(pub usize);
+
+/// The set of the result-metrics system that follows every stage.
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ResultMetricsSet;
+
+/// Options of one run.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Output folder; `[output].dir` when `None`.
+    pub out_dir: Option<PathBuf>,
+}
+
+/// What a run did.
+#[derive(Clone, Debug)]
+pub struct RunReport {
+    /// Where the files went.
+    pub out_dir: PathBuf,
+    /// Files written, in order.
+    pub files: Vec<PathBuf>,
+    /// Per-stage wall times.
+    pub timings: Vec<StageTiming>,
+    /// Everything written to `metrics.json`.
+    pub metrics: serde_json::Value,
+}
+
+struct StageSpan(#[allow(dead_code)] tracing::span::EnteredSpan);
+
+#[derive(Resource)]
+struct StageClock(Instant);
+
+fn no_failure(failure: Res<StageFailure>) -> bool {
+    failure.0.is_none()
+}
+
+/// Adds the world's resources and the source mesh entity.
+pub fn setup_world(pipeline: &Pipeline, world: &mut World, input: LoadedInput) {
+    let spacing = input.mesh.average_edge_length().max(f32::MIN_POSITIVE);
+    world.insert_resource(Exemplar {
+        image: input.exemplar,
+        name: input.exemplar_name,
+        wrap: pipeline.input.exemplar_wrap,
+    });
+    world.insert_resource(RunSeed(pipeline.seed));
+    world.insert_resource(TexelSpacing(spacing));
+    world.insert_resource(Metrics::default());
+    world.insert_resource(StageTimings::default());
+    world.insert_resource(StageFailure::default());
+    world.insert_resource(ExportJob::default());
+    let source = world
+        .spawn((SourceMesh, MeshLevel(0), Geometry(input.mesh)))
+        .id();
+    world.insert_resource(ActiveMesh(source));
+}
+
+/// The schedule of a pipeline: one chained system set per stage, then the
+/// result metrics.
+pub fn build_schedule(pipeline: &Pipeline) -> Schedule {
+    let mut schedule = Schedule::default();
+    schedule.set_executor(SingleThreadedExecutor::new());
+    let n = pipeline.stages.len();
+    for (i, stage) in pipeline.stages.iter().enumerate() {
+        let kind = stage.kind();
+        let begin = move |world: &mut World| {
+            let span = tracing::info_span!("stage", index = i + 1, kind).entered();
+            tracing::info!("stage {} ({kind}) started", i + 1);
+            world.insert_non_send(StageSpan(span));
+            world.insert_resource(StageClock(Instant::now()));
+        };
+        let end = move |world: &mut World| {
+            let seconds = world
+                .get_resource::<StageClock>()
+                .map(|c| c.0.elapsed().as_secs_f64())
+                .unwrap_or(0.0);
+            world.resource_mut::<StageTimings>().0.push(StageTiming {
+                index: i + 1,
+                kind: kind.to_string(),
+                seconds,
+            });
+            world.remove_non_send::<StageSpan>();
+            tracing::info!("stage {} ({kind}) done in {seconds:.3} s", i + 1);
+        };
+        schedule.add_systems(
+            (begin, stage.systems(StageCtx { index: i }), end)
+                .chain()
+                .in_set(StageSet(i)),
+        );
+        schedule.configure_sets(StageSet(i).run_if(no_failure));
+        if i > 0 {
+            schedule.configure_sets(StageSet(i).after(StageSet(i - 1)));
+        }
+    }
+    let metrics = schedule_result_metrics(pipeline);
+    if n > 0 {
+        schedule.configure_sets(ResultMetricsSet.after(StageSet(n - 1)));
+    }
+    schedule.configure_sets(ResultMetricsSet.run_if(no_failure));
+    schedule.add_systems(metrics.in_set(ResultMetricsSet));
+    schedule
+}
+
+fn schedule_result_metrics(
+    pipeline: &Pipeline,
+) -> bevy_ecs::schedule::ScheduleConfigs<bevy_ecs::system::ScheduleSystem> {
+    let settings = crate::kernels::metrics::EnergySettings {
+        neighbourhood: pipeline.output.metric_neighbourhood,
+        samples: pipeline.output.metric_samples,
+        seed: pipeline.seed,
+    };
+    crate::stages::result_metrics::system(settings)
+}
+
+/// Sets the world up from `input`, runs the whole schedule, and returns the
+/// first stage failure, if any.
+pub fn run_in_world(
+    pipeline: &Pipeline,
+    world: &mut World,
+    input: LoadedInput,
+) -> Result<(), PipelineError> {
+    setup_world(pipeline, world, input);
+    let mut schedule = build_schedule(pipeline);
+    schedule.run(world);
+    if let Some(err) = world.resource_mut::<StageFailure>().0.take() {
+        return Err(err);
+    }
+    Ok(())
+}
+
+/// Peak resident set size of this process in bytes (Linux; `None` elsewhere).
+pub fn peak_rss_bytes() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kb * 1024)
+}
+
+/// Runs a pipeline end to end and writes its outputs.
+pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, PipelineError> {
+    let started = Instant::now();
+    let out_dir = options
+        .out_dir
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(&pipeline.output.dir));
+    let input = load_input(
+        &pipeline.input,
+        &pipeline.source.base_dir,
+        &pipeline.source.file,
+    )?;
+    tracing::info!(
+        "input: {} vertices, {} faces ({}); exemplar {} {}x{}x{}",
+        input.mesh.vertex_count(),
+        input.mesh.face_count(),
+        input.load_report,
+        input.exemplar_name,
+        input.exemplar.width,
+        input.exemplar.height,
+        input.exemplar.channels
+    );
+    let input_counts = serde_json::json!({
+        "vertices": input.mesh.vertex_count(),
+        "faces": input.mesh.face_count(),
+        "repairs": input.load_report,
+        "exemplar": input.exemplar_name,
+        "exemplar_size": [input.exemplar.width, input.exemplar.height, input.exemplar.channels],
+    });
+    let mut world = World::new();
+    run_in_world(pipeline, &mut world, input)?;
+
+    let _span = tracing::info_span!("write_outputs").entered();
+    let mut files = Vec::new();
+    let config_path = out_dir.join("config.toml");
+    crate::output::write_bytes_atomic(&config_path, pipeline.resolved_toml().as_bytes())?;
+    files.push(config_path);
+    let job = std::mem::take(&mut *world.resource_mut::<ExportJob>());
+    files.extend(crate::output::export::write_export(&out_dir, &job)?);
+
+    let timings = world.resource::<StageTimings>().0.clone();
+    let metrics_res = world.resource::<Metrics>();
+    let active = world.resource::<ActiveMesh>().0;
+    let result_counts = world
+        .get::<Geometry>(active)
+        .map(|g| serde_json::json!({"vertices": g.0.vertex_count(), "faces": g.0.face_count()}))
+        .unwrap_or(serde_json::Value::Null);
+    let stages: Vec<serde_json::Value> = pipeline
+        .stages
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            serde_json::json!({
+                "index": i + 1,
+                "kind": s.kind(),
+                "seconds": timings.iter().find(|t| t.index == i + 1).map(|t| t.seconds),
+                "metrics": metrics_res.stages.get(i).cloned().unwrap_or_default(),
+            })
+        })
+        .collect();
+    let metrics = serde_json::json!({
+        "config": pipeline.source.file,
+        "seed": pipeline.seed,
+        "threads": rayon::current_num_threads(),
+        "input": input_counts,
+        "result": {
+            "mesh": result_counts,
+            "quality": metrics_res.result,
+        },
+        "stages": stages,
+        "total_seconds": started.elapsed().as_secs_f64(),
+        "peak_rss_bytes": peak_rss_bytes(),
+    });
+    let metrics_path = out_dir.join("metrics.json");
+    let text = serde_json::to_string_pretty(&metrics)
+        .map_err(|e| PipelineError::Internal(format!("metrics.json: {e}")))?;
+    crate::output::write_bytes_atomic(&metrics_path, text.as_bytes())?;
+    files.push(metrics_path);
+    Ok(RunReport {
+        out_dir,
+        files,
+        timings,
+        metrics,
+    })
+}

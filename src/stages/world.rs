@@ -1,0 +1,183 @@
+//! The world model: components of mesh levels, image levels and patches, and
+//! the run-wide resources. Everything is structure-of-arrays: a vertex is a
+//! row (`u32` id) in each per-vertex array.
+
+use crate::image::{Image, sample::Wrap};
+use crate::kernels::frames::TangentFrame;
+use crate::mesh::PolyMesh;
+use bevy_ecs::prelude::*;
+use glam::Vec2;
+use rand::SeedableRng;
+
+// ----- mesh levels -----------------------------------------------------------
+
+/// Marks the mesh as loaded from `[input]`; it is never modified, so results
+/// can be mapped back onto it.
+#[derive(Component, Debug, Default)]
+pub struct SourceMesh;
+
+/// Pyramid level of a mesh entity: 0 is the finest.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct MeshLevel(pub u8);
+
+/// Connectivity and positions of a mesh level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct Geometry(pub PolyMesh);
+
+/// Per-vertex tangent frames (s, t, n).
+#[derive(Component, Clone, Debug, Default)]
+pub struct Frames(pub Vec<TangentFrame>);
+
+/// Per-vertex texture scale: exemplar texels per world unit.
+#[derive(Component, Clone, Debug, Default)]
+pub struct VertexScale(pub Vec<f32>);
+
+/// Per-vertex colours, `channels` values per vertex, nominally in `[0, 1]`.
+#[derive(Component, Clone, Debug, Default)]
+pub struct VertexColours {
+    /// Values per vertex (the exemplar's channel count).
+    pub channels: usize,
+    /// `values[v * channels + c]`.
+    pub values: Vec<f32>,
+}
+
+/// Per-vertex source coordinate in the exemplar, in pixels (continuous, pixel
+/// centres at `i + 0.5`): which exemplar texel each vertex colour came from, so
+/// other exemplar channels can follow the same synthesis.
+#[derive(Component, Clone, Debug, Default)]
+pub struct SourceTexels(pub Vec<Vec2>);
+
+/// Per-corner texture coordinates in `[0, 1]` units of the exemplar (v = 0 at
+/// the exemplar's top row; values outside wrap when the exemplar tiles).
+#[derive(Component, Clone, Debug, Default)]
+pub struct CornerUvs(pub Vec<Vec2>);
+
+// ----- image levels ------------------------------------------------------------
+
+/// Whether an image level belongs to the halving pyramid or the same-size stack.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageLevelKind {
+    /// Gaussian pyramid: each level half the size of the previous.
+    Pyramid,
+    /// Gaussian stack: every level the exemplar's size, blur doubling.
+    Stack,
+}
+
+/// An exemplar pyramid or stack level; 0 is the exemplar itself.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ImageLevel {
+    /// Level index, 0 = finest.
+    pub level: u8,
+    /// Pyramid or stack.
+    pub kind: ImageLevelKind,
+}
+
+/// The pixels of an image level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct Pixels(pub Image);
+
+// ----- resources ---------------------------------------------------------------
+
+/// The exemplar image and how it is addressed.
+#[derive(Resource, Clone, Debug)]
+pub struct Exemplar {
+    /// Pixels, f32, the file's channel count.
+    pub image: Image,
+    /// Display name (`builtin:bricks`, a file path).
+    pub name: String,
+    /// Toroidal (`Repeat`) for tileable exemplars, `Clamp` otherwise.
+    pub wrap: Wrap,
+}
+
+/// The run's seed; every random stream derives from it, the stage index and a
+/// stream id, so results never depend on thread count or scheduling.
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct RunSeed(pub u64);
+
+impl RunSeed {
+    /// A seeded generator for one stage and one purpose (or one element).
+    pub fn rng(&self, stage: usize, stream: u64) -> rand_pcg::Pcg64Mcg {
+        rand_pcg::Pcg64Mcg::seed_from_u64(mix(self.0, stage as u64, stream))
+    }
+
+    /// A 64-bit seed for one stage and stream, for kernels that seed their own.
+    pub fn derive(&self, stage: usize, stream: u64) -> u64 {
+        mix(self.0, stage as u64, stream)
+    }
+}
+
+/// SplitMix64-style mixing of three words into one seed.
+pub fn mix(a: u64, b: u64, c: u64) -> u64 {
+    let mut z = a
+        .wrapping_add(b.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+        .wrapping_add(c.wrapping_mul(0xD1B5_4A32_D192_ED03));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The mesh entity later stages work on and export: the source mesh until a
+/// stage (retile, subdivide) makes a new finest level.
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct ActiveMesh(pub Entity);
+
+/// World units per exemplar texel on the active mesh: the spacing at which
+/// quality metrics resample the surface. Stages that set a texture scale update it.
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct TexelSpacing(pub f32);
+
+/// Per-stage metrics, written to `metrics.json` under `stages[i].metrics`.
+#[derive(Resource, Debug, Default)]
+pub struct Metrics {
+    /// One JSON object per stage, in stage order.
+    pub stages: Vec<serde_json::Map<String, serde_json::Value>>,
+    /// Metrics of the whole result (texture energy, histogram distance).
+    pub result: serde_json::Map<String, serde_json::Value>,
+}
+
+impl Metrics {
+    /// Records `key = value` for stage `index` (0-based).
+    pub fn record(&mut self, index: usize, key: &str, value: impl serde::Serialize) {
+        if self.stages.len() <= index {
+            self.stages.resize_with(index + 1, Default::default);
+        }
+        let v = serde_json::to_value(value).unwrap_or(serde_json::Value::Null);
+        self.stages[index].insert(key.to_string(), v);
+    }
+}
+
+/// Wall time of one stage.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct StageTiming {
+    /// 1-based stage number.
+    pub index: usize,
+    /// Stage kind.
+    pub kind: String,
+    /// Wall time in seconds.
+    pub seconds: f64,
+}
+
+/// Stage timings, in order.
+#[derive(Resource, Debug, Default)]
+pub struct StageTimings(pub Vec<StageTiming>);
+
+/// The first failure of a stage; later stages do not run.
+#[derive(Resource, Debug, Default)]
+pub struct StageFailure(pub Option<crate::pipeline::PipelineError>);
+
+/// What the `export` stage asks the runner to write (systems do no file I/O).
+#[derive(Resource, Debug, Default)]
+pub struct ExportJob {
+    /// Requested formats (`ply`, `obj`, `preview`).
+    pub formats: Vec<String>,
+    /// File name stem of the mesh outputs.
+    pub stem: String,
+    /// The result mesh.
+    pub mesh: PolyMesh,
+    /// Its vertex colours, if the result has them.
+    pub colours: Option<VertexColours>,
+    /// Its per-corner texture coordinates and the texture they address.
+    pub uvs: Option<(Vec<Vec2>, Image)>,
+    /// Rendered preview images.
+    pub previews: Vec<Image>,
+}
