@@ -19,7 +19,7 @@ subdivisions = 3
 [[stage]]
 kind = "orientation"
 mode = "global"
-direction = [0.0, 1.0, 0.0]
+up = [0.0, 1.0, 0.0]
 
 [[stage]]
 kind = "init_colours"
@@ -48,7 +48,7 @@ fn world_after(n: usize) -> World {
 
 #[test]
 fn components_after_each_stage() {
-    // After orientation: orthonormal frames whose s follows +Y where possible.
+    // After orientation: orthonormal frames whose t follows +Y where possible.
     let mut w = world_after(1);
     let active = w.resource::<ActiveMesh>().0;
     let nv = w.get::<Geometry>(active).unwrap().0.vertex_count();
@@ -56,8 +56,8 @@ fn components_after_each_stage() {
     assert_eq!(frames.len(), nv);
     for f in frames {
         assert!((f.s.length() - 1.0).abs() < 1e-4 && f.s.dot(f.n).abs() < 1e-4);
-        // s is the projection of +Y: never pointing down.
-        assert!(f.s.y >= -1e-4, "s follows the global direction: {:?}", f.s);
+        // t (texture up) is the projection of +Y: never pointing down.
+        assert!(f.t.y >= -1e-4, "t follows the global up: {:?}", f.t);
     }
     assert!(w.get::<VertexColours>(active).is_none());
     assert_eq!(w.resource::<StageTimings>().0.len(), 1);

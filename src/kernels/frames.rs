@@ -1,8 +1,14 @@
 //! Tangent frames (s, t, n) per vertex: the local texture axes on the surface.
 //!
-//! `s` is the texture's x direction, `t` its y direction, `n` the surface
-//! normal; `(s, t, n)` is right-handed and orthonormal. A texture scale is kept
-//! apart (per-vertex scale arrays), so frames stay unit length.
+//! `s` is the texture's "right" direction, `t` its "up" direction, `n` the
+//! surface normal; `(s, t, n)` is right-handed and orthonormal (`s × t = n`),
+//! so a texture laid out along (s, t) reads unmirrored seen from outside.
+//! A texture scale is kept apart (per-vertex scale arrays), so frames stay
+//! unit length.
+//!
+//! Convention shared by every kernel: image pixel coordinates have x to the
+//! right and y DOWN the rows, so a world displacement `d` moves
+//! `(d·s, −d·t) × scale` pixels ([`TangentFrame::texel_offset`]).
 
 use glam::Vec3;
 
@@ -32,6 +38,29 @@ impl TangentFrame {
         Self { s, t, n }
     }
 
+    /// The frame whose "up" axis `t` is `up` projected onto the plane of `n`
+    /// (the orientation vector of Zelinka & Garland §6.1, Praun et al.'s
+    /// "global up"). When `up` is (nearly) parallel to `n`, any perpendicular
+    /// direction is used.
+    #[inline]
+    pub fn from_up(n: Vec3, up: Vec3) -> Self {
+        let n = n.try_normalize().unwrap_or(Vec3::Z);
+        let projected = up - n * n.dot(up);
+        let t = projected
+            .try_normalize()
+            .filter(|_| projected.length_squared() > 1e-12)
+            .unwrap_or_else(|| n.any_orthonormal_vector());
+        let s = t.cross(n);
+        Self { s, t, n }
+    }
+
+    /// Pixel offset (x right, y down) of the world displacement `d` at
+    /// `scale` pixels per world unit.
+    #[inline]
+    pub fn texel_offset(&self, d: Vec3, scale: f32) -> glam::Vec2 {
+        glam::Vec2::new(d.dot(self.s), -d.dot(self.t)) * scale
+    }
+
     /// The frame rotated by `angle` radians about `n`.
     #[inline]
     pub fn rotated(&self, angle: f32) -> Self {
@@ -57,12 +86,13 @@ impl TangentFrame {
     }
 }
 
-/// Frames whose `s` follows a global direction projected onto each tangent
-/// plane (the "user field" of Wei & Levoy §3.1 and Praun et al. §3.2).
-pub fn frames_from_global_direction(normals: &[Vec3], dir: Vec3) -> Vec<TangentFrame> {
+/// Frames whose "up" axis `t` follows a global direction projected onto each
+/// tangent plane (the "user field" of Wei & Levoy §3.1, Praun et al. §3.2,
+/// Zelinka & Garland §6.1).
+pub fn frames_from_global_direction(normals: &[Vec3], up: Vec3) -> Vec<TangentFrame> {
     normals
         .iter()
-        .map(|&n| TangentFrame::from_direction(n, dir))
+        .map(|&n| TangentFrame::from_up(n, up))
         .collect()
 }
 
@@ -89,6 +119,10 @@ mod tests {
         assert!((f.s.length() - 1.0).abs() < 1e-5);
         assert!(f.s.dot(f.n).abs() < 1e-5 && f.t.dot(f.n).abs() < 1e-5);
         assert!((f.s.cross(f.t) - f.n).length() < 1e-5);
+        let up = TangentFrame::from_up(Vec3::Z, Vec3::Y);
+        assert!((up.s - Vec3::X).length() < 1e-6 && (up.t - Vec3::Y).length() < 1e-6);
+        // Moving up the surface moves up the image (y decreases).
+        assert!(up.texel_offset(Vec3::Y, 2.0).y < 0.0 && up.texel_offset(Vec3::X, 2.0).x > 0.0);
         let parallel = TangentFrame::from_direction(Vec3::Z, Vec3::Z);
         assert!(parallel.s.dot(Vec3::Z).abs() < 1e-6);
     }

@@ -1,4 +1,6 @@
 //! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
 
 pub mod frames;
+pub mod geodesic;
 pub mod metrics;
+pub mod orientation_field;
