@@ -2,5 +2,7 @@
 
 pub mod frames;
 pub mod geodesic;
+pub mod jump_surface;
 pub mod metrics;
 pub mod orientation_field;
+pub mod vertex_order;

@@ -1,0 +1,415 @@
+//! Jump-map texture synthesis directly on surfaces (Zelinka & Garland 2004 §6).
+//!
+//! One pass over the vertices in a chosen order (§6.2) assigns each vertex a
+//! floating-point exemplar address (pixels). Each already-synthesized
+//! neighbour suggests "copy": its address plus the texture-space offset of the
+//! edge (§6.3), and "jump": the destinations of the floating-point jump-map
+//! look-up at its address (§6.4) plus the same offset. Suggestions that keep
+//! the vertex's flattened one-ring inside the exemplar are valid (§6.5,
+//! Fig. 18); one random number picks among all valid suggestions of all
+//! neighbours (the selection table of §6.6). Only when none is valid is the
+//! vertex placed at random. Per-corner texture coordinates then come from each
+//! face's base vertex plus edge offsets, for every choice of base vertex, so a
+//! renderer can blend the three (§6.5).
+//!
+//! Coordinates: pixel addresses with x right, y down, integer values at pixel
+//! centres (`(x + 0.5) / width` is the texture coordinate u).
+
+use super::frames::TangentFrame;
+use super::vertex_order::{VertexOrder, vertex_order};
+use crate::mesh::{PolyMesh, Topology};
+use glam::{Vec2, Vec3};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+
+/// Read access to a jump map for the surface synthesizer.
+pub trait JumpLookup: Sync {
+    /// Width and height of the analysed exemplar, pixels.
+    fn dims(&self) -> (u32, u32);
+    /// Calls `f(dest_x, dest_y, weight)` for each jump stored at pixel `(x, y)`.
+    fn for_each_jump<F: FnMut(u32, u32, f32)>(&self, x: u32, y: u32, f: F);
+}
+
+/// Settings of surface synthesis.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceSynthSettings {
+    /// Desired mean patch size as a fraction of the exemplar width (§5.1:
+    /// random numbers are drawn over twice this many pixels). 0.05..=4.
+    pub patch_fraction: f32,
+    /// Width of the boundary-avoidance band as a fraction of the exemplar
+    /// size (§5.2; 0 turns it off). Ignored for tileable exemplars.
+    pub boundary_fraction: f32,
+    /// The exemplar tiles: addresses wrap and every suggestion is valid.
+    pub tileable: bool,
+    /// Vertex ordering.
+    pub order: VertexOrder,
+    /// Seed of the order and of every random choice.
+    pub seed: u64,
+}
+
+impl Default for SurfaceSynthSettings {
+    fn default() -> Self {
+        Self {
+            patch_fraction: 0.5,
+            boundary_fraction: 0.2,
+            tileable: false,
+            order: VertexOrder::EmergingFront,
+            seed: 0,
+        }
+    }
+}
+
+/// The result of surface synthesis.
+#[derive(Clone, Debug, Default)]
+pub struct SurfaceSynthOutput {
+    /// Exemplar address per vertex, pixels.
+    pub texel: Vec<Vec2>,
+    /// Vertices that took a jump suggestion.
+    pub jumps: usize,
+    /// Vertices placed at random (component starts and vertices with no valid suggestion).
+    pub random_assignments: usize,
+    /// Vertices whose flattened one-ring is larger than the exemplar, so no
+    /// address is valid (their texture is clamped).
+    pub unfit: usize,
+}
+
+/// Texture-space offset of every directed edge `v → w`, aligned with
+/// `topo.neighbour_list` (§6.3, Fig. 13): the edge is projected onto the
+/// average of its endpoints' bases, scaled by the mean of their scales
+/// (pixels per world unit). `offset(v→w) = −offset(w→v)` exactly.
+pub fn edge_offsets(
+    positions: &[Vec3],
+    frames: &[TangentFrame],
+    scale: &[f32],
+    topo: &Topology,
+) -> Vec<Vec2> {
+    let mut out = vec![Vec2::ZERO; topo.neighbour_list.len()];
+    let starts = &topo.neighbour_start;
+    out.par_chunks_mut(4096)
+        .enumerate()
+        .for_each(|(chunk, slots)| {
+            let first = chunk * 4096;
+            // The vertex owning slot `first`.
+            let mut v = starts.partition_point(|&s| s as usize <= first) - 1;
+            for (k, slot) in slots.iter_mut().enumerate() {
+                let i = first + k;
+                while starts[v + 1] as usize <= i {
+                    v += 1;
+                }
+                let w = topo.neighbour_list[i] as usize;
+                *slot = edge_offset(positions, frames, scale, v, w);
+            }
+        });
+    out
+}
+
+#[inline]
+fn edge_offset(
+    positions: &[Vec3],
+    frames: &[TangentFrame],
+    scale: &[f32],
+    a: usize,
+    b: usize,
+) -> Vec2 {
+    // Symmetric in (a, b) so both directions share one basis.
+    let (fa, fb) = (&frames[a], &frames[b]);
+    let up = (fa.t + fb.t).try_normalize().unwrap_or(fa.t);
+    let right_avg = fa.s + fb.s;
+    let right = (right_avg - up * up.dot(right_avg))
+        .try_normalize()
+        .unwrap_or(fa.s);
+    let k = 0.5 * (scale[a] + scale[b]);
+    let d = positions[b] - positions[a];
+    Vec2::new(d.dot(right), -d.dot(up)) * k
+}
+
+/// Offset of the edge `a → b` from the CSR arrays (`None` when not adjacent).
+#[inline]
+pub fn offset_between(topo: &Topology, offsets: &[Vec2], a: u32, b: u32) -> Option<Vec2> {
+    let nb = topo.neighbours(a);
+    let i = nb.binary_search(&b).ok()?;
+    Some(offsets[topo.neighbour_start[a as usize] as usize + i])
+}
+
+/// Runs the synthesis pass. `offsets` come from [`edge_offsets`].
+pub fn synthesize_surface<J: JumpLookup>(
+    topo: &Topology,
+    offsets: &[Vec2],
+    jumps: &J,
+    settings: &SurfaceSynthSettings,
+    progress: &crate::progress::Progress,
+) -> SurfaceSynthOutput {
+    let n = topo.vertex_count();
+    let (w, h) = jumps.dims();
+    let size = Vec2::new(w as f32, h as f32);
+    let max = size - Vec2::ONE;
+    let order = vertex_order(topo, settings.order, settings.seed);
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(settings.seed ^ 0x5EED_0F_5EED);
+    let mut texel = vec![Vec2::ZERO; n];
+    let mut done = vec![false; n];
+    let range = (2.0 * settings.patch_fraction * w as f32).max(1.0);
+    let band = settings.boundary_fraction * w.min(h) as f32;
+    let mut table: Vec<(Vec2, f32, bool)> = Vec::with_capacity(128);
+    let mut out = SurfaceSynthOutput::default();
+    let wrap = |p: Vec2| Vec2::new(p.x.rem_euclid(size.x), p.y.rem_euclid(size.y));
+    for (step, &v) in order.iter().enumerate() {
+        if step % 65536 == 0 {
+            progress.inc(step.min(65536) as u64);
+        }
+        let vi = v as usize;
+        let lo_i = topo.neighbour_start[vi] as usize;
+        let hi_i = topo.neighbour_start[vi + 1] as usize;
+        // Bounding box of the flattened one-ring (§6.5, Fig. 18).
+        let (mut bmin, mut bmax) = (Vec2::ZERO, Vec2::ZERO);
+        for o in &offsets[lo_i..hi_i] {
+            bmin = bmin.min(*o);
+            bmax = bmax.max(*o);
+        }
+        let valid = |p: Vec2| {
+            settings.tileable || ((p + bmin).cmpge(Vec2::ZERO).all() && (p + bmax).cmple(max).all())
+        };
+        table.clear();
+        for (k, &u) in topo.neighbours(v).iter().enumerate() {
+            let ui = u as usize;
+            if !done[ui] {
+                continue;
+            }
+            let d = -offsets[lo_i + k]; // u → v
+            let pu = texel[ui];
+            let step_len = d.length().max(1e-3);
+            // Floating-point look-up (§6.4): coalesce the four taps.
+            let base = pu.floor();
+            let f = pu - base;
+            let first_jump = table.len();
+            let mut sum = 0.0f32;
+            for (tx, ty, bw) in [
+                (0.0, 0.0, (1.0 - f.x) * (1.0 - f.y)),
+                (1.0, 0.0, f.x * (1.0 - f.y)),
+                (0.0, 1.0, (1.0 - f.x) * f.y),
+                (1.0, 1.0, f.x * f.y),
+            ] {
+                if bw <= 0.0 {
+                    continue;
+                }
+                let tap = base + Vec2::new(tx, ty);
+                let stored = if settings.tileable {
+                    wrap(tap)
+                } else {
+                    tap.clamp(Vec2::ZERO, max)
+                };
+                let sub = pu - tap;
+                jumps.for_each_jump(stored.x as u32, stored.y as u32, |dx, dy, jw| {
+                    let mass = jw * bw;
+                    sum += mass;
+                    table.push((Vec2::new(dx as f32, dy as f32) + sub + d, mass, true));
+                });
+            }
+            // Jump probability per pixel travelled (§5.1), raised near the
+            // exemplar boundary (§5.2).
+            let mut r = range;
+            if !settings.tileable && band > 0.0 {
+                let dist = pu.min(max - pu).min_element().max(0.0);
+                if dist < band {
+                    r = sum + (range - sum) * dist / band;
+                }
+            }
+            let mut k_scale = step_len / r.max(1e-6);
+            if sum * k_scale > 1.0 {
+                k_scale = 1.0 / sum;
+            }
+            let copy_mass = (1.0 - sum * k_scale).max(0.0);
+            // Keep only valid jump entries, with scaled mass.
+            let mut keep = first_jump;
+            for j in first_jump..table.len() {
+                let (p, m, is_jump) = table[j];
+                if valid(p) {
+                    table[keep] = (p, m * k_scale, is_jump);
+                    keep += 1;
+                }
+            }
+            table.truncate(keep);
+            let copy = pu + d;
+            if copy_mass > 0.0 && valid(copy) {
+                table.push((copy, copy_mass, false));
+            }
+        }
+        let total: f32 = table.iter().map(|e| e.1).sum();
+        let chosen = if total > 0.0 {
+            let mut x = rng.random::<f32>() * total;
+            let mut pick = table[table.len() - 1];
+            for e in &table {
+                if x < e.1 {
+                    pick = *e;
+                    break;
+                }
+                x -= e.1;
+            }
+            if pick.2 {
+                out.jumps += 1;
+            }
+            pick.0
+        } else {
+            out.random_assignments += 1;
+            if settings.tileable {
+                Vec2::new(rng.random::<f32>() * size.x, rng.random::<f32>() * size.y)
+            } else {
+                // Uniform over the valid range -bmin ..= max - bmax.
+                let lo = -bmin;
+                let hi = max - bmax;
+                if hi.cmpge(lo).all() {
+                    lo + (hi - lo) * Vec2::new(rng.random::<f32>(), rng.random::<f32>())
+                } else {
+                    out.unfit += 1;
+                    (lo + hi) * 0.5
+                }
+            }
+        };
+        texel[vi] = if settings.tileable {
+            wrap(chosen)
+        } else {
+            chosen
+        };
+        done[vi] = true;
+    }
+    out.texel = texel;
+    out
+}
+
+/// Per-corner texture coordinates (§6.5), in `[0, 1]` units of the exemplar
+/// (v down). Returns the single-base UVs (each face's first corner as base),
+/// and for every fan triangle of [`PolyMesh::triangulate_corners`] the UVs of
+/// its three corners for each of the three base choices, for the blend.
+pub fn corner_uvs(
+    mesh: &PolyMesh,
+    topo: &Topology,
+    offsets: &[Vec2],
+    texel: &[Vec2],
+    dims: (u32, u32),
+) -> (Vec<Vec2>, Vec<[[Vec2; 3]; 3]>) {
+    let inv = Vec2::new(1.0 / dims.0 as f32, 1.0 / dims.1 as f32);
+    let to_uv = |p: Vec2| (p + Vec2::splat(0.5)) * inv;
+    // Address of face corner `j` seen from base corner `b` of face `f`:
+    // walk forward around the face summing edge offsets.
+    let walk = |f: usize, b: usize, j: usize| -> Vec2 {
+        let face = mesh.face(f);
+        let k = face.len();
+        let mut p = texel[face[b] as usize];
+        let mut i = b;
+        while i != j {
+            let next = (i + 1) % k;
+            p += offset_between(topo, offsets, face[i], face[next]).unwrap_or(Vec2::ZERO);
+            i = next;
+        }
+        p
+    };
+    let mut single = vec![Vec2::ZERO; mesh.corner_count()];
+    for f in 0..mesh.face_count() {
+        let r = mesh.face_corners(f);
+        for (j, c) in r.clone().enumerate() {
+            single[c] = to_uv(walk(f, 0, j));
+        }
+    }
+    let (tris, face_of) = mesh.triangulate_corners();
+    let blend = tris
+        .iter()
+        .zip(&face_of)
+        .map(|(t, &f)| {
+            let start = mesh.face_start[f as usize];
+            let local = t.map(|c| (c - start) as usize);
+            let mut layers = [[Vec2::ZERO; 3]; 3];
+            for (b, layer) in layers.iter_mut().enumerate() {
+                for (j, uv) in layer.iter_mut().enumerate() {
+                    *uv = to_uv(walk(f as usize, local[b], local[j]));
+                }
+            }
+            layers
+        })
+        .collect();
+    (single, blend)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A jump map with no jumps: synthesis must then copy everywhere.
+    struct NoJumps(u32, u32);
+    impl JumpLookup for NoJumps {
+        fn dims(&self) -> (u32, u32) {
+            (self.0, self.1)
+        }
+        fn for_each_jump<F: FnMut(u32, u32, f32)>(&self, _: u32, _: u32, _: F) {}
+    }
+
+    fn plane(n: usize) -> PolyMesh {
+        let p = (0..n * n)
+            .map(|i| Vec3::new((i % n) as f32, -((i / n) as f32), 0.0))
+            .collect();
+        let mut faces = Vec::new();
+        for y in 0..n - 1 {
+            for x in 0..n - 1 {
+                let i = (y * n + x) as u32;
+                let n = n as u32;
+                faces.push([i, i + n, i + n + 1]);
+                faces.push([i, i + n + 1, i + 1]);
+            }
+        }
+        PolyMesh::from_triangles(p, &faces)
+    }
+
+    #[test]
+    fn without_jumps_a_plane_is_a_translated_copy() {
+        let m = plane(8);
+        let t = Topology::build(&m);
+        let frames = vec![TangentFrame::from_up(Vec3::Z, Vec3::Y); m.vertex_count()];
+        let scale = vec![1.0; m.vertex_count()];
+        let off = edge_offsets(&m.positions, &frames, &scale, &t);
+        // +x world is +x pixels; world -y (down the grid) is +y pixels.
+        assert_eq!(offset_between(&t, &off, 0, 1), Some(Vec2::new(1.0, 0.0)));
+        assert_eq!(offset_between(&t, &off, 0, 8), Some(Vec2::new(0.0, 1.0)));
+        let s = SurfaceSynthSettings {
+            tileable: true,
+            ..Default::default()
+        };
+        let out = synthesize_surface(&t, &off, &NoJumps(32, 32), &s, &Default::default());
+        assert_eq!(out.random_assignments, 1, "only the start is random");
+        let p0 = out.texel[0];
+        for (v, p) in out.texel.iter().enumerate() {
+            let expect = p0 + Vec2::new((v % 8) as f32, (v / 8) as f32);
+            let d = (*p - expect).abs();
+            let d = Vec2::new(d.x.min(32.0 - d.x), d.y.min(32.0 - d.y));
+            assert!(d.max_element() < 1e-3, "vertex {v}: {p} vs {expect}");
+        }
+    }
+
+    #[test]
+    fn clamped_addresses_keep_one_rings_inside() {
+        let m = plane(12);
+        let t = Topology::build(&m);
+        let frames = vec![TangentFrame::from_up(Vec3::Z, Vec3::Y); m.vertex_count()];
+        let scale = vec![1.5; m.vertex_count()];
+        let off = edge_offsets(&m.positions, &frames, &scale, &t);
+        let s = SurfaceSynthSettings::default();
+        let out = synthesize_surface(&t, &off, &NoJumps(10, 10), &s, &Default::default());
+        assert_eq!(out.unfit, 0);
+        for v in 0..m.vertex_count() as u32 {
+            for &w in t.neighbours(v) {
+                let q = out.texel[v as usize] + offset_between(&t, &off, v, w).unwrap();
+                assert!(q.cmpge(Vec2::splat(-1e-3)).all() && q.cmple(Vec2::splat(9.001)).all());
+            }
+        }
+        let (single, blend) = corner_uvs(&m, &t, &off, &out.texel, (10, 10));
+        assert!(
+            single
+                .iter()
+                .all(|uv| uv.cmpge(Vec2::ZERO).all() && uv.cmple(Vec2::ONE).all())
+        );
+        assert_eq!(blend.len(), m.face_count());
+        // A triangle's layers differ only by where the base vertex sits.
+        for (f, layers) in blend.iter().enumerate() {
+            let e01 = layers[0][1] - layers[0][0];
+            let e01b = layers[1][1] - layers[1][0];
+            assert!((e01 - e01b).length() < 1e-5, "face {f}: edge offsets agree");
+        }
+    }
+}
