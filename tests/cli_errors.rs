@@ -148,3 +148,15 @@ fn bad_meshes_are_refused_with_what_and_where() {
 fn zero_threads_is_refused() {
     expect_bad(BASE, &["--threads", "0"], &["--threads"]);
 }
+
+#[test]
+fn missing_stage_input_says_what_to_add() {
+    let no_mesh = BASE
+        .replace("mesh = \"builtin:icosphere\"\n", "")
+        .replace("[input.mesh_options]\nsubdivisions = 2\n", "");
+    expect_bad(
+        &no_mesh,
+        &[],
+        &["stage 1 (orientation)", "needs a mesh", "set `mesh` in [input]"],
+    );
+}

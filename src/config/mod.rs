@@ -183,8 +183,10 @@ pub struct RawConfig {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawInput {
-    /// `builtin:NAME` or a path to .obj, .ply, .off or .stl.
-    pub mesh: String,
+    /// `builtin:NAME` or a path to .obj, .ply, .off or .stl. Optional for
+    /// image-only pipelines (`jump_image`).
+    #[serde(default)]
+    pub mesh: Option<String>,
     /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga.
     pub exemplar: String,
     /// Options of a builtin mesh (`surfsynth stages` lists them).
@@ -253,7 +255,10 @@ kind = "init_colours"
         .unwrap();
         let raw = src.parse().unwrap();
         assert_eq!(raw.seed, 3);
-        assert_eq!(raw.input.mesh, "../shared/data/meshes/knot.off");
+        assert_eq!(
+            raw.input.mesh.as_deref(),
+            Some("../shared/data/meshes/knot.off")
+        );
         assert_eq!(raw.input.mesh_options["subdivisions"].as_integer(), Some(2));
         let mode = raw.stage[0]
             .get_ref()

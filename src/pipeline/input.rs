@@ -42,7 +42,11 @@ pub fn load_input(
     file: &str,
 ) -> Result<LoadedInput, PipelineError> {
     let _span = tracing::info_span!("load_input").entered();
-    let (mesh, load_report) = if let Some(name) = input.mesh.strip_prefix("builtin:") {
+    let (mesh, load_report) = if let Some(name) = input
+        .mesh
+        .as_deref()
+        .and_then(|m| m.strip_prefix("builtin:"))
+    {
         let opts: crate::mesh::builtin::BuiltinOptions =
             table_into(&input.mesh_options, file, "input.mesh_options")?;
         let mesh = crate::mesh::builtin::builtin_mesh(name, &opts)?;
@@ -56,7 +60,14 @@ pub fn load_input(
             }
             .into());
         }
-        let path = base_dir.join(&input.mesh);
+        let Some(mesh_path) = input.mesh.as_deref() else {
+            return Ok(LoadedInput {
+                mesh: PolyMesh::new(),
+                load_report: "no mesh (image-only pipeline)".into(),
+                ..load_exemplar(input, base_dir, file)?
+            });
+        };
+        let path = base_dir.join(mesh_path);
         let options = crate::mesh::LoadOptions {
             merge_duplicates: input.merge_duplicates,
             ..Default::default()
@@ -64,6 +75,18 @@ pub fn load_input(
         let (mesh, report) = crate::mesh::load_mesh(&path, &options)?;
         (mesh, report.summary())
     };
+    Ok(LoadedInput {
+        mesh,
+        load_report,
+        ..load_exemplar(input, base_dir, file)?
+    })
+}
+
+fn load_exemplar(
+    input: &RawInput,
+    base_dir: &Path,
+    file: &str,
+) -> Result<LoadedInput, PipelineError> {
     if input.exemplar.starts_with("builtin:") {
         let _: crate::image::ExemplarOptions =
             table_into(&input.exemplar_options, file, "input.exemplar_options")?;
@@ -80,8 +103,8 @@ pub fn load_input(
     let (exemplar, exemplar_name) =
         crate::image::exemplar_from_spec(&input.exemplar, base_dir, &opts)?;
     Ok(LoadedInput {
-        mesh,
-        load_report,
+        mesh: PolyMesh::new(),
+        load_report: String::new(),
         exemplar,
         exemplar_name,
     })

@@ -86,6 +86,9 @@ impl Pipeline {
         let allowed_kinds = all.iter().map(|s| s.kind).collect::<Vec<_>>().join(", ");
         let mut stages = Vec::with_capacity(raw.stage.len());
         let mut available: HashSet<Datum> = HashSet::new();
+        if raw.input.mesh.is_some() {
+            available.insert(Datum::Mesh);
+        }
         for (i, spanned) in raw.stage.iter().enumerate() {
             let index = i + 1;
             let table_line = source.line_of(spanned.span().start);
@@ -141,14 +144,18 @@ impl Pipeline {
                         index,
                         kind,
                         needs: need.describe().to_string(),
-                        hint: format!(
-                            "add {} before it",
-                            producers
-                                .iter()
-                                .map(|p| format!("`{p}`"))
-                                .collect::<Vec<_>>()
-                                .join(" or ")
-                        ),
+                        hint: if need == Datum::Mesh {
+                            "set `mesh` in [input]".to_string()
+                        } else {
+                            format!(
+                                "add {} before it",
+                                producers
+                                    .iter()
+                                    .map(|p| format!("`{p}`"))
+                                    .collect::<Vec<_>>()
+                                    .join(" or ")
+                            )
+                        },
                     });
                 }
             }

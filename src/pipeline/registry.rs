@@ -8,6 +8,8 @@ use bevy_ecs::system::ScheduleSystem;
 /// Data a stage reads or writes, for validating the order of stages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Datum {
+    /// A mesh (`[input] mesh`).
+    Mesh,
     /// Per-vertex tangent frames on the active mesh.
     Frames,
     /// Per-vertex colours on the active mesh.
@@ -26,6 +28,7 @@ impl Datum {
     /// What it is, for messages.
     pub fn describe(self) -> &'static str {
         match self {
+            Datum::Mesh => "a mesh",
             Datum::Frames => "tangent frames",
             Datum::Colours => "vertex colours",
             Datum::MeshPyramid => "a mesh pyramid",
@@ -35,8 +38,11 @@ impl Datum {
         }
     }
 
-    /// Which stages produce it.
+    /// Which stages produce it (for a mesh: the `[input]` section).
     pub fn producers(self) -> Vec<&'static str> {
+        if self == Datum::Mesh {
+            return vec!["input.mesh"];
+        }
         registry()
             .iter()
             .filter(|s| (s.produces_any)().contains(&self))

@@ -62,7 +62,7 @@ impl Stage for InitColours {
     type Settings = InitColoursSettings;
 
     fn requires(_: &Self::Settings) -> Vec<Datum> {
-        vec![]
+        vec![Datum::Mesh]
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Colours]

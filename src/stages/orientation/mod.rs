@@ -225,7 +225,7 @@ impl Stage for Orientation {
     type Settings = OrientationSettings;
 
     fn requires(_: &Self::Settings) -> Vec<Datum> {
-        vec![]
+        vec![Datum::Mesh]
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Frames]
