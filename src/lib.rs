@@ -11,6 +11,7 @@
 //! * [`config`], [`pipeline`]: TOML configs into a validated schedule; running it.
 //! * [`output`]: exporters, preview renderer, atomic writes.
 
+pub mod cache;
 pub mod config;
 pub mod image;
 pub mod kernels;
