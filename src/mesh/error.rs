@@ -22,14 +22,18 @@ pub enum MeshError {
         message: String,
     },
     /// A vertex coordinate is NaN or infinite.
-    #[error("mesh {path}: vertex {vertex} has a non-finite coordinate {value:?}; coordinates must be finite numbers")]
+    #[error(
+        "mesh {path}: vertex {vertex} has a non-finite coordinate {value:?}; coordinates must be finite numbers"
+    )]
     NonFinite {
         path: PathBuf,
         vertex: usize,
         value: [f32; 3],
     },
     /// A face refers to a vertex that does not exist.
-    #[error("mesh {path}: face {face} refers to vertex {index}, but the mesh has {vertex_count} vertices (valid: 0..{vertex_count})")]
+    #[error(
+        "mesh {path}: face {face} refers to vertex {index}, but the mesh has {vertex_count} vertices (valid: 0..{vertex_count})"
+    )]
     IndexOutOfRange {
         path: PathBuf,
         face: usize,
@@ -45,4 +49,11 @@ pub enum MeshError {
     /// A stage cannot process this mesh (with what and where).
     #[error("{stage}: {message}")]
     Unsupported { stage: String, message: String },
+    /// A loader option is out of range.
+    #[error("mesh load option {option} = {value} is out of range; allowed: {allowed}")]
+    InvalidOption {
+        option: String,
+        value: String,
+        allowed: String,
+    },
 }

@@ -15,6 +15,9 @@ pub mod repair;
 mod topology;
 
 pub use error::MeshError;
+pub use info::MeshInfo;
+pub use io::{LoadOptions, load_mesh};
+pub use repair::LoadReport;
 pub use topology::Topology;
 
 use glam::Vec3;
@@ -166,7 +169,9 @@ impl PolyMesh {
 
     /// All unit face normals.
     pub fn face_normals(&self) -> Vec<Vec3> {
-        (0..self.face_count()).map(|f| self.face_normal(f)).collect()
+        (0..self.face_count())
+            .map(|f| self.face_normal(f))
+            .collect()
     }
 
     /// Area-weighted unit vertex normals; an isolated vertex gets +Z.

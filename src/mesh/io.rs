@@ -1,1 +1,0 @@
-//! Mesh loaders and writers (helper fills this in).
