@@ -22,18 +22,14 @@ pub enum MeshError {
         message: String,
     },
     /// A vertex coordinate is NaN or infinite.
-    #[error(
-        "mesh {path}: vertex {vertex} has a non-finite coordinate {value:?}; coordinates must be finite numbers"
-    )]
+    #[error("mesh {path}: vertex {vertex} has a non-finite coordinate {value:?}; coordinates must be finite numbers")]
     NonFinite {
         path: PathBuf,
         vertex: usize,
         value: [f32; 3],
     },
     /// A face refers to a vertex that does not exist.
-    #[error(
-        "mesh {path}: face {face} refers to vertex {index}, but the mesh has {vertex_count} vertices (valid: 0..{vertex_count})"
-    )]
+    #[error("mesh {path}: face {face} refers to vertex {index}, but the mesh has {vertex_count} vertices (valid: 0..{vertex_count})")]
     IndexOutOfRange {
         path: PathBuf,
         face: usize,

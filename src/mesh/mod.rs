@@ -169,9 +169,7 @@ impl PolyMesh {
 
     /// All unit face normals.
     pub fn face_normals(&self) -> Vec<Vec3> {
-        (0..self.face_count())
-            .map(|f| self.face_normal(f))
-            .collect()
+        (0..self.face_count()).map(|f| self.face_normal(f)).collect()
     }
 
     /// Area-weighted unit vertex normals; an isolated vertex gets +Z.
