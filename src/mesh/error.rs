@@ -49,4 +49,11 @@ pub enum MeshError {
     /// A stage cannot process this mesh (with what and where).
     #[error("{stage}: {message}")]
     Unsupported { stage: String, message: String },
+    /// A loader option is out of range.
+    #[error("mesh load option {option} = {value} is out of range; allowed: {allowed}")]
+    InvalidOption {
+        option: String,
+        value: String,
+        allowed: String,
+    },
 }

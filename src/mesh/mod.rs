@@ -16,7 +16,8 @@ mod topology;
 
 pub use error::MeshError;
 pub use info::MeshInfo;
-pub use io::{LoadOptions, LoadReport, load_mesh};
+pub use io::{LoadOptions, load_mesh};
+pub use repair::LoadReport;
 pub use topology::Topology;
 
 use glam::Vec3;

@@ -15,7 +15,7 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     .colours
                     .as_ref()
                     .map(|c| (c.values.as_slice(), c.channels));
-                super::ply::write_ply(&path, &job.mesh, colours)?;
+                super::ply::write_ply(&path, &job.mesh, colours, &[])?;
                 files.push(path);
             }
             "obj" => {

@@ -1,13 +1,232 @@
-//! TEMPORARY STUB (replaced by helper-a's merge).
+//! Wavefront OBJ writer: `STEM.obj`, and with a texture `STEM.mtl` and
+//! `STEM.png`, all written atomically.
+//!
+//! UV convention: our texture coordinates have `v = 0` at the **top** image
+//! row (image convention, as [`crate::image::Image`] stores rows top-down).
+//! OBJ's `vt` has `v = 0` at the **bottom**, so we write `vt u (1 - v)`.
+//! Texture coordinates are per corner: corner `c` gets `vt` number `c + 1`,
+//! so seams need no vertex splitting.
+//!
+//! Numbers are written with Rust's shortest round-trip formatting, so the
+//! output is byte-deterministic and positions read back bit-exactly.
+
+use super::{OutputError, write_atomic, write_png};
+use crate::image::Image;
+use crate::mesh::PolyMesh;
+use glam::Vec2;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// Name of the one material the `.mtl` file defines.
+pub const MATERIAL_NAME: &str = "surfsynth";
+
+fn encode_error(message: String) -> OutputError {
+    OutputError::Encode {
+        what: "OBJ".into(),
+        message,
+    }
+}
+
+/// Encodes the `.obj` text.
+///
+/// - `corner_uvs`: one UV per corner (`mesh.corner_count()` entries), in our
+///   top-row-is-`v = 0` convention; written flipped (see the module docs).
+/// - `vertex_colours`: `(values in [0, 1], channels)` per vertex, written with
+///   the common `v x y z r g b` extension (1 channel is grey; alpha dropped).
+/// - `mtl`: the `.mtl` file name to reference with `mtllib`/`usemtl`.
+///
+/// # Errors
+/// [`OutputError::Encode`] when an attribute array has the wrong length or
+/// the colours have a channel count outside `1..=4`.
+pub fn encode_obj(
+    mesh: &PolyMesh,
+    corner_uvs: Option<&[Vec2]>,
+    vertex_colours: Option<(&[f32], usize)>,
+    mtl: Option<&str>,
+) -> Result<String, OutputError> {
+    let nv = mesh.vertex_count();
+    if let Some(uvs) = corner_uvs
+        && uvs.len() != mesh.corner_count()
+    {
+        return Err(encode_error(format!(
+            "{} corner UVs for a mesh with {} corners",
+            uvs.len(),
+            mesh.corner_count()
+        )));
+    }
+    if let Some((values, channels)) = vertex_colours
+        && (!(1..=4).contains(&channels) || values.len() != nv * channels)
+    {
+        return Err(encode_error(format!(
+            "vertex colours: {} values with {channels} channels for {nv} vertices \
+             (need 1..=4 channels and vertices x channels values)",
+            values.len()
+        )));
+    }
+    let mut s = String::with_capacity(32 * (nv + mesh.corner_count()) + 64);
+    s.push_str("# written by surfsynth\n");
+    if let Some(mtl) = mtl {
+        let _ = writeln!(s, "mtllib {mtl}");
+    }
+    for (v, p) in mesh.positions.iter().enumerate() {
+        let _ = write!(s, "v {} {} {}", p.x, p.y, p.z);
+        if let Some((values, channels)) = vertex_colours {
+            let c = &values[v * channels..(v + 1) * channels];
+            let rgb = if channels < 3 {
+                [c[0]; 3]
+            } else {
+                [c[0], c[1], c[2]]
+            };
+            let _ = write!(s, " {} {} {}", rgb[0], rgb[1], rgb[2]);
+        }
+        s.push('\n');
+    }
+    if let Some(uvs) = corner_uvs {
+        for uv in uvs {
+            let _ = writeln!(s, "vt {} {}", uv.x, 1.0 - uv.y);
+        }
+    }
+    if mtl.is_some() {
+        let _ = writeln!(s, "usemtl {MATERIAL_NAME}");
+    }
+    for f in 0..mesh.face_count() {
+        s.push('f');
+        for c in mesh.face_corners(f) {
+            let v = mesh.corner_vertex[c] + 1;
+            if corner_uvs.is_some() {
+                let _ = write!(s, " {v}/{}", c + 1);
+            } else {
+                let _ = write!(s, " {v}");
+            }
+        }
+        s.push('\n');
+    }
+    Ok(s)
+}
+
+/// The `.mtl` text: one white diffuse material textured with `png`.
+pub fn encode_mtl(png: &str) -> String {
+    format!(
+        "# written by surfsynth\nnewmtl {MATERIAL_NAME}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\nmap_Kd {png}\n"
+    )
+}
+
+/// Writes `dir/STEM.obj`, and with a `texture` also `dir/STEM.mtl` (material
+/// with `map_Kd STEM.png`) and `dir/STEM.png`. Returns the written paths, the
+/// `.obj` first. The texture files are written before the `.obj`, so a
+/// present `.obj` always finds them.
+///
+/// See [`encode_obj`] for `corner_uvs` (our `v = 0` is the top row; the file
+/// gets `1 - v`) and `vertex_colours`.
+///
+/// # Errors
+/// [`OutputError::Encode`] for a `stem` that is empty or holds a path
+/// separator or whitespace, or attribute arrays of the wrong size;
+/// [`OutputError::Io`] when a file cannot be written.
 pub fn write_obj(
-    dir: &std::path::Path,
+    dir: &Path,
     stem: &str,
-    _m: &crate::mesh::PolyMesh,
-    _u: Option<&[glam::Vec2]>,
-    _t: Option<&crate::image::Image>,
-    _c: Option<(&[f32], usize)>,
-) -> Result<Vec<std::path::PathBuf>, super::OutputError> {
-    let p = dir.join(format!("{stem}.obj"));
-    super::write_bytes_atomic(&p, b"")?;
-    Ok(vec![p])
+    mesh: &PolyMesh,
+    corner_uvs: Option<&[Vec2]>,
+    texture: Option<&Image>,
+    vertex_colours: Option<(&[f32], usize)>,
+) -> Result<Vec<PathBuf>, OutputError> {
+    if stem.is_empty()
+        || stem
+            .chars()
+            .any(|c| c == '/' || c == '\\' || c.is_whitespace())
+    {
+        return Err(encode_error(format!(
+            "file stem {stem:?} must be non-empty, without path separators or whitespace"
+        )));
+    }
+    let obj_path = dir.join(format!("{stem}.obj"));
+    let mut written = vec![obj_path.clone()];
+    let mtl_name = texture.map(|_| format!("{stem}.mtl"));
+    let text = encode_obj(mesh, corner_uvs, vertex_colours, mtl_name.as_deref())?;
+    if let (Some(img), Some(mtl_name)) = (texture, &mtl_name) {
+        let png_name = format!("{stem}.png");
+        let png_path = dir.join(&png_name);
+        write_png(&png_path, img)?;
+        let mtl_path = dir.join(mtl_name);
+        let mtl = encode_mtl(&png_name);
+        write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;
+        written.push(mtl_path);
+        written.push(png_path);
+    }
+    write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
+    Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::{LoadOptions, load_mesh};
+    use glam::Vec3;
+
+    fn quad_and_triangle() -> PolyMesh {
+        let p = vec![
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(1.0, 0.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+            Vec3::new(0.1, 2.3, 0.7),
+        ];
+        PolyMesh::from_polygons(p, [&[0u32, 1, 2, 3][..], &[3, 2, 4][..]])
+    }
+
+    #[test]
+    fn uvs_are_per_corner_and_flipped() {
+        let m = quad_and_triangle();
+        let uvs: Vec<Vec2> = (0..m.corner_count())
+            .map(|c| Vec2::new(c as f32 / 8.0, 0.25))
+            .collect();
+        let s = encode_obj(&m, Some(&uvs), None, Some("a.mtl")).unwrap();
+        assert!(s.contains("mtllib a.mtl\n"));
+        assert!(s.contains("vt 0.125 0.75\n"), "{s}");
+        assert!(s.contains("f 1/1 2/2 3/3 4/4\nf 4/5 3/6 5/7\n"), "{s}");
+        assert_eq!(s.matches("\nvt ").count(), 7);
+    }
+
+    #[test]
+    fn writes_obj_mtl_png_and_reads_back() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = quad_and_triangle();
+        let uvs = vec![Vec2::new(0.5, 0.5); m.corner_count()];
+        let tex = Image::new(4, 2, 3);
+        let grey = [0.0, 0.2, 0.4, 0.6, 1.0];
+        let paths = write_obj(
+            dir.path(),
+            "out",
+            &m,
+            Some(&uvs),
+            Some(&tex),
+            Some((&grey, 1)),
+        )
+        .unwrap();
+        assert_eq!(paths.len(), 3);
+        for p in &paths {
+            assert!(p.exists(), "{}", p.display());
+        }
+        let mtl = std::fs::read_to_string(dir.path().join("out.mtl")).unwrap();
+        assert!(mtl.contains("map_Kd out.png"));
+        let obj = std::fs::read_to_string(&paths[0]).unwrap();
+        assert!(obj.contains("v 0.1 2.3 0.7 1 1 1\n"), "{obj}");
+        let (back, _) = load_mesh(&paths[0], &LoadOptions::default()).unwrap();
+        assert_eq!(back, m);
+        // Without a texture only the .obj is written.
+        let paths = write_obj(dir.path(), "plain", &m, None, None, None).unwrap();
+        assert_eq!(paths.len(), 1);
+        assert!(!dir.path().join("plain.mtl").exists());
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let dir = tempfile::tempdir().unwrap();
+        let m = quad_and_triangle();
+        assert!(write_obj(dir.path(), "a/b", &m, None, None, None).is_err());
+        assert!(write_obj(dir.path(), "", &m, None, None, None).is_err());
+        let uvs = vec![Vec2::ZERO; 3];
+        assert!(write_obj(dir.path(), "a", &m, Some(&uvs), None, None).is_err());
+    }
 }
