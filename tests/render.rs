@@ -6,8 +6,8 @@ use surfsynth::image::Image;
 use surfsynth::image::sample::Wrap;
 use surfsynth::mesh::PolyMesh;
 use surfsynth::output::render::{
-    Background, DEFAULT_VIEWS, Layer, Normals, RenderOptions, Shading, View, render, render_views,
-    write_previews,
+    Background, DEFAULT_VIEWS, Layer, Normals, RenderOptions, Shading, View, gather_layer_uvs,
+    render, render_views, write_previews,
 };
 
 const FRONT: View = View {
@@ -386,6 +386,12 @@ fn later_layers_win_where_opaque_and_show_through_where_transparent() {
     let face0 = [uv(-1.0, -1.0), uv(0.0, -1.0), uv(0.0, 1.0), uv(-1.0, 1.0)];
     let face1 = [uv(0.0, -1.0), uv(1.0, -1.0), uv(1.0, 1.0), uv(0.0, 1.0)];
     let both: Vec<Vec2> = face0.iter().chain(&face1).copied().collect();
+    // The same from a whole-mesh per-corner array, listing the faces in
+    // another order: the layer's own face order decides the layout.
+    assert_eq!(
+        gather_layer_uvs(&mesh, &[1, 0], &both),
+        [face1, face0].concat()
+    );
     let layers = [
         Layer {
             faces: &[0, 1],

@@ -83,6 +83,18 @@ pub struct Layer<'a> {
     pub wrap: Wrap,
 }
 
+/// Gathers the compact [`Layer::uvs`] of `faces` from a per-corner array of
+/// the whole mesh (`mesh.corner_count()` entries).
+///
+/// # Panics
+/// When a face id or a corner is out of range.
+pub fn gather_layer_uvs(mesh: &PolyMesh, faces: &[u32], corner_uvs: &[Vec2]) -> Vec<Vec2> {
+    faces
+        .iter()
+        .flat_map(|&f| corner_uvs[mesh.face_corners(f as usize)].iter().copied())
+        .collect()
+}
+
 /// What colours the surface.
 #[derive(Clone, Copy, Debug)]
 pub enum Shading<'a> {
