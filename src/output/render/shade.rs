@@ -1,0 +1,241 @@
+//! Per-sample shading: perspective-correct attribute interpolation, surface
+//! colour from the [`Shading`], layer compositing and Lambert lighting.
+
+use super::raster::Tri;
+use super::{Normals, RenderOptions, Shading};
+use crate::mesh::PolyMesh;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// Mesh data derived once and shared by every view.
+pub(crate) struct Scene<'a> {
+    pub mesh: &'a PolyMesh,
+    pub shading: &'a Shading<'a>,
+    pub options: &'a RenderOptions,
+    /// Fan triangulation as mesh corner triples.
+    pub tris: Vec<[u32; 3]>,
+    /// The face of each triangle.
+    pub face_of: Vec<u32>,
+    /// Unit face normals (zero for a degenerate face).
+    pub face_normals: Vec<Vec3>,
+    /// Per-corner normals for smooth shading; empty for flat shading.
+    pub corner_normals: Vec<Vec3>,
+    /// For [`Shading::Layers`]: per face, the layers that cover it.
+    pub layers: LayerIndex,
+}
+
+/// Per face, the `(layer, offset of the face's first corner in layer.uvs)`
+/// pairs that cover it, in layer order (CSR).
+#[derive(Default)]
+pub(crate) struct LayerIndex {
+    start: Vec<u32>,
+    entries: Vec<(u32, u32)>,
+}
+
+impl LayerIndex {
+    fn new(mesh: &PolyMesh, shading: &Shading) -> Self {
+        let Shading::Layers(layers) = shading else {
+            return Self::default();
+        };
+        let fc = mesh.face_count();
+        let mut start = vec![0u32; fc + 1];
+        for layer in layers.iter() {
+            for &f in layer.faces {
+                start[f as usize + 1] += 1;
+            }
+        }
+        for f in 0..fc {
+            start[f + 1] += start[f];
+        }
+        let mut fill = start.clone();
+        let mut entries = vec![(0u32, 0u32); start[fc] as usize];
+        // Layers in the outer loop keep each face's list in layer order.
+        for (li, layer) in layers.iter().enumerate() {
+            let mut offset = 0u32;
+            for &f in layer.faces {
+                let f = f as usize;
+                entries[fill[f] as usize] = (li as u32, offset);
+                fill[f] += 1;
+                offset += mesh.face_corners(f).len() as u32;
+            }
+        }
+        Self { start, entries }
+    }
+
+    #[inline]
+    fn of_face(&self, f: usize) -> &[(u32, u32)] {
+        &self.entries[self.start[f] as usize..self.start[f + 1] as usize]
+    }
+}
+
+/// Area-weighted per-corner normals that only average faces whose unit
+/// normal lies within `crease_deg` of the corner's own face normal, so
+/// smooth surfaces shade smoothly while creases (and faces whose orientation
+/// disagrees with their neighbours') stay sharp.
+pub(crate) fn corner_normals(mesh: &PolyMesh, face_normals: &[Vec3], crease_deg: f32) -> Vec<Vec3> {
+    let nv = mesh.vertex_count();
+    let fc = mesh.face_count();
+    let mut start = vec![0u32; nv + 1];
+    for &v in &mesh.corner_vertex {
+        start[v as usize + 1] += 1;
+    }
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut incident = vec![0u32; mesh.corner_count()];
+    let mut corner_face = vec![0u32; mesh.corner_count()];
+    for f in 0..fc {
+        for c in mesh.face_corners(f) {
+            let v = mesh.corner_vertex[c] as usize;
+            incident[fill[v] as usize] = f as u32;
+            fill[v] += 1;
+            corner_face[c] = f as u32;
+        }
+    }
+    let scaled: Vec<Vec3> = (0..fc)
+        .into_par_iter()
+        .map(|f| mesh.face_normal_scaled(f))
+        .collect();
+    let cos = crease_deg.clamp(0.0, 180.0).to_radians().cos();
+    (0..mesh.corner_count())
+        .into_par_iter()
+        .map(|c| {
+            let own = face_normals[corner_face[c] as usize];
+            let v = mesh.corner_vertex[c] as usize;
+            let mut n = Vec3::ZERO;
+            for &g in &incident[start[v] as usize..start[v + 1] as usize] {
+                if face_normals[g as usize].dot(own) >= cos {
+                    n += scaled[g as usize];
+                }
+            }
+            n.try_normalize().unwrap_or(own)
+        })
+        .collect()
+}
+
+/// Interprets 1 (grey), 2 (grey, alpha), 3 (RGB) or 4 (RGBA) channel values
+/// as RGBA; with more channels the first three are RGB and it is opaque.
+#[inline]
+fn to_rgba(v: &[f32], channels: usize) -> [f32; 4] {
+    match channels {
+        1 => [v[0], v[0], v[0], 1.0],
+        2 => [v[0], v[0], v[0], v[1]],
+        3 => [v[0], v[1], v[2], 1.0],
+        4 => [v[0], v[1], v[2], v[3]],
+        _ => [v[0], v[1], v[2], 1.0],
+    }
+}
+
+/// `top` over `under` with straight (non-premultiplied) alpha.
+#[inline]
+fn over(under: [f32; 3], top: [f32; 4]) -> [f32; 3] {
+    let a = top[3].clamp(0.0, 1.0);
+    [0, 1, 2].map(|i| under[i] + (top[i] - under[i]) * a)
+}
+
+#[inline]
+fn sample(texture: &crate::image::Image, uv: Vec2, wrap: crate::image::sample::Wrap) -> [f32; 4] {
+    let mut out = [0.0f32; 4];
+    texture.sample_uv(uv.x, uv.y, wrap, &mut out);
+    to_rgba(&out, texture.channels as usize)
+}
+
+impl<'a> Scene<'a> {
+    /// Derives triangles, normals and the layer index. Inputs must have been
+    /// checked with [`Shading::check`].
+    pub fn new(mesh: &'a PolyMesh, shading: &'a Shading<'a>, options: &'a RenderOptions) -> Self {
+        let (tris, face_of) = mesh.triangulate_corners();
+        let face_normals: Vec<Vec3> = (0..mesh.face_count())
+            .into_par_iter()
+            .map(|f| mesh.face_normal(f))
+            .collect();
+        let corner_normals = match options.normals {
+            Normals::Flat => Vec::new(),
+            Normals::Smooth { crease_deg } => corner_normals(mesh, &face_normals, crease_deg),
+        };
+        Self {
+            mesh,
+            shading,
+            options,
+            layers: LayerIndex::new(mesh, shading),
+            tris,
+            face_of,
+            face_normals,
+            corner_normals,
+        }
+    }
+
+    /// The lit colour of the sample at pixel `(px, py)` covered by `t`;
+    /// `light` is the unit direction toward the key light.
+    #[inline]
+    pub fn shade(&self, t: &Tri, px: i32, py: i32, light: Vec3) -> [f32; 3] {
+        // Perspective-correct barycentrics: screen-space weights over depth.
+        let w = t.weights(px, py);
+        let q = [0, 1, 2].map(|i| w[i].max(0) as f32 * t.inv_w[i]);
+        let sum = q[0] + q[1] + q[2];
+        let b = if sum > 0.0 {
+            q.map(|v| v / sum)
+        } else {
+            [1.0 / 3.0; 3]
+        };
+        let face = self.face_of[t.source as usize] as usize;
+        let c = t.corners.map(|c| c as usize);
+
+        let mut n = if self.corner_normals.is_empty() {
+            self.face_normals[face]
+        } else {
+            (self.corner_normals[c[0]] * b[0]
+                + self.corner_normals[c[1]] * b[1]
+                + self.corner_normals[c[2]] * b[2])
+                .normalize_or_zero()
+        };
+        if n == Vec3::ZERO {
+            // A degenerate polygon: fall back to the triangle's own normal in
+            // its original winding (fan triangles are `[c0, c, c + 1]`; setup
+            // may have swapped the last two), which `t.back` refers to.
+            let (c1, c2) = (c[1].min(c[2]), c[1].max(c[2]));
+            let p =
+                [c[0], c1, c2].map(|c| self.mesh.positions[self.mesh.corner_vertex[c] as usize]);
+            n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+        }
+        // Two-sided lighting: a triangle seen from behind is lit on its back.
+        if t.back {
+            n = -n;
+        }
+
+        let opts = self.options;
+        let base = opts.base_colour;
+        let albedo = match *self.shading {
+            Shading::Plain => base,
+            Shading::VertexColours { values, channels } => {
+                let mut rgba = [0.0f32; 4];
+                for i in 0..3 {
+                    let v = self.mesh.corner_vertex[c[i]] as usize * channels;
+                    let col = to_rgba(&values[v..v + channels], channels);
+                    for k in 0..4 {
+                        rgba[k] += b[i] * col[k];
+                    }
+                }
+                over(base, rgba)
+            }
+            Shading::CornerUvs { uvs, texture, wrap } => {
+                let uv = uvs[c[0]] * b[0] + uvs[c[1]] * b[1] + uvs[c[2]] * b[2];
+                over(base, sample(texture, uv, wrap))
+            }
+            Shading::Layers(layers) => {
+                let first = self.mesh.face_start[face] as usize;
+                let mut colour = base;
+                for &(li, offset) in self.layers.of_face(face) {
+                    let layer = &layers[li as usize];
+                    let uv_of = |corner: usize| layer.uvs[offset as usize + corner - first];
+                    let uv = uv_of(c[0]) * b[0] + uv_of(c[1]) * b[1] + uv_of(c[2]) * b[2];
+                    colour = over(colour, sample(layer.texture, uv, layer.wrap));
+                }
+                colour
+            }
+        };
+        let light = opts.ambient + (1.0 - opts.ambient) * n.dot(light).max(0.0);
+        albedo.map(|a| a * light)
+    }
+}
