@@ -49,7 +49,7 @@ fn world_after(n: usize) -> World {
 #[test]
 fn components_after_each_stage() {
     // After orientation: orthonormal frames whose t follows +Y where possible.
-    let mut w = world_after(1);
+    let w = world_after(1);
     let active = w.resource::<ActiveMesh>().0;
     let nv = w.get::<Geometry>(active).unwrap().0.vertex_count();
     let frames = &w.get::<Frames>(active).expect("orientation adds Frames").0;

@@ -19,8 +19,8 @@ pub fn blur_binomial(img: &Image, step: u32, wrap: Wrap) -> Image {
             let o = tmp.offset(x as u32, y as u32);
             for (k, wt) in BINOMIAL5.iter().enumerate() {
                 let px = img.texel(x + (k as i64 - 2) * step, y, wrap);
-                for i in 0..c {
-                    tmp.data[o + i] += wt * px[i];
+                for (acc, v) in tmp.data[o..o + c].iter_mut().zip(px) {
+                    *acc += wt * v;
                 }
             }
         }
@@ -31,8 +31,8 @@ pub fn blur_binomial(img: &Image, step: u32, wrap: Wrap) -> Image {
             let o = out.offset(x as u32, y as u32);
             for (k, wt) in BINOMIAL5.iter().enumerate() {
                 let px = tmp.texel(x, y + (k as i64 - 2) * step, wrap);
-                for i in 0..c {
-                    out.data[o + i] += wt * px[i];
+                for (acc, v) in out.data[o..o + c].iter_mut().zip(px) {
+                    *acc += wt * v;
                 }
             }
         }

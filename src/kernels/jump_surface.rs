@@ -144,7 +144,7 @@ pub fn synthesize_surface<J: JumpLookup>(
     let size = Vec2::new(w as f32, h as f32);
     let max = size - Vec2::ONE;
     let order = vertex_order(topo, settings.order, settings.seed);
-    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(settings.seed ^ 0x5EED_0F_5EED);
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(settings.seed ^ 0x005E_ED0F_5EED);
     let mut texel = vec![Vec2::ZERO; n];
     let mut done = vec![false; n];
     let range = (2.0 * settings.patch_fraction * w as f32).max(1.0);

@@ -161,7 +161,7 @@ mod tests {
         let m = two_component_mesh();
         let t = Topology::build(&m);
         let o = vertex_order(&t, VertexOrder::EmergingFront, 9);
-        let mut done = vec![false; 50];
+        let mut done = [false; 50];
         // After the first vertex of a component, every next vertex of the
         // same component touches an already-synthesized one.
         let mut with_nbr = 0;

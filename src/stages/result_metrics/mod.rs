@@ -13,18 +13,24 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 
+type ResultQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static Frames>,
+        Option<&'static VertexColours>,
+        Option<&'static CornerUvs>,
+    ),
+>;
+
 /// The result-metrics system with its settings.
 pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
     (move |active: Res<ActiveMesh>,
            exemplar: Res<Exemplar>,
            spacing: Res<TexelSpacing>,
            mut metrics: ResMut<Metrics>,
-           meshes: Query<(
-        &Geometry,
-        Option<&Frames>,
-        Option<&VertexColours>,
-        Option<&CornerUvs>,
-    )>| {
+           meshes: ResultQuery| {
         let _span = tracing::info_span!("result_metrics").entered();
         let Ok((geometry, frames, colours, uvs)) = meshes.get(active.0) else {
             return;
