@@ -2,3 +2,4 @@
 
 pub mod frames;
 pub mod metrics;
+pub mod surface_sample;
