@@ -15,7 +15,7 @@ mod nearest;
 pub use super::surface_sample::SurfaceSignal;
 pub use energy::{image_texture_energy, surface_texture_energy};
 pub use histogram::{histogram_wasserstein, histogram_wasserstein_mean};
-pub use nearest::ExemplarNeighbourhoods;
+pub use nearest::{ExemplarNeighbourhoods, QueryScratch};
 
 /// Settings of the texture energy (the `[metrics]` options of a config).
 #[derive(Clone, Debug, PartialEq, serde::Deserialize)]
