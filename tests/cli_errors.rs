@@ -157,6 +157,10 @@ fn missing_stage_input_says_what_to_add() {
     expect_bad(
         &no_mesh,
         &[],
-        &["stage 1 (orientation)", "needs a mesh", "set `mesh` in [input]"],
+        &[
+            "stage 1 (orientation)",
+            "needs a mesh",
+            "set `mesh` in [input]",
+        ],
     );
 }

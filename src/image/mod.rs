@@ -7,9 +7,9 @@ pub mod io;
 pub mod pyramid;
 pub mod sample;
 
-pub use builtin::ExemplarOptions;
+pub use builtin::{BUILTIN_EXEMPLARS, ExemplarOptions, builtin_exemplar, check_exemplar_size};
 pub use error::ImageError;
-pub use io::exemplar_from_spec;
+pub use io::{exemplar_from_spec, load_image};
 
 /// A row-major image of `f32` values with interleaved channels, values
 /// nominally in `[0, 1]`.

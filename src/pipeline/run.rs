@@ -118,6 +118,7 @@ fn schedule_result_metrics(
         neighbourhood: pipeline.output.metric_neighbourhood,
         samples: pipeline.output.metric_samples,
         seed: pipeline.seed,
+        ..Default::default()
     };
     crate::stages::result_metrics::system(settings)
 }

@@ -1,0 +1,396 @@
+//! Integration tests of exemplar loading and of the texture metrics on the
+//! shared texture photographs (`../shared/data/textures`).
+
+use std::path::PathBuf;
+
+use glam::{Vec2, Vec3};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_pcg::Pcg64Mcg;
+use surfsynth::image::sample::Wrap;
+use surfsynth::image::{ExemplarOptions, Image, exemplar_from_spec, load_image};
+use surfsynth::kernels::frames::TangentFrame;
+use surfsynth::kernels::metrics::{
+    EnergySettings, SurfaceSignal, histogram_wasserstein, histogram_wasserstein_mean,
+    image_texture_energy, surface_texture_energy,
+};
+use surfsynth::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+use surfsynth::mesh::{PolyMesh, Topology};
+
+const TEXTURES: [&str; 5] = ["stones", "brick", "water", "planks", "grass"];
+
+fn data_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+}
+
+fn texture(name: &str) -> Image {
+    let path = data_dir().join("textures").join(format!("{name}.png"));
+    load_image(&path).unwrap_or_else(|e| panic!("shared test texture missing or unreadable: {e}"))
+}
+
+/// `img` repeated `nx`×`ny` times.
+fn tile(img: &Image, nx: u32, ny: u32) -> Image {
+    crop(img, 0, 0, img.width * nx, img.height * ny)
+}
+
+/// A `w`×`h` window at `(x0, y0)` of the infinite tiling of `img`.
+fn crop(img: &Image, x0: u32, y0: u32, w: u32, h: u32) -> Image {
+    let mut out = Image::new(w, h, img.channels);
+    for y in 0..h {
+        for x in 0..w {
+            let src = img.texel((x0 + x) as i64, (y0 + y) as i64, Wrap::Repeat);
+            out.pixel_mut(x, y).copy_from_slice(src);
+        }
+    }
+    out
+}
+
+/// The pixels of `img` in a seeded random order (same histogram, no structure).
+fn shuffled(img: &Image, seed: u64) -> Image {
+    let c = img.channels as usize;
+    let mut pixels: Vec<&[f32]> = img.data.chunks_exact(c).collect();
+    pixels.shuffle(&mut Pcg64Mcg::seed_from_u64(seed));
+    let data = pixels.concat();
+    Image::from_data(img.width, img.height, img.channels, data).unwrap()
+}
+
+#[test]
+fn shared_textures_load_as_128_square_rgb() {
+    for name in TEXTURES {
+        let img = texture(name);
+        assert_eq!(
+            (img.width, img.height, img.channels),
+            (128, 128, 3),
+            "{name}"
+        );
+        assert!(img.data.iter().all(|v| (0.0..=1.0).contains(v)), "{name}");
+        let (lo, hi) = img
+            .data
+            .iter()
+            .fold((1.0f32, 0.0f32), |(lo, hi), &v| (lo.min(v), hi.max(v)));
+        assert!(hi - lo > 0.3, "{name} has contrast: {lo}..{hi}");
+    }
+    // The same file through an exemplar spec, relative to a base directory.
+    let (img, name) = exemplar_from_spec(
+        "textures/stones.png",
+        &data_dir(),
+        &ExemplarOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(name, "textures/stones.png");
+    assert_eq!(img, texture("stones"));
+}
+
+#[test]
+fn tiled_exemplar_has_zero_energy_and_a_shuffle_is_far() {
+    let settings = EnergySettings {
+        neighbourhood: 7,
+        samples: 400,
+        seed: 11,
+        ..Default::default()
+    };
+    for name in ["stones", "brick", "water"] {
+        let ex = texture(name);
+        let tiled = image_texture_energy(&tile(&ex, 2, 2), &ex, &settings, Wrap::Repeat);
+        // Away from its borders a crop of the tiling is made of exemplar
+        // windows; clamping at the borders makes a few windows new.
+        let cropped =
+            image_texture_energy(&crop(&ex, 37, 51, 150, 140), &ex, &settings, Wrap::Clamp);
+        let shuffle = image_texture_energy(&shuffled(&ex, 5), &ex, &settings, Wrap::Repeat);
+        println!(
+            "{name}: tiled {:.3e}, crop {:.3e} (p90 {:.3e}), shuffle {:.3e} (p90 {:.3e})",
+            tiled.mean, cropped.mean, cropped.p90, shuffle.mean, shuffle.p90
+        );
+        assert_eq!(tiled.samples, 400);
+        assert!(tiled.mean < 1e-9, "{name}: tiled energy {}", tiled.mean);
+        assert_eq!(
+            cropped.p90, 0.0,
+            "{name}: most crop windows are exemplar windows"
+        );
+        assert!(
+            shuffle.mean > 5.0 * tiled.mean && shuffle.mean > 0.005,
+            "{name}: shuffle energy {} not far above tiled {}",
+            shuffle.mean,
+            tiled.mean
+        );
+        assert!(
+            shuffle.mean > 5.0 * cropped.mean,
+            "{name}: shuffle {} vs crop {}",
+            shuffle.mean,
+            cropped.mean
+        );
+    }
+}
+
+#[test]
+fn wasserstein_ignores_pixel_order_but_sees_colour() {
+    for name in ["stones", "brick", "water"] {
+        let ex = texture(name);
+        let shuffle = histogram_wasserstein(&shuffled(&ex, 9), &ex);
+        assert!(shuffle.iter().all(|&d| d < 1e-6), "{name}: {shuffle:?}");
+        assert!(histogram_wasserstein_mean(&tile(&ex, 2, 3), &ex) < 1e-6);
+        let grey = Image::from_data(64, 64, 3, vec![0.5; 64 * 64 * 3]).unwrap();
+        let d = histogram_wasserstein_mean(&grey, &ex);
+        println!("{name}: grey W1 {d:.4}");
+        assert!(d > 0.05, "{name}: constant grey W1 {d}");
+    }
+}
+
+/// A planar grid over the exemplar: vertex `(x, y)` at `(x, y, 0)` (one world
+/// unit per texel, texel centres on vertices), quads counter-clockwise about
+/// +Z. With frames `s = +X`, `t = +Y`, `n = +Z`, template column `i` and row
+/// `j` run along image x and y.
+fn grid(w: u32, h: u32) -> PolyMesh {
+    let positions = (0..h)
+        .flat_map(|y| (0..w).map(move |x| Vec3::new(x as f32, -(y as f32), 0.0)))
+        .collect();
+    let mut faces = Vec::new();
+    for y in 0..h - 1 {
+        for x in 0..w - 1 {
+            let v = y * w + x;
+            faces.push([v, v + w, v + w + 1, v + 1]);
+        }
+    }
+    PolyMesh::from_polygons(positions, faces.iter().map(|f| &f[..]))
+}
+
+fn plane_frames(mesh: &PolyMesh) -> Vec<TangentFrame> {
+    vec![TangentFrame::from_direction(Vec3::Z, Vec3::X); mesh.vertex_count()]
+}
+
+#[test]
+fn grid_vertex_template_is_the_exemplar_window() {
+    let ex = texture("water");
+    let mesh = grid(ex.width, ex.height);
+    let topo = Topology::build(&mesh);
+    let frames = plane_frames(&mesh);
+    let signal = SurfaceSignal::VertexColours {
+        values: &ex.data,
+        channels: 3,
+    };
+    let mut out = vec![0.0; 7 * 7 * 3];
+    let mut scratch = ResampleScratch::new();
+    for (cx, cy) in [(10u32, 20u32), (64, 64), (126, 1)] {
+        let v = cy * ex.width + cx;
+        let covered = resample_neighbourhood(
+            &mesh,
+            &topo,
+            v,
+            &frames[v as usize],
+            1.0,
+            7,
+            &signal,
+            &[0.0; 3],
+            &mut out,
+            &mut scratch,
+        );
+        for j in 0..7u32 {
+            for i in 0..7u32 {
+                let (x, y) = (cx as i64 + i as i64 - 3, cy as i64 + j as i64 - 3);
+                let got = &out[((j * 7 + i) * 3) as usize..][..3];
+                let inside =
+                    (0..ex.width as i64).contains(&x) && (0..ex.height as i64).contains(&y);
+                assert_eq!(scratch.coverage()[(j * 7 + i) as usize], inside);
+                if inside {
+                    assert_eq!(
+                        got,
+                        ex.pixel(x as u32, y as u32),
+                        "template ({i}, {j}) at vertex ({cx}, {cy})"
+                    );
+                }
+            }
+        }
+        // At (126, 1) the template sticks out two columns and two rows.
+        let expected = if cy == 1 { 5 * 5 } else { 49 };
+        assert_eq!(covered, expected);
+    }
+}
+
+#[test]
+fn surface_energy_of_copied_colours_is_zero_and_of_shuffled_is_large() {
+    let ex = texture("stones");
+    let mesh = grid(ex.width, ex.height);
+    let topo = Topology::build(&mesh);
+    let frames = plane_frames(&mesh);
+    let settings = EnergySettings {
+        samples: 300,
+        seed: 4,
+        ..Default::default()
+    };
+    let copy = SurfaceSignal::VertexColours {
+        values: &ex.data,
+        channels: 3,
+    };
+    let e_copy = surface_texture_energy(&mesh, &topo, &frames, 1.0, &copy, &ex, &settings);
+    let sh = shuffled(&ex, 3);
+    let shuffle = SurfaceSignal::VertexColours {
+        values: &sh.data,
+        channels: 3,
+    };
+    let e_shuffle = surface_texture_energy(&mesh, &topo, &frames, 1.0, &shuffle, &ex, &settings);
+    let image_shuffle = image_texture_energy(&sh, &ex, &settings, Wrap::Clamp);
+    println!("copy {e_copy:?}\nshuffle {e_shuffle:?}\nimage shuffle {image_shuffle:?}");
+    assert_eq!(e_copy.samples, 300);
+    assert!(e_copy.mean < 1e-9, "{e_copy:?}");
+    assert!(e_shuffle.mean > 0.01, "{e_shuffle:?}");
+    // On a flat grid the surface and image energies measure the same thing.
+    assert!(
+        (e_shuffle.mean / image_shuffle.mean - 1.0).abs() < 0.2,
+        "{e_shuffle:?} vs {image_shuffle:?}"
+    );
+}
+
+#[test]
+fn surface_energy_of_a_moved_and_triangulated_grid_stays_near_zero() {
+    // The same grid rotated and shifted in space, triangulated, with frames
+    // rotated along: the resampled templates must not change.
+    let ex = texture("brick");
+    let flat = grid(ex.width, ex.height).triangulated();
+    let rot = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.7, -0.4, 1.9);
+    let shift = Vec3::new(3.0, -20.0, 7.5);
+    let mut mesh = flat.clone();
+    for p in &mut mesh.positions {
+        *p = rot * *p + shift;
+    }
+    let topo = Topology::build(&mesh);
+    let frames =
+        vec![TangentFrame::from_direction(rot * Vec3::Z, rot * Vec3::X); mesh.vertex_count()];
+    let settings = EnergySettings {
+        samples: 200,
+        seed: 8,
+        ..Default::default()
+    };
+    let signal = SurfaceSignal::VertexColours {
+        values: &ex.data,
+        channels: 3,
+    };
+    let e = surface_texture_energy(&mesh, &topo, &frames, 1.0, &signal, &ex, &settings);
+    println!("moved grid {e:?}");
+    assert!(e.mean < 1e-6, "{e:?}");
+}
+
+#[test]
+fn plane_with_uvs_onto_the_exemplar_has_near_zero_energy() {
+    let ex = texture("water");
+    // A coarser plane (4 texels per quad) whose corner UVs map vertex (x, y)
+    // to the texel centre (x + 0.5, y + 0.5): template points land on texel
+    // centres, so bilinear sampling returns exact pixels.
+    let (w, h) = (33u32, 33u32);
+    let mut mesh = grid(w, h);
+    for p in &mut mesh.positions {
+        *p *= 4.0;
+    }
+    let uvs: Vec<Vec2> = mesh
+        .corner_vertex
+        .iter()
+        .map(|&v| {
+            let p = mesh.positions[v as usize];
+            Vec2::new(
+                (p.x + 0.5) / ex.width as f32,
+                (-p.y + 0.5) / ex.height as f32,
+            )
+        })
+        .collect();
+    let topo = Topology::build(&mesh);
+    let frames = plane_frames(&mesh);
+    let settings = EnergySettings {
+        samples: 300,
+        seed: 2,
+        ..Default::default()
+    };
+    let signal = SurfaceSignal::CornerUvs {
+        uvs: &uvs,
+        texture: &ex,
+        wrap: Wrap::Repeat,
+    };
+    let e = surface_texture_energy(&mesh, &topo, &frames, 1.0, &signal, &ex, &settings);
+    // The same plane showing a shuffled texture.
+    let sh = shuffled(&ex, 1);
+    let signal_sh = SurfaceSignal::CornerUvs {
+        uvs: &uvs,
+        texture: &sh,
+        wrap: Wrap::Repeat,
+    };
+    let e_sh = surface_texture_energy(&mesh, &topo, &frames, 1.0, &signal_sh, &ex, &settings);
+    println!("uv plane {e:?}, shuffled {e_sh:?}");
+    assert!(e.mean < 1e-8, "{e:?}");
+    assert!(e_sh.mean > 0.01, "{e_sh:?}");
+}
+
+/// A cylinder around +Z with the texture wrapped once around it (one world
+/// unit per texel along the surface), outward normals.
+fn cylinder(around: u32, rows: u32) -> (PolyMesh, Vec<Vec2>, Vec<TangentFrame>) {
+    let radius = around as f32 / std::f32::consts::TAU;
+    let mut positions = Vec::new();
+    let mut frames = Vec::new();
+    for y in 0..rows {
+        for x in 0..around {
+            let a = x as f32 / around as f32 * std::f32::consts::TAU;
+            let n = Vec3::new(a.cos(), a.sin(), 0.0);
+            positions.push(n * radius - Vec3::Z * y as f32);
+            // s along increasing angle (texture x), t = +Z (texture up; image
+            // rows run down, toward −Z).
+            frames.push(TangentFrame::from_direction(
+                n,
+                Vec3::new(-a.sin(), a.cos(), 0.0),
+            ));
+        }
+    }
+    let mut faces = Vec::new();
+    let mut uvs = Vec::new();
+    for y in 0..rows - 1 {
+        for x in 0..around {
+            let x1 = (x + 1) % around;
+            faces.push([
+                y * around + x,
+                (y + 1) * around + x,
+                (y + 1) * around + x1,
+                y * around + x1,
+            ]);
+            // Per-corner UVs: the seam column uses u = 1 rather than 0.
+            for (cx, cy) in [(x, y), (x, y + 1), (x + 1, y + 1), (x + 1, y)] {
+                uvs.push(Vec2::new(
+                    (cx as f32 + 0.5) / around as f32,
+                    (cy as f32 + 0.5) / rows as f32,
+                ));
+            }
+        }
+    }
+    let mesh = PolyMesh::from_polygons(positions, faces.iter().map(|f| &f[..]));
+    (mesh, uvs, frames)
+}
+
+#[test]
+fn textured_cylinder_has_low_energy() {
+    let ex = texture("stones");
+    let (mesh, uvs, frames) = cylinder(ex.width, ex.height);
+    let topo = Topology::build(&mesh);
+    let settings = EnergySettings {
+        samples: 300,
+        seed: 6,
+        ..Default::default()
+    };
+    let signal = SurfaceSignal::CornerUvs {
+        uvs: &uvs,
+        texture: &ex,
+        wrap: Wrap::Repeat,
+    };
+    let e = surface_texture_energy(&mesh, &topo, &frames, 1.0, &signal, &ex, &settings);
+    let sh = shuffled(&ex, 2);
+    let signal_sh = SurfaceSignal::CornerUvs {
+        uvs: &uvs,
+        texture: &sh,
+        wrap: Wrap::Repeat,
+    };
+    let e_sh = surface_texture_energy(&mesh, &topo, &frames, 1.0, &signal_sh, &ex, &settings);
+    println!("cylinder {e:?}, shuffled {e_sh:?}");
+    assert!(e.mean < 0.05 * e_sh.mean, "{e:?} vs {e_sh:?}");
+    // A frame turned by a quarter turn reads the texture sideways: worse.
+    let turned: Vec<TangentFrame> = frames
+        .iter()
+        .map(|f| f.rotated(std::f32::consts::FRAC_PI_2))
+        .collect();
+    let e_turned = surface_texture_energy(&mesh, &topo, &turned, 1.0, &signal, &ex, &settings);
+    println!("cylinder turned frames {e_turned:?}");
+    assert!(e_turned.mean > 3.0 * e.mean, "{e_turned:?} vs {e:?}");
+}
