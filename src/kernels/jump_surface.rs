@@ -33,8 +33,11 @@ pub trait JumpLookup: Sync {
 /// Settings of surface synthesis.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceSynthSettings {
-    /// Desired mean patch size as a fraction of the exemplar width (§5.1:
-    /// random numbers are drawn over twice this many pixels). 0.05..=4.
+    /// Desired patch size as a fraction of the exemplar's side `L`: patches
+    /// of about `(f·L)²` pixels are wanted, so random numbers are drawn over
+    /// twice that many pixels (§5.1). Each vertex counts for the texture area
+    /// it covers (its mean squared edge offset), so the patch size in texels
+    /// does not depend on the mesh resolution. 0.05..=16.
     pub patch_fraction: f32,
     /// Width of the boundary-avoidance band as a fraction of the exemplar
     /// size (§5.2; 0 turns it off). Ignored for tileable exemplars.
@@ -147,7 +150,8 @@ pub fn synthesize_surface<J: JumpLookup>(
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(settings.seed ^ 0x005E_ED0F_5EED);
     let mut texel = vec![Vec2::ZERO; n];
     let mut done = vec![false; n];
-    let range = (2.0 * settings.patch_fraction * w as f32).max(1.0);
+    let side = ((w as f32) * (h as f32)).sqrt();
+    let range = (2.0 * (settings.patch_fraction * side).powi(2)).max(1.0);
     let band = settings.boundary_fraction * w.min(h) as f32;
     let mut table: Vec<(Vec2, f32, bool)> = Vec::with_capacity(128);
     let mut out = SurfaceSynthOutput::default();
@@ -176,7 +180,8 @@ pub fn synthesize_surface<J: JumpLookup>(
             }
             let d = -offsets[lo_i + k]; // u → v
             let pu = texel[ui];
-            let step_len = d.length().max(1e-3);
+            // Texture area this vertex stands for, in pixels.
+            let step_area = d.length_squared().max(1e-6);
             // Floating-point look-up (§6.4): coalesce the four taps.
             let base = pu.floor();
             let f = pu - base;
@@ -204,7 +209,7 @@ pub fn synthesize_surface<J: JumpLookup>(
                     table.push((Vec2::new(dx as f32, dy as f32) + sub + d, mass, true));
                 });
             }
-            // Jump probability per pixel travelled (§5.1), raised near the
+            // Jump probability per pixel of area (§5.1), raised near the
             // exemplar boundary (§5.2).
             let mut r = range;
             if !settings.tileable && band > 0.0 {
@@ -213,7 +218,7 @@ pub fn synthesize_surface<J: JumpLookup>(
                     r = sum + (range - sum) * dist / band;
                 }
             }
-            let mut k_scale = step_len / r.max(1e-6);
+            let mut k_scale = step_area / r.max(1e-6);
             if sum * k_scale > 1.0 {
                 k_scale = 1.0 / sum;
             }

@@ -7,6 +7,11 @@ use std::path::{Path, PathBuf};
 /// Writes the job's files into `dir`; returns their paths.
 pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputError> {
     let mut files = Vec::new();
+    for (name, image) in &job.images {
+        let path = dir.join(name);
+        super::write_png(&path, image)?;
+        files.push(path);
+    }
     for format in &job.formats {
         match format.as_str() {
             "ply" => {

@@ -180,4 +180,12 @@ pub struct ExportJob {
     pub uvs: Option<(Vec<Vec2>, Image)>,
     /// Rendered preview images.
     pub previews: Vec<Image>,
+    /// Further images to write as PNG, by file name (`jump_image.png`, ...).
+    pub images: Vec<(String, Image)>,
 }
+
+/// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
+/// the texture coordinates of its three corners for each of the three choices
+/// of base vertex: the 3-way blend of Zelinka & Garland §6.5.
+#[derive(Component, Clone, Debug, Default)]
+pub struct BlendUvs(pub Vec<[[Vec2; 3]; 3]>);

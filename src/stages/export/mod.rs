@@ -117,6 +117,7 @@ impl Stage for Export {
             } else {
                 Vec::new()
             };
+            let images = std::mem::take(&mut job.images);
             *job = ExportJob {
                 formats: settings.formats.clone(),
                 stem: settings.name.clone(),
@@ -124,6 +125,7 @@ impl Stage for Export {
                 colours: colours.cloned(),
                 uvs: uvs.map(|u| (u.0.clone(), exemplar.image.clone())),
                 previews,
+                images,
             };
         })
         .into_configs()
