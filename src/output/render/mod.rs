@@ -109,6 +109,16 @@ pub enum Shading<'a> {
         texture: &'a Image,
         wrap: Wrap,
     },
+    /// The jump-map 3-way blend (Zelinka & Garland 2004 §6.5): for every fan
+    /// triangle of [`PolyMesh::triangulate_corners`], the texture coordinates
+    /// of its three corners for each choice of base vertex. The three look-ups
+    /// are blended with linear alpha ramps (the barycentric coordinate of each
+    /// base vertex).
+    BlendedUvs {
+        layers: &'a [[[Vec2; 3]; 3]],
+        texture: &'a Image,
+        wrap: Wrap,
+    },
     /// Lapped-texture layers, composited in order (later ones on top) with
     /// alpha blending over the base colour.
     ///
@@ -258,6 +268,13 @@ impl Shading<'_> {
             Shading::CornerUvs { uvs, texture, .. } => {
                 check_texture("texture", texture)?;
                 check_length("corner uvs", mesh.corner_count(), uvs.len())
+            }
+            Shading::BlendedUvs { layers, texture, .. } => {
+                check_texture("texture", texture)?;
+                let tris: usize = (0..mesh.face_count())
+                    .map(|f| mesh.face_corners(f).len().saturating_sub(2))
+                    .sum();
+                check_length("blend layers (fan triangles)", tris, layers.len())
             }
             Shading::Layers(layers) => {
                 for (i, layer) in layers.iter().enumerate() {

@@ -223,6 +223,30 @@ impl<'a> Scene<'a> {
                 let uv = uvs[c[0]] * b[0] + uvs[c[1]] * b[1] + uvs[c[2]] * b[2];
                 over(base, sample(texture, uv, wrap))
             }
+            Shading::BlendedUvs {
+                layers,
+                texture,
+                wrap,
+            } => {
+                // Map the drawn corners back to the fan triangle's order
+                // (setup may have swapped two of them).
+                let orig = self.tris[t.source as usize];
+                let pos = t.corners.map(|c| orig.iter().position(|&o| o == c).unwrap_or(0));
+                let mut bo = [0.0f32; 3];
+                for i in 0..3 {
+                    bo[pos[i]] += b[i];
+                }
+                let layer = &layers[t.source as usize];
+                let mut rgba = [0.0f32; 4];
+                for (base_corner, uvs) in layer.iter().enumerate() {
+                    let uv = uvs[0] * bo[0] + uvs[1] * bo[1] + uvs[2] * bo[2];
+                    let col = sample(texture, uv, wrap);
+                    for k in 0..4 {
+                        rgba[k] += bo[base_corner] * col[k];
+                    }
+                }
+                over(base, rgba)
+            }
             Shading::Layers(layers) => {
                 let first = self.mesh.face_start[face] as usize;
                 let mut colour = base;
