@@ -5,5 +5,6 @@ pub mod geodesic;
 pub mod jump_surface;
 pub mod metrics;
 pub mod orientation_field;
+pub mod sqrt2;
 pub mod surface_sample;
 pub mod vertex_order;
