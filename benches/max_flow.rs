@@ -11,7 +11,11 @@
 //! * `square/N`: a `side × side` grid (10^4 and ~10^5 nodes), the worst case
 //!   for BK: augmenting paths cross the whole grid;
 //! * `band/N`: a 32-pixel-wide overlap band of ~10^5 nodes, the usual shape
-//!   of a seam between two patches.
+//!   of a seam between two patches;
+//! * `patch/N`: the per-vertex graph of Bangay & Morkel §3.4 (Fig. 9, eq. 1)
+//!   on a 33 × 33 texel neighbourhood: the centre tied to the texture
+//!   terminal (source) and the border ring to the surface terminal (sink),
+//!   n-links `M(A, B) · exp(−(x_A² + x_B²) / (σ r²))` with σ = 1, r = 33.
 //!
 //! Only `max_flow` is timed; graphs are built and cloned outside the loop.
 //!
@@ -59,6 +63,57 @@ fn seam_grid(width: u32, height: u32, seed: u64) -> FlowGraph {
     g
 }
 
+/// The texture-transfer graph of Bangay & Morkel §3.4 on a `side × side`
+/// neighbourhood (`side` odd), seeded.
+fn transfer_patch(side: u32, seed: u64) -> FlowGraph {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = (side * side) as usize;
+    let mismatch: Vec<f64> = (0..n).map(|_| rng.random_range(0.0..3.0)).collect();
+    let c = f64::from(side / 2);
+    let r2 = f64::from(side) * f64::from(side);
+    let x2 = |v: u32| {
+        let (x, y) = (f64::from(v % side) - c, f64::from(v / side) - c);
+        x * x + y * y
+    };
+    let weight = |a: u32, b: u32| {
+        (mismatch[a as usize] + mismatch[b as usize]) * (-(x2(a) + x2(b)) / r2).exp()
+    };
+    let mut g = FlowGraph::with_capacity(n, 2 * n);
+    for y in 0..side {
+        for x in 0..side {
+            let v = y * side + x;
+            if x + 1 < side {
+                let w = weight(v, v + 1);
+                g.add_edge(v, v + 1, w, w);
+            }
+            if y + 1 < side {
+                let w = weight(v, v + side);
+                g.add_edge(v, v + side, w, w);
+            }
+            if x == 0 || y == 0 || x + 1 == side || y + 1 == side {
+                g.add_terminal_weights(v, 0.0, f64::INFINITY);
+            }
+        }
+    }
+    g.add_terminal_weights(n as u32 / 2, f64::INFINITY, 0.0);
+    g
+}
+
+fn bench_patch(c: &mut Criterion) {
+    let graph = transfer_patch(33, 42);
+    c.bench_with_input(
+        BenchmarkId::new("max_flow_bk/patch", graph.num_nodes()),
+        &graph,
+        |b, graph| {
+            b.iter_batched(
+                || graph.clone(),
+                |mut g| black_box(g.max_flow()),
+                BatchSize::SmallInput,
+            )
+        },
+    );
+}
+
 fn bench_grids(c: &mut Criterion) {
     let mut group = c.benchmark_group("max_flow_bk");
     group.sample_size(10);
@@ -83,5 +138,5 @@ fn bench_grids(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_grids);
+criterion_group!(benches, bench_patch, bench_grids);
 criterion_main!(benches);
