@@ -1,0 +1,142 @@
+//! Boykov–Kolmogorov max-flow on texture-seam-like 4-connected grid graphs.
+//!
+//! Each n-link is weighted like a Kwatra et al. 2003 seam, the colour
+//! mismatch of the two overlapping patches at both ends,
+//! `M(s, t) = |A(s) − B(s)| + |A(t) − B(t)|`, with a per-pixel mismatch made
+//! of a smooth low-frequency term plus the noise of random RGB values
+//! (seeded). The left column is tied to the source and the right column to
+//! the sink with infinite weight (Bangay & Morkel 2006 §3.4 tie vertices to
+//! the terminals the same way). Two shapes:
+//!
+//! * `square/N`: a `side × side` grid (10^4 and ~10^5 nodes), the worst case
+//!   for BK: augmenting paths cross the whole grid;
+//! * `band/N`: a 32-pixel-wide overlap band of ~10^5 nodes, the usual shape
+//!   of a seam between two patches;
+//! * `patch/N`: the per-vertex graph of Bangay & Morkel §3.4 (Fig. 9, eq. 1)
+//!   on a 33 × 33 texel neighbourhood: the centre tied to the texture
+//!   terminal (source) and the border ring to the surface terminal (sink),
+//!   n-links `M(A, B) · exp(−(x_A² + x_B²) / (σ r²))` with σ = 1, r = 33.
+//!
+//! Only `max_flow` is timed; graphs are built and cloned outside the loop.
+//!
+//! Run: `cargo bench --bench max_flow`. Baseline workflow:
+//! `cargo bench --bench max_flow -- --save-baseline main`, then after a
+//! change `cargo bench --bench max_flow -- --baseline main`.
+
+use criterion::{BatchSize, BenchmarkId, Criterion, criterion_group, criterion_main};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use std::hint::black_box;
+use surfsynth::kernels::max_flow::FlowGraph;
+
+/// The seam graph of a `width × height` grid (node `y * width + x`),
+/// seeded; the terminals are tied to columns 0 and `width - 1`.
+fn seam_grid(width: u32, height: u32, seed: u64) -> FlowGraph {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = (width * height) as usize;
+    let mismatch: Vec<f64> = (0..n as u32)
+        .map(|p| {
+            let (x, y) = (f64::from(p % width), f64::from(p / width));
+            let smooth = 0.5 + 0.5 * (x * 0.05).sin() * (y * 0.07).cos();
+            let noise: f64 = (0..3)
+                .map(|_| (rng.random::<f64>() - rng.random::<f64>()).abs())
+                .sum();
+            smooth + noise
+        })
+        .collect();
+    let mut g = FlowGraph::with_capacity(n, 2 * n);
+    for y in 0..height {
+        for x in 0..width {
+            let v = y * width + x;
+            if x + 1 < width {
+                let c = mismatch[v as usize] + mismatch[v as usize + 1];
+                g.add_edge(v, v + 1, c, c);
+            }
+            if y + 1 < height {
+                let c = mismatch[v as usize] + mismatch[(v + width) as usize];
+                g.add_edge(v, v + width, c, c);
+            }
+        }
+        g.add_terminal_weights(y * width, f64::INFINITY, 0.0);
+        g.add_terminal_weights(y * width + width - 1, 0.0, f64::INFINITY);
+    }
+    g
+}
+
+/// The texture-transfer graph of Bangay & Morkel §3.4 on a `side × side`
+/// neighbourhood (`side` odd), seeded.
+fn transfer_patch(side: u32, seed: u64) -> FlowGraph {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let n = (side * side) as usize;
+    let mismatch: Vec<f64> = (0..n).map(|_| rng.random_range(0.0..3.0)).collect();
+    let c = f64::from(side / 2);
+    let r2 = f64::from(side) * f64::from(side);
+    let x2 = |v: u32| {
+        let (x, y) = (f64::from(v % side) - c, f64::from(v / side) - c);
+        x * x + y * y
+    };
+    let weight = |a: u32, b: u32| {
+        (mismatch[a as usize] + mismatch[b as usize]) * (-(x2(a) + x2(b)) / r2).exp()
+    };
+    let mut g = FlowGraph::with_capacity(n, 2 * n);
+    for y in 0..side {
+        for x in 0..side {
+            let v = y * side + x;
+            if x + 1 < side {
+                let w = weight(v, v + 1);
+                g.add_edge(v, v + 1, w, w);
+            }
+            if y + 1 < side {
+                let w = weight(v, v + side);
+                g.add_edge(v, v + side, w, w);
+            }
+            if x == 0 || y == 0 || x + 1 == side || y + 1 == side {
+                g.add_terminal_weights(v, 0.0, f64::INFINITY);
+            }
+        }
+    }
+    g.add_terminal_weights(n as u32 / 2, f64::INFINITY, 0.0);
+    g
+}
+
+fn bench_patch(c: &mut Criterion) {
+    let graph = transfer_patch(33, 42);
+    c.bench_with_input(
+        BenchmarkId::new("max_flow_bk/patch", graph.num_nodes()),
+        &graph,
+        |b, graph| {
+            b.iter_batched(
+                || graph.clone(),
+                |mut g| black_box(g.max_flow()),
+                BatchSize::SmallInput,
+            )
+        },
+    );
+}
+
+fn bench_grids(c: &mut Criterion) {
+    let mut group = c.benchmark_group("max_flow_bk");
+    group.sample_size(10);
+    for (shape, width, height) in [
+        ("square", 100u32, 100u32),
+        ("square", 317, 317),
+        ("band", 32, 3125),
+    ] {
+        let graph = seam_grid(width, height, 42);
+        group.bench_with_input(
+            BenchmarkId::new(shape, width * height),
+            &graph,
+            |b, graph| {
+                b.iter_batched(
+                    || graph.clone(),
+                    |mut g| black_box(g.max_flow()),
+                    BatchSize::LargeInput,
+                )
+            },
+        );
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_patch, bench_grids);
+criterion_main!(benches);
