@@ -202,8 +202,9 @@ fn check_map_invariants(map: &JumpMap, settings: &JumpMapSettings) {
         (hi - 1.0).abs() < 1e-5,
         "largest weight sum {hi} should be 1"
     );
+    // (When every pixel's jumps are equally good, all get 1.)
     assert!(
-        (lo - settings.alpha).abs() < 1e-5,
+        (lo - settings.alpha).abs() < 1e-5 || lo == hi,
         "smallest weight sum {lo} should be alpha {}",
         settings.alpha
     );
@@ -237,6 +238,33 @@ fn jump_maps_respect_poisson_discs_and_section_4_5_weights() {
     let (map, stats) = analyse_with_stats(&synthetic(64, 48, 1), &s).expect("analysis");
     assert!(stats.halved_fraction > 0.5, "{stats:?}");
     check_map_invariants(&map, &s);
+}
+
+#[test]
+fn normalisation_is_linear_as_in_section_4_5() {
+    use surfsynth::kernels::jump_map::normalise::normalise_weights;
+    // Pixel 0: differences 1, 2, 3 (sum 6, the best); pixel 1: 3, 3, 3 (sum
+    // 9); pixel 2: one jump at 4 (counts as 3 · 4 = 12, the worst); pixel 3:
+    // no jumps.
+    let diffs = [1.0, 2.0, 3.0, 3.0, 3.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let w = normalise_weights(&diffs, &[3, 3, 1, 0], 3, 0.5);
+    let expect = [
+        5.0 / 12.0,
+        4.0 / 12.0,
+        3.0 / 12.0,
+        0.25,
+        0.25,
+        0.25,
+        0.5,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    for (a, b) in w.iter().zip(expect) {
+        assert!((a - b).abs() < 1e-6, "{w:?}");
+    }
 }
 
 #[test]
@@ -416,6 +444,31 @@ fn orders_visit_every_pixel_exactly_once() {
                 "Hilbert step {p:?} at {n}x{n}"
             );
         }
+    }
+    // It is the Hilbert curve: fast_hilbert's, up to a symmetry of the square.
+    for order in [1u8, 3, 6] {
+        let n = 1u32 << order;
+        let ours: Vec<(u32, u32)> = PixelOrder::Hilbert.iter(n, n).collect();
+        let theirs: Vec<(u32, u32)> = (0..(n * n) as u64)
+            .map(|h| fast_hilbert::h2xy::<u32>(h, order))
+            .collect();
+        type Symmetry = fn((u32, u32), u32) -> (u32, u32);
+        let symmetries: [Symmetry; 8] = [
+            |(x, y), _| (x, y),
+            |(x, y), _| (y, x),
+            |(x, y), n| (n - 1 - x, y),
+            |(x, y), n| (x, n - 1 - y),
+            |(x, y), n| (n - 1 - x, n - 1 - y),
+            |(x, y), n| (n - 1 - y, x),
+            |(x, y), n| (y, n - 1 - x),
+            |(x, y), n| (n - 1 - y, n - 1 - x),
+        ];
+        assert!(
+            symmetries
+                .iter()
+                .any(|f| theirs.iter().zip(&ours).all(|(&t, &o)| f(t, n) == o)),
+            "order {order}: not a Hilbert curve"
+        );
     }
     let v: Vec<_> = PixelOrder::Serpentine.iter(37, 23).collect();
     assert!(
@@ -922,4 +975,34 @@ fn report_speed_and_write_images() {
         save_png(&out.image, &dir.join(format!("jump_map_{stem}_radial.png")));
     }
     println!("images in {}", dir.display());
+}
+
+#[test]
+fn degenerate_exemplars_do_not_panic() {
+    let flat = Image::from_data(24, 20, 1, vec![0.5; 24 * 20]).unwrap();
+    let mut checker = Image::new(32, 32, 4);
+    for y in 0..32 {
+        for x in 0..32 {
+            checker.pixel_mut(x, y).fill(((x / 4 + y / 4) % 2) as f32);
+        }
+    }
+    for ex in [flat, checker] {
+        for boundary in [Boundary::Inset, Boundary::Toroidal] {
+            for ann_search in [AnnSearch::Auto, AnnSearch::KdTree, AnnSearch::Exhaustive] {
+                let s = JumpMapSettings {
+                    boundary,
+                    ann_search,
+                    ..Default::default()
+                };
+                let map = analyse(&ex, &s).expect("analysis");
+                check_map_invariants(&map, &s);
+                let out = synthesize_pixels(&ex, &map, &PixelSynthesisSettings::default()).unwrap();
+                assert_eq!(out.image.channels, ex.channels);
+                synthesize_patches(&ex, &map, &PatchSynthesisSettings::default()).unwrap();
+                let f = ControlField::radial(64, 64, 1.0, 2.0);
+                synthesize_controlled(&ex, &map, &f, &ControlledSynthesisSettings::default())
+                    .unwrap();
+            }
+        }
+    }
 }

@@ -23,7 +23,8 @@ pub enum PixelOrder {
 
 impl PixelOrder {
     /// Iterator over all `(x, y)` of a `width × height` image in this order;
-    /// each pixel exactly once. Empty when either size is 0.
+    /// each pixel exactly once. Empty when either size is 0. Precondition:
+    /// both sizes at most 2³¹.
     pub fn iter(self, width: u32, height: u32) -> PixelOrderIter {
         let inner = if width == 0 || height == 0 {
             Inner::Done

@@ -47,8 +47,9 @@ pub struct JumpMapSettings {
     /// Default 0.1 (the paper's "10%"). Range `[0, 10]`; 0 is exact search.
     pub ann_epsilon: f32,
     /// Nearest-neighbour search (see [`super::ann`]). Default
-    /// [`AnnSearch::Auto`]: the kd-tree for at most 8 components, exhaustive
-    /// (exact) search above, where it is faster.
+    /// [`AnnSearch::Auto`]: the kd-tree for exemplars of at least 32768
+    /// source pixels with at most 8 components, exhaustive (exact) search
+    /// otherwise, where it is faster.
     pub ann_search: AnnSearch,
     /// Jumps kept per pixel, `k` (§4.4). Default 3. Range `1..=16`.
     pub jumps_per_pixel: u32,
@@ -68,7 +69,8 @@ pub struct JumpMapSettings {
     /// α of the global normalisation (§4.5): the pixel with the worst jumps
     /// gets total jump weight α, the best gets 1. Default 0.5. Range `[0, 1]`.
     pub alpha: f32,
-    /// Seed for the PCA sample. Default 0.
+    /// Seed of the random PCA sample, the only randomness of the analysis
+    /// (the per-pixel work is deterministic). Default 0. Any value.
     pub seed: u64,
 }
 
