@@ -51,7 +51,9 @@ pub struct PixelSynthesisSettings {
     /// region's geometric-mean side `L`): patches of about `(f·L)²` pixels are
     /// wanted, and the random range is twice that pixel count (§5.1). The paper
     /// found one-third to three-quarters of the sample size best. Unit: fraction.
-    /// Default 0.5. Range `(0, 16]`.
+    /// Default 0.5. Range `(0, 16]`. With inset maps most jumps are forced by
+    /// boundary avoidance; with toroidal maps nothing else makes jumps, so
+    /// patches grow large and the exemplar's period shows: use 0.1–0.2 there.
     pub patch_fraction: f32,
     /// Width of the boundary-avoidance band as a fraction of the source
     /// region's width (horizontally) and height (vertically) (§5.2, the
