@@ -2,6 +2,7 @@
 
 pub mod frames;
 pub mod geodesic;
+pub mod jump_map;
 pub mod jump_surface;
 pub mod max_flow;
 pub mod metrics;

@@ -1,0 +1,437 @@
+//! Pixel-based image synthesis with a jump map (Zelinka & Garland 2004, §5).
+//!
+//! Output pixels are visited in a [`PixelOrder`]. Each picks one of its
+//! already-synthesized 4-neighbours uniformly at random as source; one more
+//! uniform random number then either selects a jump from the source address's
+//! list (indexed by cumulative weight, §5.1), whose destination becomes a
+//! "virtual source", or selects no jump. The pixel gets the (virtual) source
+//! address moved by the pixel's offset from that neighbour. A pixel without a
+//! synthesized neighbour (the first one) starts at a random address.
+//!
+//! Jump frequency (§5.1): the random number is drawn from `[0, R)` with
+//! `R = 2 · desired patch size`, so a jump happens with probability
+//! `(sum of weights) / R`; the desired patch size is given as a fraction of
+//! the exemplar (see [`PixelSynthesisSettings::patch_fraction`]).
+//!
+//! Boundary avoidance (§5.2), for inset maps only (toroidal addresses wrap
+//! and have no boundary): within `boundary_fraction` of the source region's
+//! size from its border, `R` falls linearly to the sum of the weights, so a
+//! jump is certain on the border itself. Should an address still leave the
+//! region (a pixel whose weights sum to 0), the pixel takes a forced jump, or
+//! a random address when the list is empty.
+//!
+//! All decisions for one address are folded into a per-exemplar-pixel table of
+//! integer thresholds before the loop, which then does no allocation and no
+//! floating point: one 64-bit PCG draw, up to `k` compares and a table read per
+//! output pixel. Synthesis is sequential by nature (each pixel depends on the
+//! previous ones), so it runs on one core; the RNG is seeded from `seed`.
+
+use rand::{Rng, RngCore, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+
+use super::order::HilbertIter;
+use super::{
+    Boundary, JumpMap, JumpMapError, PixelOrder, SourceMap, SynthesisOutput, TexelCoord, TexelRect,
+};
+use crate::image::Image;
+
+/// Marks an output pixel not yet synthesized (and the padding border).
+const NONE: u32 = u32::MAX;
+
+/// Parameters of pixel-based synthesis (§5).
+#[derive(Clone, Debug, PartialEq)]
+pub struct PixelSynthesisSettings {
+    /// Output width in pixels. Range `1..=32768`.
+    pub width: u32,
+    /// Output height in pixels. Range `1..=32768`.
+    pub height: u32,
+    /// Pixel order (§5.3). Default [`PixelOrder::Hilbert`], the paper's choice.
+    pub order: PixelOrder,
+    /// Desired patch size as a fraction of the exemplar's side (the source
+    /// region's geometric-mean side `L`): patches of about `(f·L)²` pixels are
+    /// wanted, and the random range is twice that pixel count (§5.1). The paper
+    /// found one-third to three-quarters of the sample size best. Unit: fraction.
+    /// Default 0.5. Range `(0, 16]`. With inset maps most jumps are forced by
+    /// boundary avoidance; with toroidal maps nothing else makes jumps, so
+    /// patches grow large and the exemplar's period shows: use 0.1–0.2 there.
+    pub patch_fraction: f32,
+    /// Width of the boundary-avoidance band as a fraction of the source
+    /// region's width (horizontally) and height (vertically) (§5.2, the
+    /// paper's one-fifth). Used with inset maps only. Default 0.2. Range
+    /// `[0, 0.5]`; 0 disables it.
+    pub boundary_fraction: f32,
+    /// Seed of the synthesis RNG. Default 0.
+    pub seed: u64,
+}
+
+impl Default for PixelSynthesisSettings {
+    fn default() -> Self {
+        Self {
+            width: 256,
+            height: 256,
+            order: PixelOrder::Hilbert,
+            patch_fraction: 0.5,
+            boundary_fraction: 0.2,
+            seed: 0,
+        }
+    }
+}
+
+fn invalid(
+    name: &'static str,
+    value: impl std::fmt::Debug,
+    expected: &'static str,
+) -> JumpMapError {
+    JumpMapError::InvalidSetting {
+        name,
+        value: format!("{value:?}"),
+        expected,
+    }
+}
+
+/// Checks the output size and the jump-frequency parameters shared by the
+/// synthesis kernels.
+pub(crate) fn validate_common(
+    width: u32,
+    height: u32,
+    patch_fraction: f32,
+    boundary_fraction: f32,
+) -> Result<(), JumpMapError> {
+    if !(1..=32768).contains(&width) {
+        return Err(invalid("width", width, "1..=32768 pixels"));
+    }
+    if !(1..=32768).contains(&height) {
+        return Err(invalid("height", height, "1..=32768 pixels"));
+    }
+    if !(patch_fraction.is_finite() && patch_fraction > 0.0 && patch_fraction <= 16.0) {
+        return Err(invalid("patch_fraction", patch_fraction, "(0, 16]"));
+    }
+    if !(boundary_fraction.is_finite() && (0.0..=0.5).contains(&boundary_fraction)) {
+        return Err(invalid("boundary_fraction", boundary_fraction, "[0, 0.5]"));
+    }
+    Ok(())
+}
+
+impl PixelSynthesisSettings {
+    /// Checks every parameter against its documented range.
+    ///
+    /// # Errors
+    /// [`JumpMapError::InvalidSetting`] naming the first bad parameter.
+    pub fn validate(&self) -> Result<(), JumpMapError> {
+        validate_common(
+            self.width,
+            self.height,
+            self.patch_fraction,
+            self.boundary_fraction,
+        )
+    }
+}
+
+/// The random range `R0 = 2 · (f·L)²` of §5.1 for a source region.
+pub(crate) fn base_range(region: TexelRect, patch_fraction: f32) -> f64 {
+    let side = ((region.width() as f64) * (region.height() as f64)).sqrt();
+    let patch = patch_fraction as f64 * side;
+    2.0 * patch * patch
+}
+
+/// Boundary-avoidance ramp (§5.2) at `(x, y)`, in `[0, 1]`: 0 on the border
+/// of `region`, 1 from `band` of its size inwards. Continuous coordinates.
+pub(crate) fn boundary_ramp(region: TexelRect, band: f32, x: f32, y: f32) -> f32 {
+    if band <= 0.0 {
+        return 1.0;
+    }
+    let bx = band * region.width() as f32;
+    let by = band * region.height() as f32;
+    let dx = (x - region.x0 as f32).min((region.x1 - 1) as f32 - x);
+    let dy = (y - region.y0 as f32).min((region.y1 - 1) as f32 - y);
+    (dx / bx).min(dy / by).clamp(0.0, 1.0)
+}
+
+/// Per exemplar pixel, `k` pairs (threshold, packed destination): jump `j` is
+/// taken when a uniform `u32` is below threshold `j` (cumulative weights over
+/// the pixel's random range, scaled to 2³²); unused slots have threshold 0.
+/// Indexed by packed address `y << shift | x`.
+struct JumpTable {
+    k: usize,
+    shift: u32,
+    data: Vec<u32>,
+}
+
+impl JumpTable {
+    fn new(map: &JumpMap, r0: f64, band: f32) -> Self {
+        let shift = map.width().next_power_of_two().trailing_zeros();
+        // Slots per pixel rounded up to a power of two, unused ones never taken.
+        let kp = (map.max_jumps() as usize).next_power_of_two();
+        let stride = 2 * kp;
+        let mut data = vec![0u32; ((map.height() as usize) << shift) * stride];
+        let region = map.sources();
+        for y in region.y0..region.y1 {
+            for x in region.x0..region.x1 {
+                let jumps = map.jumps_at(x, y);
+                let sum: f64 = jumps.iter().map(|j| j.weight as f64).sum();
+                let t = match map.boundary() {
+                    Boundary::Toroidal => 1.0,
+                    Boundary::Inset => boundary_ramp(region, band, x as f32, y as f32) as f64,
+                };
+                let range = sum + t * (r0 - sum).max(0.0);
+                let e = &mut data[((y << shift | x) as usize) * stride..][..stride];
+                let mut cum = 0.0;
+                for (j, jump) in jumps.iter().enumerate() {
+                    cum += jump.weight as f64;
+                    let p = if range > 0.0 {
+                        (cum / range).min(1.0)
+                    } else {
+                        0.0
+                    };
+                    e[2 * j] = (p * 4294967296.0).min(u32::MAX as f64) as u32;
+                    e[2 * j + 1] = jump.to.y << shift | jump.to.x;
+                }
+            }
+        }
+        Self { k: kp, shift, data }
+    }
+
+    #[inline(always)]
+    fn entry(&self, a: u32) -> &[u32] {
+        &self.data[a as usize * 2 * self.k..][..2 * self.k]
+    }
+}
+
+/// Fixed facts about the exemplar used by the loop.
+struct Ctx<'a> {
+    map: &'a JumpMap,
+    table: JumpTable,
+    mask: u32,
+    w: u32,
+    h: u32,
+    region: TexelRect,
+}
+
+impl Ctx<'_> {
+    #[inline(always)]
+    fn pack(&self, x: u32, y: u32) -> u32 {
+        y << self.table.shift | x
+    }
+
+    /// Moves address `a` one pixel in direction `dir` (0: +x, 1: −x, 2: +y,
+    /// 3: −y); `NONE` if it leaves the source region of an inset map.
+    #[inline(always)]
+    fn step<const TOROIDAL: bool>(&self, a: u32, dir: u8) -> u32 {
+        let x = a & self.mask;
+        let y = a >> self.table.shift;
+        let row = 1u32 << self.table.shift;
+        if TOROIDAL {
+            match dir {
+                0 => {
+                    if x + 1 == self.w {
+                        a - x
+                    } else {
+                        a + 1
+                    }
+                }
+                1 => {
+                    if x == 0 {
+                        a + self.w - 1
+                    } else {
+                        a - 1
+                    }
+                }
+                2 => {
+                    if y + 1 == self.h {
+                        x
+                    } else {
+                        a + row
+                    }
+                }
+                _ => {
+                    if y == 0 {
+                        a + (self.h - 1) * row
+                    } else {
+                        a - row
+                    }
+                }
+            }
+        } else {
+            let r = &self.region;
+            match dir {
+                0 if x + 1 < r.x1 => a + 1,
+                1 if x > r.x0 => a - 1,
+                2 if y + 1 < r.y1 => a + row,
+                3 if y > r.y0 => a - row,
+                _ => NONE,
+            }
+        }
+    }
+
+    /// A uniformly random address in the destination region.
+    fn random_address(&self, rng: &mut Pcg64Mcg) -> u32 {
+        let d = self.map.destinations();
+        let x = rng.random_range(d.x0..d.x1);
+        let y = rng.random_range(d.y0..d.y1);
+        self.pack(x, y)
+    }
+
+    /// The address after a forced jump from `a` towards `dir` (§5.2 backstop).
+    #[cold]
+    fn forced<const TOROIDAL: bool>(&self, a: u32, dir: u8, rng: &mut Pcg64Mcg) -> u32 {
+        let jumps = self.map.jumps_at(a & self.mask, a >> self.table.shift);
+        let sum: f32 = jumps.iter().map(|j| j.weight).sum();
+        let dest = if jumps.is_empty() {
+            self.random_address(rng)
+        } else if sum > 0.0 {
+            let r = rng.random::<f32>() * sum;
+            let mut cum = 0.0;
+            let mut pick = jumps[jumps.len() - 1].to;
+            for j in jumps {
+                cum += j.weight;
+                if r < cum {
+                    pick = j.to;
+                    break;
+                }
+            }
+            self.pack(pick.x, pick.y)
+        } else {
+            let j = jumps[rng.random_range(0..jumps.len())].to;
+            self.pack(j.x, j.y)
+        };
+        // Destinations lie one pixel inside the source region, so this stays in.
+        self.step::<TOROIDAL>(dest, dir)
+    }
+}
+
+/// The synthesis loop over `order`; `grid` is the output padded by one pixel
+/// on every side (padding stays `NONE`), row stride `pw`.
+#[inline(never)]
+fn run<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
+    order: I,
+    grid: &mut [u32],
+    pw: usize,
+    ctx: &Ctx,
+    rng: &mut Pcg64Mcg,
+) {
+    let k = ctx.table.k;
+    for (x, y) in order {
+        let pi = (y as usize + 1) * pw + x as usize + 1;
+        // Already-synthesized neighbours and the direction from each to here.
+        let mut cand = [0u32; 4];
+        let mut dirs = [0u8; 4];
+        let mut n = 0usize;
+        for (a, d) in [
+            (grid[pi - 1], 0u8),
+            (grid[pi + 1], 1),
+            (grid[pi - pw], 2),
+            (grid[pi + pw], 3),
+        ] {
+            cand[n] = a;
+            dirs[n] = d;
+            n += usize::from(a != NONE);
+        }
+        let addr = if n == 0 {
+            ctx.random_address(rng)
+        } else {
+            let r = rng.next_u64();
+            let c = (((r >> 32) * n as u64) >> 32) as usize;
+            let (mut a, dir) = (cand[c], dirs[c]);
+            let u = r as u32;
+            let e = ctx.table.entry(a);
+            for j in 0..k {
+                if u < e[2 * j] {
+                    a = e[2 * j + 1];
+                    break;
+                }
+            }
+            let b = ctx.step::<TOROIDAL>(a, dir);
+            if TOROIDAL || b != NONE {
+                b
+            } else {
+                ctx.forced::<TOROIDAL>(a, dir, rng)
+            }
+        };
+        grid[pi] = addr;
+    }
+}
+
+/// Synthesizes the source map of a `settings.width × settings.height` image
+/// from `map` alone (§3: synthesis never looks at exemplar pixels).
+///
+/// # Errors
+/// [`JumpMapError::InvalidSetting`] for a bad setting.
+pub fn synthesize_sources(
+    map: &JumpMap,
+    settings: &PixelSynthesisSettings,
+) -> Result<SourceMap, JumpMapError> {
+    settings.validate()?;
+    let _span = tracing::info_span!(
+        "jump_map_synthesize_pixels",
+        w = settings.width,
+        h = settings.height
+    )
+    .entered();
+    let (w, h) = (settings.width, settings.height);
+    let table = JumpTable::new(
+        map,
+        base_range(map.sources(), settings.patch_fraction),
+        settings.boundary_fraction,
+    );
+    let ctx = Ctx {
+        map,
+        mask: (1u32 << table.shift) - 1,
+        table,
+        w: map.width(),
+        h: map.height(),
+        region: map.sources(),
+    };
+    let pw = w as usize + 2;
+    let mut grid = vec![NONE; pw * (h as usize + 2)];
+    let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
+    let toroidal = map.boundary() == Boundary::Toroidal;
+    match (settings.order, toroidal) {
+        (PixelOrder::Hilbert, true) => {
+            run::<true, _>(HilbertIter::new(w, h), &mut grid, pw, &ctx, &mut rng)
+        }
+        (PixelOrder::Hilbert, false) => {
+            run::<false, _>(HilbertIter::new(w, h), &mut grid, pw, &ctx, &mut rng)
+        }
+        (o, true) => run::<true, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng),
+        (o, false) => run::<false, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng),
+    }
+    let mut texels = Vec::with_capacity(w as usize * h as usize);
+    for row in grid.chunks_exact(pw).skip(1).take(h as usize) {
+        texels.extend(
+            row[1..=w as usize]
+                .iter()
+                .map(|&a| TexelCoord::new(a & ctx.mask, a >> ctx.table.shift)),
+        );
+    }
+    Ok(SourceMap {
+        width: w,
+        height: h,
+        exemplar_width: map.width(),
+        exemplar_height: map.height(),
+        texels,
+    })
+}
+
+/// Pixel-based synthesis (§5): the source map from [`synthesize_sources`] and
+/// the image gathered from `exemplar` through it.
+///
+/// # Errors
+/// [`JumpMapError::InvalidSetting`], or [`JumpMapError::ExemplarMismatch`]
+/// when `exemplar` is not the size `map` was built for.
+pub fn synthesize_pixels(
+    exemplar: &Image,
+    map: &JumpMap,
+    settings: &PixelSynthesisSettings,
+) -> Result<SynthesisOutput, JumpMapError> {
+    if exemplar.width != map.width() || exemplar.height != map.height() {
+        return Err(JumpMapError::ExemplarMismatch {
+            map_width: map.width(),
+            map_height: map.height(),
+            width: exemplar.width,
+            height: exemplar.height,
+        });
+    }
+    let sources = synthesize_sources(map, settings)?;
+    let image = sources.gather(exemplar)?;
+    Ok(SynthesisOutput { image, sources })
+}

@@ -1,0 +1,1008 @@
+//! Jump map kernels (Zelinka & Garland 2004): analysis invariants, pixel
+//! orders, synthesis quality on the shared textures, the cache format and
+//! thread-count independence.
+
+use std::collections::HashSet;
+use std::path::{Path, PathBuf};
+
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use rayon::prelude::*;
+use surfsynth::image::Image;
+use surfsynth::kernels::jump_map::analysis::analyse_with_stats;
+use surfsynth::kernels::jump_map::ann::{AnnSearch, all_knn};
+use surfsynth::kernels::jump_map::poisson::pixel_dist2;
+use surfsynth::kernels::jump_map::synth_patch::synthesize_patch_sources;
+use surfsynth::kernels::jump_map::*;
+
+const TEXTURES: [&str; 5] = [
+    "brick.png",
+    "grass.png",
+    "planks.png",
+    "stones.png",
+    "water.png",
+];
+
+fn texture_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/textures")
+        .join(name)
+}
+
+/// Loads a shared texture as RGB f32 (the project's loader is written elsewhere).
+fn load(name: &str) -> Image {
+    let path = texture_path(name);
+    let img = image::open(&path)
+        .unwrap_or_else(|e| panic!("cannot open {}: {e}", path.display()))
+        .to_rgb32f();
+    Image::from_data(img.width(), img.height(), 3, img.into_raw()).expect("RGB buffer")
+}
+
+/// Smooth synthetic RGB noise, for tests that need no file.
+fn synthetic(w: u32, h: u32, seed: u64) -> Image {
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let raw: Vec<f32> = (0..w * h * 3).map(|_| rng.random::<f32>()).collect();
+    let raw = Image::from_data(w, h, 3, raw).unwrap();
+    surfsynth::image::pyramid::blur_binomial(&raw, 1, surfsynth::image::sample::Wrap::Repeat)
+}
+
+fn save_png(img: &Image, path: &Path) {
+    let c = img.channels as usize;
+    let data: Vec<u8> = img
+        .data
+        .chunks_exact(c)
+        .flat_map(|p| (0..3).map(move |i| (p[i.min(c - 1)].clamp(0.0, 1.0) * 255.0 + 0.5) as u8))
+        .collect();
+    image::save_buffer(path, &data, img.width, img.height, image::ColorType::Rgb8)
+        .expect("write png");
+}
+
+/// Texture energy (local helper; the real metric kernel lives elsewhere):
+/// mean over 500 seeded output locations of the smallest mean-squared
+/// difference between the output's 7×7 neighbourhood there and any 7×7
+/// exemplar neighbourhood (exhaustive, toroidal).
+fn texture_energy(out: &Image, ex: &Image) -> f64 {
+    const R: i64 = 3;
+    const N: usize = 7;
+    let c = ex.channels as usize;
+    // The exemplar padded toroidally by R on every side, for direct indexing.
+    let (pw, ph) = (
+        ex.width as usize + 2 * R as usize,
+        ex.height as usize + 2 * R as usize,
+    );
+    let wrap = surfsynth::image::sample::Wrap::Repeat;
+    let mut padded = Vec::with_capacity(pw * ph * c);
+    for y in 0..ph as i64 {
+        for x in 0..pw as i64 {
+            padded.extend_from_slice(ex.texel(x - R, y - R, wrap));
+        }
+    }
+    let mut rng = Pcg64Mcg::seed_from_u64(99);
+    let locs: Vec<(i64, i64)> = (0..500)
+        .map(|_| {
+            (
+                rng.random_range(R..out.width as i64 - R),
+                rng.random_range(R..out.height as i64 - R),
+            )
+        })
+        .collect();
+    let total: f64 = locs
+        .par_iter()
+        .map(|&(ox, oy)| {
+            let mut patch = Vec::with_capacity(N * N * c);
+            for dy in -R..=R {
+                for dx in -R..=R {
+                    patch.extend_from_slice(out.pixel((ox + dx) as u32, (oy + dy) as u32));
+                }
+            }
+            let mut best = f32::INFINITY;
+            for ey in 0..ex.height as usize {
+                for ex_ in 0..ex.width as usize {
+                    let mut d = 0.0f32;
+                    for row in 0..N {
+                        let a = &padded[((ey + row) * pw + ex_) * c..][..N * c];
+                        let b = &patch[row * N * c..][..N * c];
+                        for (x, y) in a.iter().zip(b) {
+                            d += (x - y) * (x - y);
+                        }
+                    }
+                    best = best.min(d);
+                }
+            }
+            best as f64 / patch.len() as f64
+        })
+        .sum();
+    total / locs.len() as f64
+}
+
+/// An image of exemplar pixels drawn uniformly at random.
+fn shuffle(ex: &Image, w: u32, h: u32, seed: u64) -> Image {
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let mut out = Image::new(w, h, ex.channels);
+    let c = ex.channels as usize;
+    for o in out.data.chunks_exact_mut(c) {
+        let (x, y) = (
+            rng.random_range(0..ex.width),
+            rng.random_range(0..ex.height),
+        );
+        o.copy_from_slice(ex.pixel(x, y));
+    }
+    out
+}
+
+fn check_map_invariants(map: &JumpMap, settings: &JumpMapSettings) {
+    let k = settings.jumps_per_pixel as usize;
+    let d0 = settings.effective_disc_diameter();
+    let dmin = settings.min_disc_diameter;
+    let (w, h, b) = (map.width(), map.height(), map.boundary());
+    let (mut with_jumps, mut sums) = (0usize, Vec::new());
+    for y in 0..h {
+        for x in 0..w {
+            let p = TexelCoord::new(x, y);
+            let jumps = map.jumps_at(x, y);
+            assert!(jumps.len() <= k);
+            if !map.sources().contains(x, y) {
+                assert!(
+                    jumps.is_empty(),
+                    "pixel {p:?} outside the source region has jumps"
+                );
+                continue;
+            }
+            if jumps.is_empty() {
+                continue;
+            }
+            with_jumps += 1;
+            let d = map.disc_diameter_at(x, y);
+            assert!(
+                d >= dmin && d <= d0,
+                "pixel {p:?}: accepted diameter {d} outside [{dmin}, {d0}]"
+            );
+            for (i, j) in jumps.iter().enumerate() {
+                assert_ne!(j.to, p, "pixel {p:?} jumps to itself");
+                assert!(map.destinations().contains(j.to.x, j.to.y));
+                let dist = pixel_dist2(p, j.to, w, h, b).sqrt();
+                assert!(
+                    dist >= d,
+                    "pixel {p:?} jumps to {:?} at distance {dist} < accepted diameter {d}",
+                    j.to
+                );
+                assert!(dist >= dmin);
+                for other in &jumps[i + 1..] {
+                    let dd = pixel_dist2(j.to, other.to, w, h, b).sqrt();
+                    assert!(
+                        dd >= d,
+                        "pixel {p:?}: jumps {:?} and {:?} only {dd} apart",
+                        j.to,
+                        other.to
+                    );
+                }
+                assert!(j.weight >= 0.0 && j.weight <= 1.0);
+                if i > 0 {
+                    assert!(
+                        j.weight <= jumps[i - 1].weight,
+                        "pixel {p:?}: weights must not increase (best first)"
+                    );
+                }
+            }
+            let s = map.weight_sum_at(x, y);
+            assert!(s <= 1.0 + 1e-6, "pixel {p:?}: weights sum to {s} > 1");
+            assert!(
+                s >= settings.alpha - 1e-5,
+                "pixel {p:?}: weights sum to {s} < alpha {}",
+                settings.alpha
+            );
+            sums.push(s);
+        }
+    }
+    assert!(with_jumps > 0);
+    // §4.5: the best pixel gets total weight 1, the worst α.
+    let lo = sums.iter().copied().fold(f32::INFINITY, f32::min);
+    let hi = sums.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+    assert!(
+        (hi - 1.0).abs() < 1e-5,
+        "largest weight sum {hi} should be 1"
+    );
+    // (When every pixel's jumps are equally good, all get 1.)
+    assert!(
+        (lo - settings.alpha).abs() < 1e-5 || lo == hi,
+        "smallest weight sum {lo} should be alpha {}",
+        settings.alpha
+    );
+}
+
+#[test]
+fn jump_maps_respect_poisson_discs_and_section_4_5_weights() {
+    let ex = load("stones.png");
+    for (boundary, alpha) in [(Boundary::Inset, 0.5), (Boundary::Toroidal, 0.25)] {
+        let s = JumpMapSettings {
+            boundary,
+            alpha,
+            ..Default::default()
+        };
+        let (map, stats) = analyse_with_stats(&ex, &s).expect("analysis");
+        check_map_invariants(&map, &s);
+        assert!(stats.full_fraction > 0.95, "{stats:?}");
+        assert!(
+            stats.components >= 1 && stats.explained_variance >= 0.97 - 1e-9,
+            "{stats:?}"
+        );
+    }
+    // A larger disc, more jumps and few candidates force halving.
+    let s = JumpMapSettings {
+        jumps_per_pixel: 5,
+        candidate_factor: 2,
+        disc_diameter: Some(40.0),
+        min_disc_diameter: 3.0,
+        ..Default::default()
+    };
+    let (map, stats) = analyse_with_stats(&synthetic(64, 48, 1), &s).expect("analysis");
+    assert!(stats.halved_fraction > 0.5, "{stats:?}");
+    check_map_invariants(&map, &s);
+}
+
+#[test]
+fn normalisation_is_linear_as_in_section_4_5() {
+    use surfsynth::kernels::jump_map::normalise::normalise_weights;
+    // Pixel 0: differences 1, 2, 3 (sum 6, the best); pixel 1: 3, 3, 3 (sum
+    // 9); pixel 2: one jump at 4 (counts as 3 · 4 = 12, the worst); pixel 3:
+    // no jumps.
+    let diffs = [1.0, 2.0, 3.0, 3.0, 3.0, 3.0, 4.0, 0.0, 0.0, 0.0, 0.0, 0.0];
+    let w = normalise_weights(&diffs, &[3, 3, 1, 0], 3, 0.5);
+    let expect = [
+        5.0 / 12.0,
+        4.0 / 12.0,
+        3.0 / 12.0,
+        0.25,
+        0.25,
+        0.25,
+        0.5,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+    ];
+    for (a, b) in w.iter().zip(expect) {
+        assert!((a - b).abs() < 1e-6, "{w:?}");
+    }
+}
+
+#[test]
+fn inset_maps_only_cover_pixels_with_full_neighbourhoods() {
+    let ex = synthetic(40, 30, 2);
+    let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+    let r = map.sources();
+    // 9×9 at level 0 needs 4 pixels; 5×5 at level 1 and 3×3 at level 2 a little more.
+    assert!(r.x0 >= 4 && r.y0 >= 4 && r.x1 <= 36 && r.y1 <= 26, "{r:?}");
+    assert_eq!(map.destinations(), r.eroded(1));
+    let small = synthetic(10, 10, 3);
+    assert!(matches!(
+        analyse(&small, &JumpMapSettings::default()),
+        Err(JumpMapError::ExemplarTooSmall { .. })
+    ));
+    let toroidal = JumpMapSettings {
+        boundary: Boundary::Toroidal,
+        ..Default::default()
+    };
+    let m = analyse(&small, &toroidal).expect("toroidal maps work for small exemplars");
+    assert_eq!(
+        m.sources(),
+        TexelRect {
+            x0: 0,
+            y0: 0,
+            x1: 10,
+            y1: 10
+        }
+    );
+}
+
+#[test]
+fn bad_settings_and_exemplars_are_rejected() {
+    let ex = synthetic(32, 32, 4);
+    let bad = [
+        JumpMapSettings {
+            neighbourhood_widths: vec![8],
+            ..Default::default()
+        },
+        JumpMapSettings {
+            neighbourhood_widths: vec![],
+            ..Default::default()
+        },
+        JumpMapSettings {
+            pca_variance: 0.0,
+            ..Default::default()
+        },
+        JumpMapSettings {
+            pca_sample_fraction: 1.5,
+            ..Default::default()
+        },
+        JumpMapSettings {
+            alpha: f32::NAN,
+            ..Default::default()
+        },
+        JumpMapSettings {
+            jumps_per_pixel: 0,
+            ..Default::default()
+        },
+        JumpMapSettings {
+            disc_diameter: Some(1.0),
+            ..Default::default()
+        },
+    ];
+    for s in bad {
+        assert!(
+            matches!(analyse(&ex, &s), Err(JumpMapError::InvalidSetting { .. })),
+            "{s:?}"
+        );
+    }
+    let mut nan = ex.clone();
+    nan.data[5] = f32::NAN;
+    assert!(matches!(
+        analyse(&nan, &JumpMapSettings::default()),
+        Err(JumpMapError::BadExemplar { .. })
+    ));
+    let empty = Image::new(0, 0, 3);
+    assert!(matches!(
+        analyse(&empty, &JumpMapSettings::default()),
+        Err(JumpMapError::BadExemplar { .. })
+    ));
+    let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+    let other = synthetic(33, 32, 4);
+    assert!(matches!(
+        synthesize_pixels(&other, &map, &PixelSynthesisSettings::default()),
+        Err(JumpMapError::ExemplarMismatch { .. })
+    ));
+    let zero = PixelSynthesisSettings {
+        width: 0,
+        ..Default::default()
+    };
+    assert!(matches!(
+        synthesize_sources(&map, &zero),
+        Err(JumpMapError::InvalidSetting { .. })
+    ));
+}
+
+#[test]
+fn ann_search_meets_the_epsilon_guarantee() {
+    let mut rng = Pcg64Mcg::seed_from_u64(5);
+    for dim in [5usize, 12, 20] {
+        let n = 3000;
+        // Decaying variances, like PCA coordinates.
+        let pts: Vec<f32> = (0..n * dim)
+            .map(|i| (rng.random::<f32>() - 0.5) / (1.0 + (i % dim) as f32))
+            .collect();
+        let m = 16;
+        let exact = all_knn(&pts, dim, m, 0.0, AnnSearch::Exhaustive);
+        for eps in [0.0f32, 0.1, 0.5] {
+            let approx = all_knn(&pts, dim, m, eps, AnnSearch::KdTree);
+            for i in 0..n {
+                let (a, e) = (&approx[i * m..][..m], &exact[i * m..][..m]);
+                assert_eq!(
+                    a[0].index as usize, i,
+                    "a point is its own nearest neighbour"
+                );
+                for r in 0..m {
+                    let bound = (1.0 + eps) * (1.0 + eps) * e[r].dist2 + 1e-6;
+                    assert!(
+                        a[r].dist2 <= bound,
+                        "dim {dim} eps {eps} point {i} rank {r}: {} > {bound}",
+                        a[r].dist2
+                    );
+                }
+                if eps == 0.0 {
+                    for r in 0..m {
+                        assert!((a[r].dist2 - e[r].dist2).abs() <= 1e-5 * (1.0 + e[r].dist2));
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn orders_visit_every_pixel_exactly_once() {
+    let sizes = [
+        (37, 23),
+        (1, 50),
+        (100, 1),
+        (1, 1),
+        (64, 64),
+        (5, 3),
+        (3, 5),
+        (17, 129),
+        (256, 7),
+    ];
+    for order in [
+        PixelOrder::Scanline,
+        PixelOrder::Serpentine,
+        PixelOrder::Hilbert,
+    ] {
+        for (w, h) in sizes {
+            let visited: Vec<(u32, u32)> = order.iter(w, h).collect();
+            assert_eq!(visited.len(), (w * h) as usize, "{order:?} {w}x{h}");
+            let set: HashSet<_> = visited.iter().copied().collect();
+            assert_eq!(
+                set.len(),
+                visited.len(),
+                "{order:?} {w}x{h} repeats a pixel"
+            );
+            assert!(
+                visited.iter().all(|&(x, y)| x < w && y < h),
+                "{order:?} {w}x{h} leaves the image"
+            );
+        }
+        assert_eq!(order.iter(0, 5).count(), 0);
+    }
+    // Inside a power-of-two square every Hilbert step is to a 4-neighbour;
+    // serpentine steps are too.
+    for n in [2u32, 4, 8, 64, 128] {
+        let v: Vec<_> = PixelOrder::Hilbert.iter(n, n).collect();
+        for p in v.windows(2) {
+            assert_eq!(
+                p[0].0.abs_diff(p[1].0) + p[0].1.abs_diff(p[1].1),
+                1,
+                "Hilbert step {p:?} at {n}x{n}"
+            );
+        }
+    }
+    // It is the Hilbert curve: fast_hilbert's, up to a symmetry of the square.
+    for order in [1u8, 3, 6] {
+        let n = 1u32 << order;
+        let ours: Vec<(u32, u32)> = PixelOrder::Hilbert.iter(n, n).collect();
+        let theirs: Vec<(u32, u32)> = (0..(n * n) as u64)
+            .map(|h| fast_hilbert::h2xy::<u32>(h, order))
+            .collect();
+        type Symmetry = fn((u32, u32), u32) -> (u32, u32);
+        let symmetries: [Symmetry; 8] = [
+            |(x, y), _| (x, y),
+            |(x, y), _| (y, x),
+            |(x, y), n| (n - 1 - x, y),
+            |(x, y), n| (x, n - 1 - y),
+            |(x, y), n| (n - 1 - x, n - 1 - y),
+            |(x, y), n| (n - 1 - y, x),
+            |(x, y), n| (y, n - 1 - x),
+            |(x, y), n| (n - 1 - y, n - 1 - x),
+        ];
+        assert!(
+            symmetries
+                .iter()
+                .any(|f| theirs.iter().zip(&ours).all(|(&t, &o)| f(t, n) == o)),
+            "order {order}: not a Hilbert curve"
+        );
+    }
+    let v: Vec<_> = PixelOrder::Serpentine.iter(37, 23).collect();
+    assert!(
+        v.windows(2)
+            .all(|p| p[0].0.abs_diff(p[1].0) + p[0].1.abs_diff(p[1].1) == 1)
+    );
+}
+
+#[test]
+fn synthesis_beats_a_pixel_shuffle_on_the_shared_textures() {
+    let dir = std::env::temp_dir();
+    for name in TEXTURES {
+        let ex = load(name);
+        let map = analyse(&ex, &JumpMapSettings::default()).expect("analysis");
+        let pixel = synthesize_pixels(&ex, &map, &PixelSynthesisSettings::default())
+            .expect("pixel synthesis");
+        let patch = synthesize_patches(&ex, &map, &PatchSynthesisSettings::default())
+            .expect("patch synthesis");
+        let stem = name.trim_end_matches(".png");
+        save_png(
+            &pixel.image,
+            &dir.join(format!("jump_map_{stem}_pixel.png")),
+        );
+        save_png(
+            &pixel.sources.patch_visualisation(),
+            &dir.join(format!("jump_map_{stem}_pixel_patches.png")),
+        );
+        save_png(
+            &patch.image,
+            &dir.join(format!("jump_map_{stem}_patch.png")),
+        );
+        let shuffled = shuffle(&ex, 256, 256, 7);
+        let e_shuffle = texture_energy(&shuffled, &ex);
+        let e_pixel = texture_energy(&pixel.image, &ex);
+        let e_patch = texture_energy(&patch.image, &ex);
+        println!("{name}: energy shuffle {e_shuffle:.5}, pixel {e_pixel:.5}, patch {e_patch:.5}");
+        assert!(
+            e_pixel <= 0.5 * e_shuffle,
+            "{name}: pixel synthesis energy {e_pixel} vs shuffle {e_shuffle}"
+        );
+        assert!(
+            e_patch <= 0.5 * e_shuffle,
+            "{name}: patch synthesis energy {e_patch} vs shuffle {e_shuffle}"
+        );
+    }
+}
+
+#[test]
+fn synthesized_addresses_stay_valid_for_any_size_and_order() {
+    let ex = synthetic(48, 40, 6);
+    for boundary in [Boundary::Inset, Boundary::Toroidal] {
+        let map = analyse(
+            &ex,
+            &JumpMapSettings {
+                boundary,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        for order in [
+            PixelOrder::Scanline,
+            PixelOrder::Serpentine,
+            PixelOrder::Hilbert,
+        ] {
+            for (w, h) in [(1, 1), (37, 23), (3, 300), (200, 2)] {
+                let s = PixelSynthesisSettings {
+                    width: w,
+                    height: h,
+                    order,
+                    patch_fraction: 0.2,
+                    seed: 3,
+                    ..Default::default()
+                };
+                let src = synthesize_sources(&map, &s).unwrap();
+                assert_eq!(src.texels.len(), (w * h) as usize);
+                assert!(
+                    src.texels.iter().all(|t| map.sources().contains(t.x, t.y)),
+                    "{boundary:?} {order:?} {w}x{h}"
+                );
+                let vis = src.patch_visualisation();
+                assert_eq!((vis.width, vis.height, vis.channels), (w, h, 3));
+                assert!(vis.data.iter().all(|v| (0.0..=1.0).contains(v)));
+            }
+        }
+        let p = synthesize_patch_sources(
+            &map,
+            &PatchSynthesisSettings {
+                width: 61,
+                height: 45,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert!(p.texels.iter().all(|t| map.sources().contains(t.x, t.y)));
+    }
+}
+
+#[test]
+fn patches_are_mostly_copied_coherently() {
+    // Away from jumps, output neighbours copy exemplar neighbours: far fewer
+    // seam edges than pixel edges.
+    let ex = load("water.png");
+    let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+    let out = synthesize_sources(&map, &PixelSynthesisSettings::default()).unwrap();
+    let edges = 2 * 256 * 255;
+    assert!(
+        out.seam_edges() < edges / 4,
+        "{} seams of {edges} edges",
+        out.seam_edges()
+    );
+    let p = synthesize_patch_sources(&map, &PatchSynthesisSettings::default()).unwrap();
+    assert!(
+        p.seam_edges() < edges / 10,
+        "{} seams of {edges} edges",
+        p.seam_edges()
+    );
+}
+
+#[test]
+fn cache_round_trips_and_rejects_corrupt_stale_or_truncated_bytes() {
+    let ex = synthetic(40, 36, 8);
+    let s = JumpMapSettings::default();
+    let map = analyse(&ex, &s).unwrap();
+    let key = s.cache_key(&ex);
+    assert_eq!(map.key(), &key);
+    let bytes = map.to_bytes();
+    assert_eq!(JumpMap::from_bytes(&bytes, &key).expect("round trip"), map);
+
+    // Every single flipped byte is caught.
+    for i in (0..bytes.len())
+        .step_by(7)
+        .chain([0, 9, 12, 50, bytes.len() - 1])
+    {
+        let mut b = bytes.clone();
+        b[i] ^= 0x5a;
+        assert!(
+            JumpMap::from_bytes(&b, &key).is_err(),
+            "flipped byte {i} accepted"
+        );
+    }
+    // Truncations.
+    for len in [
+        0,
+        1,
+        7,
+        8,
+        20,
+        44,
+        100,
+        bytes.len() / 2,
+        bytes.len() - 32,
+        bytes.len() - 1,
+    ] {
+        assert!(
+            JumpMap::from_bytes(&bytes[..len], &key).is_err(),
+            "truncated to {len} accepted"
+        );
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(JumpMap::from_bytes(&longer, &key).is_err());
+    // Other settings or another exemplar: a different key, so stale.
+    let other = JumpMapSettings {
+        alpha: 0.4,
+        ..Default::default()
+    };
+    assert_ne!(other.cache_key(&ex), key);
+    assert_eq!(
+        JumpMap::from_bytes(&bytes, &other.cache_key(&ex)),
+        Err(JumpMapError::StaleCache)
+    );
+    let mut ex2 = ex.clone();
+    ex2.data[0] += 1e-3;
+    assert_eq!(
+        JumpMap::from_bytes(&bytes, &s.cache_key(&ex2)),
+        Err(JumpMapError::StaleCache)
+    );
+    // Random garbage never panics.
+    let mut rng = Pcg64Mcg::seed_from_u64(9);
+    for _ in 0..200 {
+        let len = rng.random_range(0..400);
+        let mut g: Vec<u8> = (0..len).map(|_| rng.random()).collect();
+        if len >= 8 && rng.random::<bool>() {
+            g[..8].copy_from_slice(b"SSJMPMAP");
+        }
+        assert!(JumpMap::from_bytes(&g, &key).is_err());
+    }
+}
+
+#[test]
+fn cache_key_covers_every_parameter() {
+    let ex = synthetic(16, 16, 10);
+    let base = JumpMapSettings::default();
+    let k0 = base.cache_key(&ex);
+    assert_eq!(k0, base.clone().cache_key(&ex), "deterministic");
+    let variants = [
+        JumpMapSettings {
+            neighbourhood_widths: vec![7, 5, 3],
+            ..base.clone()
+        },
+        JumpMapSettings {
+            boundary: Boundary::Toroidal,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            pca_sample_fraction: 0.2,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            pca_variance: 0.9,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            max_components: 10,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            ann_epsilon: 0.0,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            ann_search: AnnSearch::Exhaustive,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            jumps_per_pixel: 4,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            candidate_factor: 5,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            disc_diameter: Some(9.0),
+            ..base.clone()
+        },
+        JumpMapSettings {
+            min_disc_diameter: 3.0,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            alpha: 0.6,
+            ..base.clone()
+        },
+        JumpMapSettings {
+            seed: 1,
+            ..base.clone()
+        },
+    ];
+    let mut keys = HashSet::from([k0]);
+    for v in &variants {
+        assert!(keys.insert(v.cache_key(&ex)), "{v:?} shares a key");
+    }
+    let mut grey = Image::from_data(16, 16, 1, ex.data[..256].to_vec()).unwrap();
+    assert!(keys.insert(base.cache_key(&grey)));
+    grey.width = 8;
+    grey.height = 32;
+    assert!(
+        keys.insert(base.cache_key(&grey)),
+        "dimensions are part of the key"
+    );
+}
+
+#[test]
+fn results_are_identical_at_one_and_two_threads() {
+    let ex = load("planks.png");
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+            let kd = analyse(
+                &synthetic(40, 40, 11),
+                &JumpMapSettings {
+                    pca_variance: 0.5,
+                    ann_search: AnnSearch::KdTree,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let out = synthesize_pixels(&ex, &map, &PixelSynthesisSettings::default()).unwrap();
+            let patch = synthesize_patches(&ex, &map, &PatchSynthesisSettings::default()).unwrap();
+            (map.to_bytes(), kd.to_bytes(), out, patch)
+        })
+    };
+    let (a, b) = (run(1), run(2));
+    assert!(a.0 == b.0, "analysis differs between 1 and 2 threads");
+    assert!(
+        a.1 == b.1,
+        "kd-tree analysis differs between 1 and 2 threads"
+    );
+    assert_eq!(a.2, b.2);
+    assert_eq!(a.3, b.3);
+}
+
+#[test]
+fn float_lookups_blend_the_four_neighbouring_lists() {
+    let ex = synthetic(32, 32, 12);
+    let map = analyse(
+        &ex,
+        &JumpMapSettings {
+            boundary: Boundary::Toroidal,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut out = Vec::new();
+    map.jumps_at_float(5.0, 7.0, &mut out);
+    let exact: Vec<_> = map
+        .jumps_at(5, 7)
+        .iter()
+        .map(|j| FloatJump {
+            to: [j.to.x as f32, j.to.y as f32],
+            weight: j.weight,
+        })
+        .collect();
+    assert_eq!(out, exact, "an integer address returns its own list");
+    map.jumps_at_float(5.25, 7.5, &mut out);
+    let sum: f32 = out.iter().map(|j| j.weight).sum();
+    let expect = 0.75 * 0.5 * map.weight_sum_at(5, 7)
+        + 0.25 * 0.5 * map.weight_sum_at(6, 7)
+        + 0.75 * 0.5 * map.weight_sum_at(5, 8)
+        + 0.25 * 0.5 * map.weight_sum_at(6, 8);
+    assert!((sum - expect).abs() < 1e-5 && sum <= 1.0);
+    // The first entries come from (5, 7), offset by the subpixel address.
+    let j = map.jumps_at(5, 7)[0];
+    assert_eq!(out[0].to, [j.to.x as f32 + 0.25, j.to.y as f32 + 0.5]);
+    // Wrapping: the neighbour right of the last column is column 0.
+    map.jumps_at_float(31.5, 0.0, &mut out);
+    let j0 = map.jumps_at(0, 0)[0];
+    assert!(
+        out.iter()
+            .any(|f| f.to == [j0.to.x as f32 - 0.5, j0.to.y as f32])
+    );
+}
+
+/// Median of the address step between output neighbours, per axis.
+fn median(mut v: Vec<f32>) -> f32 {
+    v.sort_by(f32::total_cmp);
+    v[v.len() / 2]
+}
+
+#[test]
+fn controlled_synthesis_follows_the_scale_and_orientation_fields() {
+    let ex = load("grass.png");
+    let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+    let s = ControlledSynthesisSettings::default();
+    // Perspective: the texture-space step between horizontal neighbours is
+    // about the scale, 1 at the bottom and 4 at the top.
+    let f = ControlField::perspective(128, 128, 1.0, 4.0);
+    let out = synthesize_controlled(&ex, &map, &f, &s).unwrap();
+    let step = |y: u32| {
+        median(
+            (0..127)
+                .map(|x| {
+                    out.sources[(y * 128 + x + 1) as usize][0]
+                        - out.sources[(y * 128 + x) as usize][0]
+                })
+                .collect(),
+        )
+    };
+    assert!((step(127) - 1.0).abs() < 0.05, "bottom step {}", step(127));
+    assert!((step(0) - 4.0).abs() < 0.2, "top step {}", step(0));
+    // Radial: on the right half, up points left (to the centre), so moving
+    // down in the output moves left in the texture.
+    let f = ControlField::radial(128, 128, 1.5, 1.5);
+    let out = synthesize_controlled(&ex, &map, &f, &s).unwrap();
+    let dx: Vec<f32> = (40..80)
+        .flat_map(|y| (100..127).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            out.sources[((y + 1) * 128 + x) as usize][0] - out.sources[(y * 128 + x) as usize][0]
+        })
+        .collect();
+    assert!((median(dx) + 1.5).abs() < 0.1);
+    // Scale 1, upright: as good as plain pixel synthesis against a shuffle.
+    let f = ControlField::uniform(128, 128, 0.0, 1.0);
+    let out = synthesize_controlled(&ex, &map, &f, &s).unwrap();
+    let e = texture_energy(&out.image, &ex);
+    let e_shuffle = texture_energy(&shuffle(&ex, 128, 128, 3), &ex);
+    assert!(
+        e <= 0.5 * e_shuffle,
+        "controlled energy {e} vs shuffle {e_shuffle}"
+    );
+    assert!(out.sources.iter().all(|a| {
+        map.sources()
+            .contains(a[0].floor() as u32, a[1].floor() as u32)
+    }));
+    let bad = ControlField::uniform(8, 8, 0.0, 0.0);
+    assert!(synthesize_controlled(&ex, &map, &bad, &s).is_err());
+}
+
+/// CPU time of the calling thread in seconds (Linux), else wall time.
+fn thread_seconds() -> f64 {
+    std::fs::read_to_string("/proc/thread-self/schedstat")
+        .ok()
+        .and_then(|s| s.split_whitespace().next()?.parse::<u64>().ok())
+        .map(|ns| ns as f64 * 1e-9)
+        .unwrap_or_else(|| std::time::UNIX_EPOCH.elapsed().unwrap().as_secs_f64())
+}
+
+/// Timings and images for the issue notes:
+/// `cargo test --release --test jump_map -- --ignored --nocapture`.
+#[test]
+#[ignore = "report: timings and PNGs in the temp directory"]
+fn report_speed_and_write_images() {
+    let dir = std::env::temp_dir();
+    let ex = load("stones.png");
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let (map, cpu) = pool.install(|| {
+        let t = thread_seconds();
+        let (m, stats) = analyse_with_stats(&ex, &JumpMapSettings::default()).unwrap();
+        println!("{stats:?}");
+        (m, thread_seconds() - t)
+    });
+    let t = std::time::Instant::now();
+    let _ = analyse(&ex, &JumpMapSettings::default()).unwrap();
+    println!(
+        "analysis of 128x128 stones: {cpu:.3} s CPU on one thread, {:.3} s wall on the global pool",
+        t.elapsed().as_secs_f64()
+    );
+    for n in [256u32, 1024] {
+        for order in [
+            PixelOrder::Scanline,
+            PixelOrder::Serpentine,
+            PixelOrder::Hilbert,
+        ] {
+            let s = PixelSynthesisSettings {
+                width: n,
+                height: n,
+                order,
+                ..Default::default()
+            };
+            let reps = if n == 256 { 200 } else { 12 };
+            let t = thread_seconds();
+            for _ in 0..reps {
+                std::hint::black_box(synthesize_pixels(&ex, &map, &s).unwrap());
+            }
+            let dt = (thread_seconds() - t) / reps as f64;
+            println!(
+                "pixel synthesis {n}x{n} {order:?}: {:.1} Mpx/s (one core, CPU time)",
+                (n * n) as f64 / dt * 1e-6
+            );
+        }
+        let s = PatchSynthesisSettings {
+            width: n,
+            height: n,
+            ..Default::default()
+        };
+        let reps = if n == 256 { 400 } else { 25 };
+        let t = thread_seconds();
+        for _ in 0..reps {
+            std::hint::black_box(synthesize_patches(&ex, &map, &s).unwrap());
+        }
+        let dt = (thread_seconds() - t) / reps as f64;
+        println!(
+            "patch synthesis {n}x{n}: {:.1} Mpx/s (one core, CPU time)",
+            (n * n) as f64 / dt * 1e-6
+        );
+    }
+    for name in TEXTURES {
+        let ex = load(name);
+        let stem = name.trim_end_matches(".png");
+        let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+        for order in [
+            PixelOrder::Scanline,
+            PixelOrder::Serpentine,
+            PixelOrder::Hilbert,
+        ] {
+            let s = PixelSynthesisSettings {
+                order,
+                ..Default::default()
+            };
+            let out = synthesize_pixels(&ex, &map, &s).unwrap();
+            save_png(
+                &out.image,
+                &dir.join(format!("jump_map_{stem}_{order:?}.png")),
+            );
+            save_png(
+                &out.sources.patch_visualisation(),
+                &dir.join(format!("jump_map_{stem}_{order:?}_patches.png")),
+            );
+        }
+        let out = synthesize_patches(&ex, &map, &PatchSynthesisSettings::default()).unwrap();
+        save_png(&out.image, &dir.join(format!("jump_map_{stem}_patch.png")));
+        let s = ControlledSynthesisSettings::default();
+        let out = synthesize_controlled(
+            &ex,
+            &map,
+            &ControlField::perspective(256, 256, 1.0, 4.0),
+            &s,
+        )
+        .unwrap();
+        save_png(
+            &out.image,
+            &dir.join(format!("jump_map_{stem}_perspective.png")),
+        );
+        let out = synthesize_controlled(&ex, &map, &ControlField::radial(256, 256, 1.0, 3.0), &s)
+            .unwrap();
+        save_png(&out.image, &dir.join(format!("jump_map_{stem}_radial.png")));
+    }
+    println!("images in {}", dir.display());
+}
+
+#[test]
+fn degenerate_exemplars_do_not_panic() {
+    let flat = Image::from_data(24, 20, 1, vec![0.5; 24 * 20]).unwrap();
+    let mut checker = Image::new(32, 32, 4);
+    for y in 0..32 {
+        for x in 0..32 {
+            checker.pixel_mut(x, y).fill(((x / 4 + y / 4) % 2) as f32);
+        }
+    }
+    for ex in [flat, checker] {
+        for boundary in [Boundary::Inset, Boundary::Toroidal] {
+            for ann_search in [AnnSearch::Auto, AnnSearch::KdTree, AnnSearch::Exhaustive] {
+                let s = JumpMapSettings {
+                    boundary,
+                    ann_search,
+                    ..Default::default()
+                };
+                let map = analyse(&ex, &s).expect("analysis");
+                check_map_invariants(&map, &s);
+                let out = synthesize_pixels(&ex, &map, &PixelSynthesisSettings::default()).unwrap();
+                assert_eq!(out.image.channels, ex.channels);
+                synthesize_patches(&ex, &map, &PatchSynthesisSettings::default()).unwrap();
+                let f = ControlField::radial(64, 64, 1.0, 2.0);
+                synthesize_controlled(&ex, &map, &f, &ControlledSynthesisSettings::default())
+                    .unwrap();
+            }
+        }
+    }
+}
