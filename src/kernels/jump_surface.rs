@@ -418,3 +418,15 @@ mod tests {
         }
     }
 }
+
+impl JumpLookup for super::jump_map::JumpMap {
+    fn dims(&self) -> (u32, u32) {
+        (self.width(), self.height())
+    }
+    #[inline]
+    fn for_each_jump<F: FnMut(u32, u32, f32)>(&self, x: u32, y: u32, mut f: F) {
+        for j in self.jumps_at(x, y) {
+            f(j.to.x, j.to.y, j.weight);
+        }
+    }
+}

@@ -3,6 +3,9 @@
 
 pub mod export;
 pub mod init_colours;
+pub mod jump_image;
+pub mod jump_map;
+pub mod jump_surface;
 pub mod orientation;
 pub mod result_metrics;
 pub mod world;

@@ -189,3 +189,18 @@ pub struct ExportJob {
 /// of base vertex: the 3-way blend of Zelinka & Garland §6.5.
 #[derive(Component, Clone, Debug, Default)]
 pub struct BlendUvs(pub Vec<[[Vec2; 3]; 3]>);
+
+/// The exemplar's jump map (Zelinka & Garland 2004 §4), made by `jump_map`.
+#[derive(Resource, Clone, Debug)]
+pub struct ExemplarJumpMap(pub std::sync::Arc<crate::kernels::jump_map::JumpMap>);
+
+/// Records a stage failure (the first one wins); later stages do not run.
+pub fn fail(failure: &mut StageFailure, index: usize, kind: &str, message: impl Into<String>) {
+    if failure.0.is_none() {
+        failure.0 = Some(crate::pipeline::PipelineError::Stage {
+            index: index + 1,
+            kind: kind.to_string(),
+            message: message.into(),
+        });
+    }
+}

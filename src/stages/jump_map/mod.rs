@@ -1,0 +1,232 @@
+//! Stage `jump_map`: analysis of the exemplar into a jump map (Zelinka &
+//! Garland 2004 §4), cached on disk keyed by a hash of the exemplar pixels and
+//! every analysis parameter. A cached file is re-validated (magic, version,
+//! key, checksum) and rebuilt when stale or corrupt, never trusted.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::image::sample::Wrap;
+use crate::kernels::jump_map::{Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_stats};
+use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use serde::{Deserialize, Serialize};
+use std::sync::Arc;
+
+/// Settings of `jump_map`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct JumpMapStageSettings {
+    /// Neighbourhood widths, finest level first.
+    pub neighbourhoods: Vec<u32>,
+    /// `auto` (from `input.exemplar_wrap`), `toroidal` or `inset`.
+    pub boundary: String,
+    /// Fraction of neighbourhoods sampled for PCA.
+    pub pca_sample: f32,
+    /// Fraction of variance the kept components explain.
+    pub pca_variance: f32,
+    /// Upper bound on kept components.
+    pub max_components: u32,
+    /// Approximate-nearest-neighbour error tolerance.
+    pub ann_epsilon: f32,
+    /// Jumps kept per pixel (k).
+    pub jumps: u32,
+    /// Candidates per kept jump (s).
+    pub candidates: u32,
+    /// Normalisation exponent α (§4.5).
+    pub alpha: f32,
+    /// Read and write the on-disk cache.
+    pub cache: bool,
+}
+
+impl Default for JumpMapStageSettings {
+    fn default() -> Self {
+        let d = JumpMapSettings::default();
+        Self {
+            neighbourhoods: d.neighbourhood_widths,
+            boundary: "auto".into(),
+            pca_sample: d.pca_sample_fraction,
+            pca_variance: d.pca_variance,
+            max_components: d.max_components,
+            ann_epsilon: d.ann_epsilon,
+            jumps: d.jumps_per_pixel,
+            candidates: d.candidate_factor,
+            alpha: d.alpha,
+            cache: true,
+        }
+    }
+}
+
+impl StageSettings for JumpMapStageSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "neighbourhoods",
+            unit: "pixels",
+            range: ParamRange::OddInt(1, 31),
+            doc: "neighbourhood width per Gaussian-pyramid level, finest first (§4.3; paper 9, 5, 3); each level weighted to contribute equally",
+        },
+        ParamDoc {
+            name: "boundary",
+            unit: "",
+            range: ParamRange::OneOf(&["auto", "toroidal", "inset"]),
+            doc: "toroidal neighbourhoods for tileable exemplars, inset otherwise; auto follows input.exemplar_wrap",
+        },
+        ParamDoc {
+            name: "pca_sample",
+            unit: "fraction",
+            range: ParamRange::Float(0.001, 1.0),
+            doc: "random fraction of neighbourhoods the PCA basis is computed from (§4.2; paper 10%)",
+        },
+        ParamDoc {
+            name: "pca_variance",
+            unit: "fraction",
+            range: ParamRange::Float(0.01, 1.0),
+            doc: "variance the kept principal components explain (§4.2; paper 97%)",
+        },
+        ParamDoc {
+            name: "max_components",
+            unit: "",
+            range: ParamRange::Int(1, 256),
+            doc: "upper bound on kept principal components",
+        },
+        ParamDoc {
+            name: "ann_epsilon",
+            unit: "fraction",
+            range: ParamRange::Float(0.0, 10.0),
+            doc: "relative error tolerance of the approximate nearest-neighbour search (paper 10%)",
+        },
+        ParamDoc {
+            name: "jumps",
+            unit: "per pixel",
+            range: ParamRange::Int(1, 16),
+            doc: "jumps kept per pixel, k (§4.4; paper 2-4)",
+        },
+        ParamDoc {
+            name: "candidates",
+            unit: "per jump",
+            range: ParamRange::Int(1, 64),
+            doc: "candidate factor s: k·s nearest neighbours are Poisson-disc filtered down to k (§4.4; paper 5-10)",
+        },
+        ParamDoc {
+            name: "alpha",
+            unit: "",
+            range: ParamRange::Float(0.0, 1.0),
+            doc: "normalisation exponent α of §4.5",
+        },
+        ParamDoc {
+            name: "cache",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "read and write the jump-map cache ($SURFSYNTH_CACHE, else $XDG_CACHE_HOME/surfsynth, else ~/.cache/surfsynth)",
+        },
+    ];
+}
+
+impl JumpMapStageSettings {
+    /// The kernel settings for an exemplar addressed with `wrap`.
+    pub fn kernel_settings(&self, wrap: Wrap, seed: u64) -> JumpMapSettings {
+        let boundary = match self.boundary.as_str() {
+            "toroidal" => Boundary::Toroidal,
+            "inset" => Boundary::Inset,
+            _ if wrap == Wrap::Repeat => Boundary::Toroidal,
+            _ => Boundary::Inset,
+        };
+        JumpMapSettings {
+            neighbourhood_widths: self.neighbourhoods.clone(),
+            boundary,
+            pca_sample_fraction: self.pca_sample,
+            pca_variance: self.pca_variance,
+            max_components: self.max_components,
+            ann_epsilon: self.ann_epsilon,
+            jumps_per_pixel: self.jumps,
+            candidate_factor: self.candidates,
+            alpha: self.alpha,
+            seed,
+            ..JumpMapSettings::default()
+        }
+    }
+}
+
+/// Loads the jump map from the cache or analyses the exemplar (and caches it).
+/// Returns the map and whether it came from the cache.
+pub fn load_or_analyse(
+    exemplar: &crate::image::Image,
+    settings: &JumpMapSettings,
+    cache: bool,
+) -> Result<(JumpMap, bool, Option<crate::kernels::jump_map::analysis::AnalysisStats>), String> {
+    let key = settings.cache_key(exemplar);
+    let dir = if cache {
+        crate::cache::default_dir()
+    } else {
+        None
+    };
+    if let Some(dir) = &dir {
+        if let Some(bytes) = crate::cache::read(dir, "jumpmap", &key) {
+            match JumpMap::from_bytes(&bytes, &key) {
+                Ok(map) => return Ok((map, true, None)),
+                Err(e) => tracing::warn!("jump-map cache entry rejected ({e}); rebuilding"),
+            }
+        }
+    }
+    let (map, stats) = analyse_with_stats(exemplar, settings).map_err(|e| e.to_string())?;
+    if let Some(dir) = &dir {
+        crate::cache::write(dir, "jumpmap", &key, &map.to_bytes());
+    }
+    Ok((map, false, Some(stats)))
+}
+
+/// The `jump_map` stage.
+pub struct JumpMapStage;
+
+impl Stage for JumpMapStage {
+    const KIND: &'static str = "jump_map";
+    const SUMMARY: &'static str =
+        "analyses the exemplar into a jump map (PCA, ANN, Poisson-disc filtering), cached on disk";
+    const PAPER: &'static str = "Zelinka & Garland 2004 §4";
+    type Settings = JumpMapStageSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::JumpMap]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               exemplar: Res<Exemplar>,
+               seed: Res<RunSeed>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>| {
+            let ks = settings.kernel_settings(exemplar.wrap, seed.derive(ctx.index, 0));
+            let started = std::time::Instant::now();
+            match load_or_analyse(&exemplar.image, &ks, settings.cache) {
+                Ok((map, cached, stats)) => {
+                    let secs = started.elapsed().as_secs_f64();
+                    metrics.record(ctx.index, "cache_hit", cached);
+                    metrics.record(ctx.index, "seconds", secs);
+                    metrics.record(
+                        ctx.index,
+                        "boundary",
+                        format!("{:?}", map.boundary()).to_lowercase(),
+                    );
+                    if let Some(s) = stats {
+                        metrics.record(ctx.index, "pca_components", s.components);
+                        metrics.record(ctx.index, "explained_variance", s.explained_variance);
+                        metrics.record(ctx.index, "mean_jumps", s.mean_jumps);
+                        metrics.record(ctx.index, "full_fraction", s.full_fraction);
+                    }
+                    tracing::info!(
+                        "jump map {}x{} {} in {secs:.3} s",
+                        map.width(),
+                        map.height(),
+                        if cached { "loaded from cache" } else { "analysed" }
+                    );
+                    commands.insert_resource(ExemplarJumpMap(Arc::new(map)));
+                }
+                Err(message) => fail(&mut failure, ctx.index, Self::KIND, message),
+            }
+        })
+        .into_configs()
+    }
+}
