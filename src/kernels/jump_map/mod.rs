@@ -9,11 +9,13 @@
 //! - [`neighbourhoods`]: multi-resolution neighbourhood vectors over a Gaussian
 //!   pyramid, each level weighted equally (§4.1, §4.3), toroidal or inset (§4.2).
 //! - [`pca`]: principal components of a random sample of neighbourhoods (§4.2).
-//! - [`ann`]: (1+ε)-approximate k nearest neighbours in PCA space, a kiddo
-//!   kd-tree on the leading components plus exact refinement (§4.2).
+//! - [`ann`]: (1+ε)-approximate k nearest neighbours in PCA space (§4.2): a
+//!   kiddo kd-tree on the leading components with exact refinement, or a
+//!   blocked exhaustive search where that is faster.
 //! - [`poisson`]: Poisson-disc filtering of the candidates with halving (§4.4).
 //! - [`normalise`]: jump weights in `[α, 1]` per pixel (§4.5).
-//! - [`analysis`]: the whole analysis, [`analyse`].
+//! - [`analysis`]: the whole analysis, [`analyse`] (and
+//!   [`analysis::analyse_with_stats`] for PCA and Poisson statistics).
 //! - [`map`]: the [`JumpMap`] itself, integer and floating-point look-ups (§6.4),
 //!   and its byte format for the disk cache.
 //!
