@@ -89,24 +89,36 @@ impl Stage for Export {
         (move |active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
                mut job: ResMut<ExportJob>,
-               meshes: Query<(&Geometry, Option<&VertexColours>, Option<&CornerUvs>)>| {
-            let Ok((geometry, colours, uvs)) = meshes.get(active.0) else {
+               meshes: Query<(
+            &Geometry,
+            Option<&VertexColours>,
+            Option<&CornerUvs>,
+            Option<&BlendUvs>,
+        )>| {
+            let Ok((geometry, colours, uvs, blend)) = meshes.get(active.0) else {
                 return;
             };
             let mesh = &geometry.0;
             let previews = if settings.formats.iter().any(|f| f == "preview") {
                 let _span = tracing::info_span!("render_previews").entered();
-                let shading = match (uvs, colours) {
-                    (Some(uv), _) => Shading::CornerUvs {
+                let shading = match (blend, uvs, colours) {
+                    (Some(b), _, _) if b.0.len() == mesh.corner_count().saturating_sub(2 * mesh.face_count()) => {
+                        Shading::BlendedUvs {
+                            layers: &b.0,
+                            texture: &exemplar.image,
+                            wrap: exemplar.wrap,
+                        }
+                    }
+                    (_, Some(uv), _) => Shading::CornerUvs {
                         uvs: &uv.0,
                         texture: &exemplar.image,
                         wrap: exemplar.wrap,
                     },
-                    (None, Some(c)) => Shading::VertexColours {
+                    (_, None, Some(c)) => Shading::VertexColours {
                         values: &c.values,
                         channels: c.channels,
                     },
-                    (None, None) => Shading::Plain,
+                    (_, None, None) => Shading::Plain,
                 };
                 render_views(
                     mesh,
