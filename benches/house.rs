@@ -12,7 +12,9 @@ use surfsynth::output::render::{RenderOptions, Shading, render_views};
 use surfsynth::pipeline::{Pipeline, RunOptions, run};
 
 fn shared(rel: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data").join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(rel)
 }
 
 fn house(c: &mut Criterion) {

@@ -4,7 +4,9 @@
 //! floating-point exemplar address (pixels). Each already-synthesized
 //! neighbour suggests "copy": its address plus the texture-space offset of the
 //! edge (§6.3), and "jump": the destinations of the floating-point jump-map
-//! look-up at its address (§6.4) plus the same offset. Suggestions that keep
+//! look-up (§6.4) at that copy address (the paper looks up at the
+//! neighbour's address and adds the offset; both agree for one-pixel steps,
+//! and ours keeps jumps matched across long edges of coarse meshes). Suggestions that keep
 //! the vertex's flattened one-ring inside the exemplar are valid (§6.5,
 //! Fig. 18); one random number picks among all valid suggestions of all
 //! neighbours (the selection table of §6.6). Only when none is valid is the
@@ -180,40 +182,61 @@ pub fn synthesize_surface<J: JumpLookup>(
             }
             let d = -offsets[lo_i + k]; // u → v
             let pu = texel[ui];
-            // Texture area this vertex stands for, in pixels.
+            // The address copying would give v. The jump map is looked up
+            // there rather than at u's own address: with one pixel between
+            // neighbours (images) the two agree, but across a long edge a
+            // destination found at u would be `d` away from the region it
+            // matches, while one found at the copy address matches v's own
+            // neighbourhood. (Our refinement of §6.4 for coarse meshes.)
+            let copy = pu + d;
+            let look = if settings.tileable {
+                wrap(copy)
+            } else {
+                copy.clamp(Vec2::ZERO, max)
+            };
             let step_area = d.length_squared().max(1e-6);
-            // Floating-point look-up (§6.4): coalesce the four taps.
-            let base = pu.floor();
-            let f = pu - base;
+            // Floating-point look-up (§6.4): coalesce the four taps around
+            // `at`; destinations are shifted by the subpixel offset and `shift`.
             let first_jump = table.len();
-            let mut sum = 0.0f32;
-            for (tx, ty, bw) in [
-                (0.0, 0.0, (1.0 - f.x) * (1.0 - f.y)),
-                (1.0, 0.0, f.x * (1.0 - f.y)),
-                (0.0, 1.0, (1.0 - f.x) * f.y),
-                (1.0, 1.0, f.x * f.y),
-            ] {
-                if bw <= 0.0 {
-                    continue;
+            let mut coalesce = |at: Vec2, shift: Vec2, table: &mut Vec<(Vec2, f32, bool)>| {
+                let base = at.floor();
+                let f = at - base;
+                let mut sum = 0.0f32;
+                for (tx, ty, bw) in [
+                    (0.0, 0.0, (1.0 - f.x) * (1.0 - f.y)),
+                    (1.0, 0.0, f.x * (1.0 - f.y)),
+                    (0.0, 1.0, (1.0 - f.x) * f.y),
+                    (1.0, 1.0, f.x * f.y),
+                ] {
+                    if bw <= 0.0 {
+                        continue;
+                    }
+                    let tap = base + Vec2::new(tx, ty);
+                    let stored = if settings.tileable {
+                        wrap(tap)
+                    } else {
+                        tap.clamp(Vec2::ZERO, max)
+                    };
+                    let sub = at - tap + shift;
+                    jumps.for_each_jump(stored.x as u32, stored.y as u32, |dx, dy, jw| {
+                        let mass = jw * bw;
+                        sum += mass;
+                        table.push((Vec2::new(dx as f32, dy as f32) + sub, mass, true));
+                    });
                 }
-                let tap = base + Vec2::new(tx, ty);
-                let stored = if settings.tileable {
-                    wrap(tap)
-                } else {
-                    tap.clamp(Vec2::ZERO, max)
-                };
-                let sub = pu - tap;
-                jumps.for_each_jump(stored.x as u32, stored.y as u32, |dx, dy, jw| {
-                    let mass = jw * bw;
-                    sum += mass;
-                    table.push((Vec2::new(dx as f32, dy as f32) + sub + d, mass, true));
-                });
+                sum
+            };
+            let mut sum = coalesce(look, Vec2::ZERO, &mut table);
+            if sum == 0.0 {
+                // No jump list at the copy address (outside an inset map's
+                // source region): fall back to u's own, as the paper does.
+                sum = coalesce(pu, d, &mut table);
             }
             // Jump probability per pixel of area (§5.1), raised near the
             // exemplar boundary (§5.2).
             let mut r = range;
             if !settings.tileable && band > 0.0 {
-                let dist = pu.min(max - pu).min_element().max(0.0);
+                let dist = look.min(max - look).min_element().max(0.0);
                 if dist < band {
                     r = sum + (range - sum) * dist / band;
                 }
@@ -233,7 +256,6 @@ pub fn synthesize_surface<J: JumpLookup>(
                 }
             }
             table.truncate(keep);
-            let copy = pu + d;
             if copy_mass > 0.0 && valid(copy) {
                 table.push((copy, copy_mass, false));
             }
@@ -293,19 +315,35 @@ pub fn corner_uvs(
 ) -> (Vec<Vec2>, Vec<[[Vec2; 3]; 3]>) {
     let inv = Vec2::new(1.0 / dims.0 as f32, 1.0 / dims.1 as f32);
     let to_uv = |p: Vec2| (p + Vec2::splat(0.5)) * inv;
-    // Address of face corner `j` seen from base corner `b` of face `f`:
-    // walk forward around the face summing edge offsets.
+    // Address of face corner `j` seen from base corner `b` of face `f`: the
+    // base address plus the edge offsets along the shorter way round the
+    // face (for a triangle always the direct edge, which the validity test
+    // of §6.5 covers); halfway round a polygon, the mean of both ways.
     let walk = |f: usize, b: usize, j: usize| -> Vec2 {
         let face = mesh.face(f);
         let k = face.len();
-        let mut p = texel[face[b] as usize];
-        let mut i = b;
-        while i != j {
-            let next = (i + 1) % k;
-            p += offset_between(topo, offsets, face[i], face[next]).unwrap_or(Vec2::ZERO);
-            i = next;
+        let base = texel[face[b] as usize];
+        let fwd = (j + k - b) % k;
+        let path = |step: usize, count: usize| {
+            let mut p = base;
+            let mut i = b;
+            for _ in 0..count {
+                let next = (i + step) % k;
+                p += offset_between(topo, offsets, face[i], face[next]).unwrap_or(Vec2::ZERO);
+                i = next;
+            }
+            p
+        };
+        let back = k - fwd;
+        if fwd == 0 {
+            base
+        } else if fwd < back {
+            path(1, fwd)
+        } else if back < fwd {
+            path(k - 1, back)
+        } else {
+            (path(1, fwd) + path(k - 1, back)) * 0.5
         }
-        p
     };
     let mut single = vec![Vec2::ZERO; mesh.corner_count()];
     for f in 0..mesh.face_count() {

@@ -21,6 +21,10 @@ pub fn run_cli(args: &[&str]) -> (i32, String, String) {
     let out = bin()
         .args(args)
         .env("RUST_LOG", "warn")
+        .env(
+            "SURFSYNTH_CACHE",
+            Path::new(env!("CARGO_TARGET_TMPDIR")).join("surfsynth-cache"),
+        )
         .output()
         .expect("the surfsynth binary runs");
     (

@@ -269,7 +269,9 @@ impl Shading<'_> {
                 check_texture("texture", texture)?;
                 check_length("corner uvs", mesh.corner_count(), uvs.len())
             }
-            Shading::BlendedUvs { layers, texture, .. } => {
+            Shading::BlendedUvs {
+                layers, texture, ..
+            } => {
                 check_texture("texture", texture)?;
                 let tris: usize = (0..mesh.face_count())
                     .map(|f| mesh.face_corners(f).len().saturating_sub(2))

@@ -231,7 +231,9 @@ impl<'a> Scene<'a> {
                 // Map the drawn corners back to the fan triangle's order
                 // (setup may have swapped two of them).
                 let orig = self.tris[t.source as usize];
-                let pos = t.corners.map(|c| orig.iter().position(|&o| o == c).unwrap_or(0));
+                let pos = t
+                    .corners
+                    .map(|c| orig.iter().position(|&o| o == c).unwrap_or(0));
                 let mut bo = [0.0f32; 3];
                 for i in 0..3 {
                     bo[pos[i]] += b[i];

@@ -102,7 +102,10 @@ impl Stage for Export {
             let previews = if settings.formats.iter().any(|f| f == "preview") {
                 let _span = tracing::info_span!("render_previews").entered();
                 let shading = match (blend, uvs, colours) {
-                    (Some(b), _, _) if b.0.len() == mesh.corner_count().saturating_sub(2 * mesh.face_count()) => {
+                    (Some(b), _, _)
+                        if b.0.len()
+                            == mesh.corner_count().saturating_sub(2 * mesh.face_count()) =>
+                    {
                         Shading::BlendedUvs {
                             layers: &b.0,
                             texture: &exemplar.image,

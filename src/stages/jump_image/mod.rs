@@ -137,7 +137,10 @@ impl StageSettings for JumpImageSettings {
 
     fn check(&self) -> Result<(), (String, String)> {
         if self.name.is_empty() || self.name.contains(['/', '\\']) || self.name.starts_with('.') {
-            return Err(("name".into(), format!("{:?} is not a plain file name stem", self.name)));
+            return Err((
+                "name".into(),
+                format!("{:?} is not a plain file name stem", self.name),
+            ));
         }
         Ok(())
     }
@@ -182,7 +185,8 @@ pub struct JumpImage;
 
 impl Stage for JumpImage {
     const KIND: &'static str = "jump_image";
-    const SUMMARY: &'static str = "jump-map synthesis of a planar image: pixel-based, patch-based or controlled";
+    const SUMMARY: &'static str =
+        "jump-map synthesis of a planar image: pixel-based, patch-based or controlled";
     const PAPER: &'static str = "Zelinka & Garland 2004 §5, §7.1, §7.2";
     type Settings = JumpImageSettings;
 
@@ -215,8 +219,12 @@ impl Stage for JumpImage {
                     },
                 )
                 .map(|o| {
-                    let src: Vec<[f32; 2]> =
-                        o.sources.texels.iter().map(|t| [t.x as f32, t.y as f32]).collect();
+                    let src: Vec<[f32; 2]> = o
+                        .sources
+                        .texels
+                        .iter()
+                        .map(|t| [t.x as f32, t.y as f32])
+                        .collect();
                     (o.image, src)
                 }),
                 "controlled" => {
@@ -224,7 +232,9 @@ impl Stage for JumpImage {
                     let [a, b] = settings.field_scale;
                     let field = match settings.field.as_str() {
                         "radial" => ControlField::radial(w, h, a, b),
-                        "uniform" => ControlField::uniform(w, h, settings.field_angle.to_radians(), a),
+                        "uniform" => {
+                            ControlField::uniform(w, h, settings.field_angle.to_radians(), a)
+                        }
                         _ => ControlField::perspective(w, h, a, b),
                     };
                     synthesize_controlled(
@@ -253,8 +263,12 @@ impl Stage for JumpImage {
                     },
                 )
                 .map(|o| {
-                    let src: Vec<[f32; 2]> =
-                        o.sources.texels.iter().map(|t| [t.x as f32, t.y as f32]).collect();
+                    let src: Vec<[f32; 2]> = o
+                        .sources
+                        .texels
+                        .iter()
+                        .map(|t| [t.x as f32, t.y as f32])
+                        .collect();
                     (o.image, src)
                 }),
             };
@@ -278,14 +292,24 @@ impl Stage for JumpImage {
                     ..Default::default()
                 };
                 let e = image_texture_energy(&image, ex, &es, crate::image::sample::Wrap::Clamp);
-                let base = image_texture_energy(&shuffled(ex, s), ex, &es, crate::image::sample::Wrap::Clamp);
+                let base = image_texture_energy(
+                    &shuffled(ex, s),
+                    ex,
+                    &es,
+                    crate::image::sample::Wrap::Clamp,
+                );
                 metrics.record(ctx.index, "texture_energy", &e);
                 metrics.record(ctx.index, "shuffle_texture_energy", &base);
-                metrics.record(ctx.index, "energy_ratio_vs_shuffle", e.mean / base.mean.max(1e-12));
+                metrics.record(
+                    ctx.index,
+                    "energy_ratio_vs_shuffle",
+                    e.mean / base.mean.max(1e-12),
+                );
             }
             let src_img = source_image(image.width, image.height, &sources, ex.width, ex.height);
             let name = &settings.name;
-            job.images.push((format!("{name}_sources.png"), src_img.clone()));
+            job.images
+                .push((format!("{name}_sources.png"), src_img.clone()));
             let mut patches = src_img;
             for px in patches.data.chunks_exact_mut(3) {
                 px[2] = 0.25;

@@ -154,7 +154,14 @@ pub fn load_or_analyse(
     exemplar: &crate::image::Image,
     settings: &JumpMapSettings,
     cache: bool,
-) -> Result<(JumpMap, bool, Option<crate::kernels::jump_map::analysis::AnalysisStats>), String> {
+) -> Result<
+    (
+        JumpMap,
+        bool,
+        Option<crate::kernels::jump_map::analysis::AnalysisStats>,
+    ),
+    String,
+> {
     let key = settings.cache_key(exemplar);
     let dir = if cache {
         crate::cache::default_dir()
@@ -220,7 +227,11 @@ impl Stage for JumpMapStage {
                         "jump map {}x{} {} in {secs:.3} s",
                         map.width(),
                         map.height(),
-                        if cached { "loaded from cache" } else { "analysed" }
+                        if cached {
+                            "loaded from cache"
+                        } else {
+                            "analysed"
+                        }
                     );
                     commands.insert_resource(ExemplarJumpMap(Arc::new(map)));
                 }

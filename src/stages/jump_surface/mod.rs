@@ -155,12 +155,22 @@ impl Stage for JumpSurface {
                mut failure: ResMut<StageFailure>,
                meshes: Query<(&Geometry, &Frames)>| {
             let Ok((geometry, frames)) = meshes.get(active.0) else {
-                fail(&mut failure, ctx.index, Self::KIND, "the active mesh has no tangent frames");
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "the active mesh has no tangent frames",
+                );
                 return;
             };
             let mesh = &geometry.0;
             if frames.0.len() != mesh.vertex_count() {
-                fail(&mut failure, ctx.index, Self::KIND, "tangent frames do not match the mesh");
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "tangent frames do not match the mesh",
+                );
                 return;
             }
             let started = std::time::Instant::now();
@@ -186,7 +196,8 @@ impl Stage for JumpSurface {
                 order: settings.order,
                 seed: seed.derive(ctx.index, 0),
             };
-            let progress = crate::progress::Progress::new(mesh.vertex_count() as u64, "jump_surface");
+            let progress =
+                crate::progress::Progress::new(mesh.vertex_count() as u64, "jump_surface");
             let out = {
                 let _s = tracing::info_span!("synthesize").entered();
                 synthesize_surface(&topo, &offsets, map, &synth, &progress)
@@ -194,7 +205,13 @@ impl Stage for JumpSurface {
             progress.finish();
             let (single, blend) = {
                 let _s = tracing::info_span!("corner_uvs").entered();
-                corner_uvs(mesh, &topo, &offsets, &out.texel, (map.width(), map.height()))
+                corner_uvs(
+                    mesh,
+                    &topo,
+                    &offsets,
+                    &out.texel,
+                    (map.width(), map.height()),
+                )
             };
             let secs = started.elapsed().as_secs_f64();
             let n = mesh.vertex_count();
