@@ -198,7 +198,7 @@ pub fn synthesize_surface<J: JumpLookup>(
             // Floating-point look-up (§6.4): coalesce the four taps around
             // `at`; destinations are shifted by the subpixel offset and `shift`.
             let first_jump = table.len();
-            let mut coalesce = |at: Vec2, shift: Vec2, table: &mut Vec<(Vec2, f32, bool)>| {
+            let coalesce = |at: Vec2, shift: Vec2, table: &mut Vec<(Vec2, f32, bool)>| {
                 let base = at.floor();
                 let f = at - base;
                 let mut sum = 0.0f32;
@@ -371,6 +371,18 @@ pub fn corner_uvs(
     (single, blend)
 }
 
+impl JumpLookup for super::jump_map::JumpMap {
+    fn dims(&self) -> (u32, u32) {
+        (self.width(), self.height())
+    }
+    #[inline]
+    fn for_each_jump<F: FnMut(u32, u32, f32)>(&self, x: u32, y: u32, mut f: F) {
+        for j in self.jumps_at(x, y) {
+            f(j.to.x, j.to.y, j.weight);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -453,18 +465,6 @@ mod tests {
             let e01 = layers[0][1] - layers[0][0];
             let e01b = layers[1][1] - layers[1][0];
             assert!((e01 - e01b).length() < 1e-5, "face {f}: edge offsets agree");
-        }
-    }
-}
-
-impl JumpLookup for super::jump_map::JumpMap {
-    fn dims(&self) -> (u32, u32) {
-        (self.width(), self.height())
-    }
-    #[inline]
-    fn for_each_jump<F: FnMut(u32, u32, f32)>(&self, x: u32, y: u32, mut f: F) {
-        for j in self.jumps_at(x, y) {
-            f(j.to.x, j.to.y, j.weight);
         }
     }
 }

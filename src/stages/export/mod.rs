@@ -69,6 +69,17 @@ impl StageSettings for ExportSettings {
     }
 }
 
+type ExportQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static VertexColours>,
+        Option<&'static CornerUvs>,
+        Option<&'static BlendUvs>,
+    ),
+>;
+
 /// The `export` stage.
 pub struct Export;
 
@@ -89,12 +100,7 @@ impl Stage for Export {
         (move |active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
                mut job: ResMut<ExportJob>,
-               meshes: Query<(
-            &Geometry,
-            Option<&VertexColours>,
-            Option<&CornerUvs>,
-            Option<&BlendUvs>,
-        )>| {
+               meshes: ExportQuery| {
             let Ok((geometry, colours, uvs, blend)) = meshes.get(active.0) else {
                 return;
             };

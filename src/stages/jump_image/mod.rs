@@ -298,8 +298,8 @@ impl Stage for JumpImage {
                     &es,
                     crate::image::sample::Wrap::Clamp,
                 );
-                metrics.record(ctx.index, "texture_energy", &e);
-                metrics.record(ctx.index, "shuffle_texture_energy", &base);
+                metrics.record(ctx.index, "texture_energy", e);
+                metrics.record(ctx.index, "shuffle_texture_energy", base);
                 metrics.record(
                     ctx.index,
                     "energy_ratio_vs_shuffle",

@@ -168,12 +168,13 @@ pub fn load_or_analyse(
     } else {
         None
     };
-    if let Some(dir) = &dir {
-        if let Some(bytes) = crate::cache::read(dir, "jumpmap", &key) {
-            match JumpMap::from_bytes(&bytes, &key) {
-                Ok(map) => return Ok((map, true, None)),
-                Err(e) => tracing::warn!("jump-map cache entry rejected ({e}); rebuilding"),
-            }
+    if let Some(bytes) = dir
+        .as_ref()
+        .and_then(|dir| crate::cache::read(dir, "jumpmap", &key))
+    {
+        match JumpMap::from_bytes(&bytes, &key) {
+            Ok(map) => return Ok((map, true, None)),
+            Err(e) => tracing::warn!("jump-map cache entry rejected ({e}); rebuilding"),
         }
     }
     let (map, stats) = analyse_with_stats(exemplar, settings).map_err(|e| e.to_string())?;
