@@ -28,7 +28,9 @@ fn jump_maps(c: &mut Criterion) {
     let settings = JumpMapSettings::default();
     let mut g = c.benchmark_group("jump_map/analysis");
     g.sample_size(10);
-    g.bench_function("stones_128", |b| b.iter(|| analyse(&ex, &settings).unwrap()));
+    g.bench_function("stones_128", |b| {
+        b.iter(|| analyse(&ex, &settings).unwrap())
+    });
     g.finish();
 
     let map = analyse(&ex, &settings).unwrap();
@@ -49,7 +51,11 @@ fn jump_maps(c: &mut Criterion) {
 
     let mut g = c.benchmark_group("jump_map/surface_vertices");
     g.sample_size(10);
-    for (n, res) in [(10_000usize, [125u32, 80]), (100_000, [400, 250]), (1_000_000, [1250, 800])] {
+    for (n, res) in [
+        (10_000usize, [125u32, 80]),
+        (100_000, [400, 250]),
+        (1_000_000, [1250, 800]),
+    ] {
         let mesh = builtin_mesh(
             "torus",
             &BuiltinOptions {
@@ -74,7 +80,13 @@ fn jump_maps(c: &mut Criterion) {
             b.iter(|| {
                 let offsets = edge_offsets(&mesh.positions, &frames, &scale, &topo);
                 let out = synthesize_surface(&topo, &offsets, &map, &s, &Default::default());
-                corner_uvs(&mesh, &topo, &offsets, &out.texel, (map.width(), map.height()))
+                corner_uvs(
+                    &mesh,
+                    &topo,
+                    &offsets,
+                    &out.texel,
+                    (map.width(), map.height()),
+                )
             })
         });
     }

@@ -155,9 +155,50 @@ pub fn synthesize_surface<J: JumpLookup>(
     let side = ((w as f32) * (h as f32)).sqrt();
     let range = (2.0 * (settings.patch_fraction * side).powi(2)).max(1.0);
     let band = settings.boundary_fraction * w.min(h) as f32;
-    let mut table: Vec<(Vec2, f32, bool)> = Vec::with_capacity(128);
     let mut out = SurfaceSynthOutput::default();
     let wrap = |p: Vec2| Vec2::new(p.x.rem_euclid(size.x), p.y.rem_euclid(size.y));
+    let stored_of = |tap: Vec2| {
+        if settings.tileable {
+            wrap(tap)
+        } else {
+            tap.clamp(Vec2::ZERO, max)
+        }
+    };
+    // Bilinear taps around a floating-point address (§6.4).
+    let taps = |at: Vec2| {
+        let base = at.floor();
+        let f = at - base;
+        [
+            (base, (1.0 - f.x) * (1.0 - f.y)),
+            (base + Vec2::X, f.x * (1.0 - f.y)),
+            (base + Vec2::Y, (1.0 - f.x) * f.y),
+            (base + Vec2::ONE, f.x * f.y),
+        ]
+    };
+    let weight_sum = |at: Vec2| -> f32 {
+        taps(at)
+            .iter()
+            .filter(|t| t.1 > 0.0)
+            .map(|&(tap, bw)| {
+                let st = stored_of(tap);
+                let mut s = 0.0;
+                jumps.for_each_jump(st.x as u32, st.y as u32, |_, _, jw| s += jw);
+                s * bw
+            })
+            .sum()
+    };
+    /// One already-synthesized neighbour's suggestions, before validity of
+    /// the jumps is known.
+    #[derive(Clone, Copy)]
+    struct Suggestion {
+        copy: Vec2,
+        copy_mass: f32,
+        jump_at: Vec2,
+        jump_shift: Vec2,
+        jump_scale: f32,
+        jump_mass: f32,
+    }
+    let mut suggestions: Vec<Suggestion> = Vec::with_capacity(32);
     for (step, &v) in order.iter().enumerate() {
         if step % 65536 == 0 {
             progress.inc(step.min(65536) as u64);
@@ -174,7 +215,7 @@ pub fn synthesize_surface<J: JumpLookup>(
         let valid = |p: Vec2| {
             settings.tileable || ((p + bmin).cmpge(Vec2::ZERO).all() && (p + bmax).cmple(max).all())
         };
-        table.clear();
+        suggestions.clear();
         for (k, &u) in topo.neighbours(v).iter().enumerate() {
             let ui = u as usize;
             if !done[ui] {
@@ -189,51 +230,18 @@ pub fn synthesize_surface<J: JumpLookup>(
             // matches, while one found at the copy address matches v's own
             // neighbourhood. (Our refinement of §6.4 for coarse meshes.)
             let copy = pu + d;
-            let look = if settings.tileable {
-                wrap(copy)
-            } else {
-                copy.clamp(Vec2::ZERO, max)
-            };
-            let step_area = d.length_squared().max(1e-6);
-            // Floating-point look-up (§6.4): coalesce the four taps around
-            // `at`; destinations are shifted by the subpixel offset and `shift`.
-            let first_jump = table.len();
-            let coalesce = |at: Vec2, shift: Vec2, table: &mut Vec<(Vec2, f32, bool)>| {
-                let base = at.floor();
-                let f = at - base;
-                let mut sum = 0.0f32;
-                for (tx, ty, bw) in [
-                    (0.0, 0.0, (1.0 - f.x) * (1.0 - f.y)),
-                    (1.0, 0.0, f.x * (1.0 - f.y)),
-                    (0.0, 1.0, (1.0 - f.x) * f.y),
-                    (1.0, 1.0, f.x * f.y),
-                ] {
-                    if bw <= 0.0 {
-                        continue;
-                    }
-                    let tap = base + Vec2::new(tx, ty);
-                    let stored = if settings.tileable {
-                        wrap(tap)
-                    } else {
-                        tap.clamp(Vec2::ZERO, max)
-                    };
-                    let sub = at - tap + shift;
-                    jumps.for_each_jump(stored.x as u32, stored.y as u32, |dx, dy, jw| {
-                        let mass = jw * bw;
-                        sum += mass;
-                        table.push((Vec2::new(dx as f32, dy as f32) + sub, mass, true));
-                    });
-                }
-                sum
-            };
-            let mut sum = coalesce(look, Vec2::ZERO, &mut table);
+            let look = stored_of(copy);
+            let (mut jump_at, mut jump_shift) = (look, Vec2::ZERO);
+            let mut sum = weight_sum(look);
             if sum == 0.0 {
                 // No jump list at the copy address (outside an inset map's
                 // source region): fall back to u's own, as the paper does.
-                sum = coalesce(pu, d, &mut table);
+                (jump_at, jump_shift) = (pu, d);
+                sum = weight_sum(pu);
             }
             // Jump probability per pixel of area (§5.1), raised near the
             // exemplar boundary (§5.2).
+            let step_area = d.length_squared().max(1e-6);
             let mut r = range;
             if !settings.tileable && band > 0.0 {
                 let dist = look.min(max - look).min_element().max(0.0);
@@ -246,48 +254,121 @@ pub fn synthesize_surface<J: JumpLookup>(
                 k_scale = 1.0 / sum;
             }
             let copy_mass = (1.0 - sum * k_scale).max(0.0);
-            // Keep only valid jump entries, with scaled mass.
-            let mut keep = first_jump;
-            for j in first_jump..table.len() {
-                let (p, m, is_jump) = table[j];
-                if valid(p) {
-                    table[keep] = (p, m * k_scale, is_jump);
-                    keep += 1;
+            suggestions.push(Suggestion {
+                copy,
+                copy_mass: if valid(copy) { copy_mass } else { 0.0 },
+                jump_at,
+                jump_shift,
+                jump_scale: k_scale,
+                jump_mass: sum * k_scale,
+            });
+        }
+        // The selection table of §6.6 over all neighbours' valid
+        // suggestions, sampled without building it: draw over the valid
+        // copies plus ALL jump mass, enumerate a neighbour's jumps only when
+        // the draw falls in its jump mass, and redraw when it lands on an
+        // invalid jump. Accepted draws follow the table's distribution exactly.
+        let total: f32 = suggestions.iter().map(|s| s.copy_mass + s.jump_mass).sum();
+        let mut chosen = None;
+        if total > 0.0 {
+            'draw: for _ in 0..64 {
+                let mut x = rng.random::<f32>() * total;
+                for sg in &suggestions {
+                    if x < sg.copy_mass {
+                        chosen = Some((sg.copy, false));
+                        break 'draw;
+                    }
+                    x -= sg.copy_mass;
+                    if x < sg.jump_mass {
+                        // Enumerate this neighbour's coalesced jumps.
+                        let mut hit = None;
+                        let mut y = x;
+                        for (tap, bw) in taps(sg.jump_at) {
+                            if bw <= 0.0 || hit.is_some() {
+                                continue;
+                            }
+                            let st = stored_of(tap);
+                            let sub = sg.jump_at - tap + sg.jump_shift;
+                            jumps.for_each_jump(st.x as u32, st.y as u32, |dx, dy, jw| {
+                                if hit.is_some() {
+                                    return;
+                                }
+                                let m = jw * bw * sg.jump_scale;
+                                if y < m {
+                                    hit = Some(Vec2::new(dx as f32, dy as f32) + sub);
+                                } else {
+                                    y -= m;
+                                }
+                            });
+                        }
+                        match hit {
+                            Some(p) if valid(p) => {
+                                chosen = Some((p, true));
+                                break 'draw;
+                            }
+                            _ => continue 'draw,
+                        }
+                    }
+                    x -= sg.jump_mass;
                 }
             }
-            table.truncate(keep);
-            if copy_mass > 0.0 && valid(copy) {
-                table.push((copy, copy_mass, false));
+            if chosen.is_none() {
+                // 64 rejections in a row: draw from the exact table.
+                let mut table: Vec<(Vec2, f32, bool)> = Vec::new();
+                for sg in &suggestions {
+                    if sg.copy_mass > 0.0 {
+                        table.push((sg.copy, sg.copy_mass, false));
+                    }
+                    for (tap, bw) in taps(sg.jump_at) {
+                        if bw <= 0.0 {
+                            continue;
+                        }
+                        let st = stored_of(tap);
+                        let sub = sg.jump_at - tap + sg.jump_shift;
+                        jumps.for_each_jump(st.x as u32, st.y as u32, |dx, dy, jw| {
+                            let p = Vec2::new(dx as f32, dy as f32) + sub;
+                            if valid(p) {
+                                table.push((p, jw * bw * sg.jump_scale, true));
+                            }
+                        });
+                    }
+                }
+                let t: f32 = table.iter().map(|e| e.1).sum();
+                if t > 0.0 {
+                    let mut x = rng.random::<f32>() * t;
+                    let mut pick = table[table.len() - 1];
+                    for e in &table {
+                        if x < e.1 {
+                            pick = *e;
+                            break;
+                        }
+                        x -= e.1;
+                    }
+                    chosen = Some((pick.0, pick.2));
+                }
             }
         }
-        let total: f32 = table.iter().map(|e| e.1).sum();
-        let chosen = if total > 0.0 {
-            let mut x = rng.random::<f32>() * total;
-            let mut pick = table[table.len() - 1];
-            for e in &table {
-                if x < e.1 {
-                    pick = *e;
-                    break;
+        let chosen = match chosen {
+            Some((p, is_jump)) => {
+                if is_jump {
+                    out.jumps += 1;
                 }
-                x -= e.1;
+                p
             }
-            if pick.2 {
-                out.jumps += 1;
-            }
-            pick.0
-        } else {
-            out.random_assignments += 1;
-            if settings.tileable {
-                Vec2::new(rng.random::<f32>() * size.x, rng.random::<f32>() * size.y)
-            } else {
-                // Uniform over the valid range -bmin ..= max - bmax.
-                let lo = -bmin;
-                let hi = max - bmax;
-                if hi.cmpge(lo).all() {
-                    lo + (hi - lo) * Vec2::new(rng.random::<f32>(), rng.random::<f32>())
+            None => {
+                out.random_assignments += 1;
+                if settings.tileable {
+                    Vec2::new(rng.random::<f32>() * size.x, rng.random::<f32>() * size.y)
                 } else {
-                    out.unfit += 1;
-                    (lo + hi) * 0.5
+                    // Uniform over the valid range -bmin ..= max - bmax.
+                    let lo = -bmin;
+                    let hi = max - bmax;
+                    if hi.cmpge(lo).all() {
+                        lo + (hi - lo) * Vec2::new(rng.random::<f32>(), rng.random::<f32>())
+                    } else {
+                        out.unfit += 1;
+                        (lo + hi) * 0.5
+                    }
                 }
             }
         };
@@ -345,16 +426,13 @@ pub fn corner_uvs(
             (path(1, fwd) + path(k - 1, back)) * 0.5
         }
     };
-    let mut single = vec![Vec2::ZERO; mesh.corner_count()];
-    for f in 0..mesh.face_count() {
-        let r = mesh.face_corners(f);
-        for (j, c) in r.clone().enumerate() {
-            single[c] = to_uv(walk(f, 0, j));
-        }
-    }
+    let single: Vec<Vec2> = (0..mesh.face_count())
+        .into_par_iter()
+        .flat_map_iter(|f| (0..mesh.face_corners(f).len()).map(move |j| to_uv(walk(f, 0, j))))
+        .collect();
     let (tris, face_of) = mesh.triangulate_corners();
     let blend = tris
-        .iter()
+        .par_iter()
         .zip(&face_of)
         .map(|(t, &f)| {
             let start = mesh.face_start[f as usize];

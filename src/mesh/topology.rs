@@ -3,6 +3,7 @@
 //! satisfies the mesh invariant, including non-manifold and multi-component meshes.
 
 use super::PolyMesh;
+use rayon::slice::ParallelSliceMut;
 
 /// Edge and vertex adjacency of a mesh, in CSR arrays.
 #[derive(Clone, Debug, Default)]
@@ -58,7 +59,7 @@ impl Topology {
                 sides.push((((lo as u64) << 32) | hi as u64, c as u32));
             }
         }
-        sides.sort_unstable();
+        sides.par_sort_unstable();
         let mut corner_face = vec![0u32; mesh.corner_count()];
         for f in 0..mesh.face_count() {
             for c in mesh.face_corners(f) {
@@ -86,7 +87,7 @@ impl Topology {
                 nb_pairs.push((e[1], e[0]));
             }
         }
-        nb_pairs.sort_unstable();
+        nb_pairs.par_sort_unstable();
         let (neighbour_start, neighbour_list) = csr_from_pairs(nv, &nb_pairs);
 
         let mut vf_pairs: Vec<(u32, u32)> = Vec::with_capacity(mesh.corner_count());
@@ -95,7 +96,7 @@ impl Topology {
                 vf_pairs.push((v, f as u32));
             }
         }
-        vf_pairs.sort_unstable();
+        vf_pairs.par_sort_unstable();
         vf_pairs.dedup();
         let (vertex_face_start, vertex_face_list) = csr_from_pairs(nv, &vf_pairs);
 
