@@ -5,4 +5,5 @@ pub mod geodesic;
 pub mod jump_surface;
 pub mod metrics;
 pub mod orientation_field;
+pub mod retile;
 pub mod vertex_order;
