@@ -54,7 +54,6 @@ pub use project::{SurfacePoint, SurfaceProjector, closest_point_on_triangle};
 use crate::mesh::PolyMesh;
 use glam::Vec3;
 use remesh::{LevelPlan, remesh_level, snap_to_surface};
-use trimesh::NONE;
 
 /// How fine level 0 should be.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -295,17 +294,7 @@ pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyra
     let v0 = settings.level0_vertices(area)?;
 
     let mut mesh = prep.mesh.clone();
-    // Input vertices lie on the input: give each the corner of one of its faces.
-    for v in 0..mesh.pos.len() {
-        let h = mesh.out[v];
-        if h != NONE {
-            mesh.src_face[v] = h / 3;
-            let mut bary = [0.0; 3];
-            bary[(h % 3) as usize] = 1.0;
-            mesh.src_bary[v] = Vec3::from_array(bary);
-            mesh.ref_normal[v] = proj.face_normal(h / 3);
-        }
-    }
+    remesh::attach_to_input(&mut mesh, &proj);
     let mut len = equilateral_edge_length(area, v0);
     let mut levels = Vec::with_capacity(settings.levels as usize);
     for level in 0..settings.levels {

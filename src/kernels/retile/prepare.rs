@@ -35,6 +35,7 @@ pub struct InputReport {
 }
 
 /// The prepared input: the manifold mesh plus the way back to the input.
+#[derive(Debug)]
 pub(crate) struct Prepared {
     /// Oriented manifold triangle mesh; `loop_id` is set on boundary vertices.
     pub mesh: TriMesh,

@@ -120,6 +120,22 @@ pub(crate) fn remesh_level(mesh: &mut TriMesh, proj: &SurfaceProjector, plan: &L
     len
 }
 
+/// Ties every vertex of a freshly prepared `mesh` (whose faces are those of
+/// `proj`) to the input: its source face is one of its faces, at the corner
+/// it is, and its reference normal is that face's normal.
+pub(crate) fn attach_to_input(mesh: &mut TriMesh, proj: &SurfaceProjector) {
+    for v in 0..mesh.pos.len() {
+        let h = mesh.out[v];
+        if h != NONE {
+            mesh.src_face[v] = h / 3;
+            let mut bary = [0.0; 3];
+            bary[(h % 3) as usize] = 1.0;
+            mesh.src_bary[v] = Vec3::from_array(bary);
+            mesh.ref_normal[v] = proj.face_normal(h / 3);
+        }
+    }
+}
+
 /// Unique edges as `(a, b, squared length)`, one half-edge each.
 fn edges_where(mesh: &TriMesh, keep: impl Fn(f32) -> bool) -> Vec<(u32, u32, f32)> {
     let mut out = Vec::new();
@@ -653,6 +669,59 @@ pub(crate) fn snap_to_surface(mesh: &mut TriMesh, proj: &SurfaceProjector) {
             mesh.src_face[v] = sp.face;
             mesh.src_bary[v] = sp.bary;
             mesh.ref_normal[v] = proj.face_normal(sp.face);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::prepare::prepare;
+    use super::*;
+    use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
+
+    /// Remeshes a builtin mesh to `target` vertices and checks the structure.
+    fn remesh_builtin(name: &str, opts: &BuiltinOptions, target: usize) -> TriMesh {
+        let input = builtin_mesh(name, opts).unwrap();
+        let prep = prepare(&input).unwrap();
+        let proj = SurfaceProjector::from_trimesh(&prep.mesh);
+        let mut mesh = prep.mesh.clone();
+        attach_to_input(&mut mesh, &proj);
+        let plan = LevelPlan {
+            target_vertices: target,
+            edge_length: 0.1,
+            iterations: 8,
+            seed: 1,
+        };
+        remesh_level(&mut mesh, &proj, &plan);
+        mesh.check().unwrap();
+        mesh.compact();
+        mesh.check().unwrap();
+        mesh
+    }
+
+    #[test]
+    fn closed_mesh_stays_a_valid_manifold_on_target() {
+        let mesh = remesh_builtin("torus", &BuiltinOptions::default(), 700);
+        assert_eq!(mesh.live_vertices, 700);
+        assert!(mesh.on_boundary.iter().all(|&b| !b));
+    }
+
+    #[test]
+    fn boundary_stays_on_the_boundary_loop() {
+        let opts = BuiltinOptions {
+            resolution: [12, 12],
+            ..BuiltinOptions::default()
+        };
+        let mesh = remesh_builtin("jittered_plane", &opts, 400);
+        assert_eq!(mesh.live_vertices, 400);
+        // The plane spans [-1, 1]²: boundary vertices lie on its border.
+        for v in 0..mesh.pos.len() {
+            let p = mesh.pos[v];
+            assert!(p.z.abs() < 1e-6);
+            if mesh.on_boundary[v] {
+                let border = 1.0 - p.x.abs().max(p.y.abs());
+                assert!(border < 1e-5, "boundary vertex {v} at {p:?}");
+            }
         }
     }
 }

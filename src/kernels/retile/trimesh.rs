@@ -28,7 +28,7 @@ pub(crate) fn next(h: u32) -> u32 {
 /// The half-edge before `h` in its face.
 #[inline]
 pub(crate) fn prev(h: u32) -> u32 {
-    if h % 3 == 0 { h + 2 } else { h - 1 }
+    if h.is_multiple_of(3) { h + 2 } else { h - 1 }
 }
 
 /// A manifold triangle mesh with boundary, editable in place.
@@ -111,7 +111,7 @@ impl TriMesh {
         }
         let mut twin = vec![NONE; nh];
         for &(key, h) in &keys {
-            let rev = (key << 32) | (key >> 32);
+            let rev = key.rotate_right(32);
             if let Ok(i) = keys.binary_search_by_key(&rev, |k| k.0) {
                 twin[h as usize] = keys[i].1;
             }
@@ -438,14 +438,19 @@ impl TriMesh {
     /// Removes dead faces and vertices, renumbering the rest in order.
     pub fn compact(&mut self) {
         let nv = self.pos.len();
-        let mut vmap = vec![NONE; nv];
         let mut n = 0u32;
-        for v in 0..nv {
-            if self.out[v] != NONE {
-                vmap[v] = n;
-                n += 1;
-            }
-        }
+        let vmap: Vec<u32> = self
+            .out
+            .iter()
+            .map(|&o| {
+                if o == NONE {
+                    NONE
+                } else {
+                    n += 1;
+                    n - 1
+                }
+            })
+            .collect();
         let nf = self.vert.len() / 3;
         let mut hmap = vec![NONE; self.vert.len()];
         let mut nh = 0u32;
@@ -502,6 +507,7 @@ impl TriMesh {
 
     /// Verifies the structural invariants; returns a description of the
     /// first violation. O(n); used by tests.
+    #[cfg(test)]
     pub fn check(&self) -> Result<(), String> {
         for h in 0..self.vert.len() as u32 {
             let v = self.vert[h as usize];
@@ -601,14 +607,15 @@ mod tests {
         let v = m.split(h);
         m.check().unwrap();
         assert_eq!(m.valence(v), 4);
-        assert_eq!(m.valence(0), 7);
+        // Vertex 0 trades neighbour 1 for the new vertex.
+        assert_eq!(m.valence(0), 6);
         // Split a boundary edge.
         let hb = m.find_edge(2, 3).unwrap();
         let w = m.split(hb);
         m.check().unwrap();
         assert!(m.on_boundary[w as usize]);
         assert_eq!(m.valence(w), 3);
-        // Flip the edge 0 — w (interior) and back.
+        // Flip the interior edge 0 — w.
         let hf = m.find_edge(0, w).unwrap();
         m.flip(hf);
         m.check().unwrap();
