@@ -397,6 +397,9 @@ fn bad_settings_and_empty_meshes_are_typed_errors() {
     );
     let e = retile(&PolyMesh::new(), &RetileSettings::default()).unwrap_err();
     assert!(matches!(e, RetileError::NoFaces { .. }), "{e}");
+    let flat = PolyMesh::from_triangles(vec![Vec3::ZERO, Vec3::X, 2.0 * Vec3::X], &[[0, 1, 2]]);
+    let e = retile(&flat, &RetileSettings::default()).unwrap_err();
+    assert!(e.to_string().contains("degenerate"), "{e}");
     let mut nan = ico.clone();
     nan.positions[5].x = f32::NAN;
     let e = retile(&nan, &RetileSettings::default()).unwrap_err();

@@ -177,10 +177,14 @@ impl TriMesh {
     }
 
     /// The first outgoing half-edge of `v` in fan order: for a boundary
-    /// vertex, the one whose previous half-edge lies on the boundary.
+    /// vertex, the one whose previous half-edge lies on the boundary; for an
+    /// interior vertex (closed fan), any.
     #[inline]
     pub fn fan_start(&self, v: u32) -> u32 {
         let s = self.out[v as usize];
+        if !self.on_boundary[v as usize] {
+            return s;
+        }
         let mut h = s;
         loop {
             let t = self.twin[prev(h) as usize];
@@ -531,9 +535,14 @@ impl TriMesh {
             }
         }
         let mut seen = vec![0u32; self.pos.len()];
+        let mut boundary = vec![false; self.pos.len()];
         for h in 0..self.vert.len() {
             if self.vert[h] != NONE {
                 seen[self.vert[h] as usize] += 1;
+                if self.twin[h] == NONE {
+                    boundary[self.vert[h] as usize] = true;
+                    boundary[self.to(h as u32) as usize] = true;
+                }
             }
         }
         let mut live = 0;
@@ -553,9 +562,7 @@ impl TriMesh {
                     seen[v as usize]
                 ));
             }
-            let s = self.fan_start(v);
-            let boundary = self.twin[prev(s) as usize] == NONE;
-            if boundary != self.on_boundary[v as usize] {
+            if boundary[v as usize] != self.on_boundary[v as usize] {
                 return Err(format!("boundary flag of vertex {v} is stale"));
             }
         }
