@@ -7,6 +7,7 @@ pub mod jump_surface;
 pub mod max_flow;
 pub mod metrics;
 pub mod orientation_field;
+pub mod retile;
 pub mod sqrt2;
 pub mod surface_sample;
 pub mod vertex_order;

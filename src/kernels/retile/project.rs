@@ -1,0 +1,479 @@
+//! Closest-point projection onto a triangle mesh and onto its boundary
+//! polylines, accelerated by a bounding-volume hierarchy.
+//!
+//! The BVH is binary, built top-down by splitting at the median centroid
+//! along the widest axis (deterministic, O(n log n)), with up to
+//! [`LEAF_SIZE`] primitives per leaf. A query walks nearer children first and
+//! prunes every box farther than the best distance so far; a good first guess
+//! (the face a vertex was on before it moved) makes queries during
+//! remeshing nearly constant time. Closest points on triangles follow
+//! Ericson, *Real-Time Collision Detection* (2005), §5.1.5.
+
+use super::trimesh::{NONE, TriMesh, next};
+use crate::mesh::PolyMesh;
+use glam::Vec3;
+
+/// Most primitives in a BVH leaf.
+const LEAF_SIZE: usize = 4;
+
+#[derive(Clone, Copy, Debug)]
+struct Node {
+    lo: Vec3,
+    hi: Vec3,
+    /// Leaf: first index into `Bvh::prims`. Inner node: index of the left
+    /// child (the right one follows it).
+    first: u32,
+    /// Primitives in a leaf; 0 for an inner node.
+    count: u32,
+}
+
+/// A bounding-volume hierarchy over primitives given by their boxes.
+#[derive(Clone, Debug, Default)]
+struct Bvh {
+    nodes: Vec<Node>,
+    prims: Vec<u32>,
+}
+
+#[inline]
+fn box_dist2(lo: Vec3, hi: Vec3, p: Vec3) -> f32 {
+    let d = (lo - p).max(p - hi).max(Vec3::ZERO);
+    d.length_squared()
+}
+
+impl Bvh {
+    fn build(boxes: &[(Vec3, Vec3)]) -> Self {
+        let mut prims: Vec<u32> = (0..boxes.len() as u32).collect();
+        let centre: Vec<Vec3> = boxes.iter().map(|(lo, hi)| 0.5 * (*lo + *hi)).collect();
+        let mut nodes = Vec::with_capacity(2 * boxes.len() / LEAF_SIZE + 1);
+        if boxes.is_empty() {
+            return Self { nodes, prims };
+        }
+        nodes.push(Node {
+            lo: Vec3::ZERO,
+            hi: Vec3::ZERO,
+            first: 0,
+            count: 0,
+        });
+        // (node, start, end) ranges of `prims` still to split.
+        let mut todo = vec![(0usize, 0usize, boxes.len())];
+        while let Some((n, s, e)) = todo.pop() {
+            let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+            let (mut clo, mut chi) = (lo, hi);
+            for &p in &prims[s..e] {
+                let (a, b) = boxes[p as usize];
+                lo = lo.min(a);
+                hi = hi.max(b);
+                clo = clo.min(centre[p as usize]);
+                chi = chi.max(centre[p as usize]);
+            }
+            nodes[n].lo = lo;
+            nodes[n].hi = hi;
+            let ext = chi - clo;
+            if e - s <= LEAF_SIZE || ext.max_element() <= 0.0 {
+                nodes[n].first = s as u32;
+                nodes[n].count = (e - s) as u32;
+                continue;
+            }
+            let axis = if ext.x >= ext.y && ext.x >= ext.z {
+                0
+            } else if ext.y >= ext.z {
+                1
+            } else {
+                2
+            };
+            let mid = s + (e - s) / 2;
+            prims[s..e].select_nth_unstable_by(mid - s, |&a, &b| {
+                centre[a as usize][axis]
+                    .total_cmp(&centre[b as usize][axis])
+                    .then(a.cmp(&b))
+            });
+            let left = nodes.len();
+            let blank = Node {
+                lo: Vec3::ZERO,
+                hi: Vec3::ZERO,
+                first: 0,
+                count: 0,
+            };
+            nodes.push(blank);
+            nodes.push(blank);
+            nodes[n].first = left as u32;
+            todo.push((left + 1, mid, e));
+            todo.push((left, s, mid));
+        }
+        Self { nodes, prims }
+    }
+
+    /// The primitive nearest to `p` by `dist2` (squared distance, or
+    /// infinity to skip a primitive), starting from the guess `(best,
+    /// best_d2)`. Returns `(NONE, ∞)` when every primitive is skipped.
+    #[inline]
+    fn nearest(
+        &self,
+        p: Vec3,
+        mut best: u32,
+        mut best_d2: f32,
+        mut dist2: impl FnMut(u32) -> f32,
+    ) -> (u32, f32) {
+        if self.nodes.is_empty() {
+            return (best, best_d2);
+        }
+        let mut stack = [0u32; 64];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let node = self.nodes[stack[top] as usize];
+            if box_dist2(node.lo, node.hi, p) >= best_d2 {
+                continue;
+            }
+            if node.count > 0 {
+                let r = node.first as usize..(node.first + node.count) as usize;
+                for &prim in &self.prims[r] {
+                    let d2 = dist2(prim);
+                    if d2 < best_d2 || (d2 == best_d2 && d2.is_finite() && prim < best) {
+                        best_d2 = d2;
+                        best = prim;
+                    }
+                }
+            } else {
+                let l = node.first;
+                let dl = box_dist2(self.nodes[l as usize].lo, self.nodes[l as usize].hi, p);
+                let dr = box_dist2(
+                    self.nodes[l as usize + 1].lo,
+                    self.nodes[l as usize + 1].hi,
+                    p,
+                );
+                // Push the farther child first so the nearer one is searched first.
+                let (near, far) = if dl <= dr { (l, l + 1) } else { (l + 1, l) };
+                if top + 2 > stack.len() {
+                    // Deeper than any median-split tree over < 2^60 primitives.
+                    continue;
+                }
+                stack[top] = far;
+                stack[top + 1] = near;
+                top += 2;
+            }
+        }
+        (best, best_d2)
+    }
+}
+
+/// Closest point to `p` on triangle `(a, b, c)` and its barycentric
+/// coordinates (Ericson 2005, §5.1.5). Degenerate triangles are handled.
+#[inline]
+pub fn closest_point_on_triangle(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> (Vec3, Vec3) {
+    let ab = b - a;
+    let ac = c - a;
+    let ap = p - a;
+    let d1 = ab.dot(ap);
+    let d2 = ac.dot(ap);
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return (a, Vec3::X);
+    }
+    let bp = p - b;
+    let d3 = ab.dot(bp);
+    let d4 = ac.dot(bp);
+    if d3 >= 0.0 && d4 <= d3 {
+        return (b, Vec3::Y);
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return (a + v * ab, Vec3::new(1.0 - v, v, 0.0));
+    }
+    let cp = p - c;
+    let d5 = ab.dot(cp);
+    let d6 = ac.dot(cp);
+    if d6 >= 0.0 && d5 <= d6 {
+        return (c, Vec3::Z);
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return (a + w * ac, Vec3::new(1.0 - w, 0.0, w));
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return (b + w * (c - b), Vec3::new(0.0, 1.0 - w, w));
+    }
+    let denom = va + vb + vc;
+    if denom.abs() <= f32::MIN_POSITIVE {
+        // Degenerate (collinear) triangle whose edge tests all failed: take a.
+        return (a, Vec3::X);
+    }
+    let v = vb / denom;
+    let w = vc / denom;
+    (a + ab * v + ac * w, Vec3::new(1.0 - v - w, v, w))
+}
+
+/// A point on the reference surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    /// The point (model units).
+    pub point: Vec3,
+    /// The triangle it lies on.
+    pub face: u32,
+    /// Its barycentric coordinates in that triangle (they sum to 1).
+    pub bary: Vec3,
+}
+
+/// A boundary edge of the reference surface.
+#[derive(Clone, Copy, Debug)]
+struct Segment {
+    /// The triangle that owns the edge.
+    face: u32,
+    /// Which corner of that triangle the edge starts at.
+    corner: u8,
+    loop_id: u32,
+}
+
+/// Projects points onto a fixed triangle mesh (the reference surface).
+///
+/// Build it once with [`SurfaceProjector::new`] (any polygon mesh; faces are
+/// fan-triangulated like [`PolyMesh::triangulated`], and face ids in results
+/// index those triangles), then query from any number of threads.
+#[derive(Clone, Debug, Default)]
+pub struct SurfaceProjector {
+    positions: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    normals: Vec<Vec3>,
+    tri_bvh: Bvh,
+    segments: Vec<Segment>,
+    seg_bvh: Bvh,
+}
+
+impl SurfaceProjector {
+    /// Builds the projector for the triangles of `mesh.triangulated()`,
+    /// without boundary queries. O(n log n).
+    pub fn new(mesh: &PolyMesh) -> Self {
+        let tri = mesh.triangulated();
+        let triangles: Vec<[u32; 3]> = tri.faces().map(|f| [f[0], f[1], f[2]]).collect();
+        Self::build(tri.positions, triangles, Vec::new())
+    }
+
+    /// Builds the projector over the live faces of a prepared mesh (face ids
+    /// are its face slots divided by three, which are all live right after
+    /// preparation), including its boundary loops.
+    pub(crate) fn from_trimesh(mesh: &TriMesh) -> Self {
+        let triangles: Vec<[u32; 3]> = mesh
+            .vert
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
+        let mut segments = Vec::new();
+        for h in 0..mesh.halfedge_slots() as u32 {
+            if mesh.alive_halfedge(h) && mesh.twin[h as usize] == NONE {
+                segments.push(Segment {
+                    face: h / 3,
+                    corner: (h % 3) as u8,
+                    loop_id: mesh.loop_id[mesh.vert[h as usize] as usize],
+                });
+            }
+        }
+        Self::build(mesh.pos.clone(), triangles, segments)
+    }
+
+    fn build(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, segments: Vec<Segment>) -> Self {
+        let boxes: Vec<(Vec3, Vec3)> = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| positions[v as usize]);
+                (a.min(b).min(c), a.max(b).max(c))
+            })
+            .collect();
+        let normals = triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|v| positions[v as usize]);
+                (b - a).cross(c - a).normalize_or_zero()
+            })
+            .collect();
+        let tri_bvh = Bvh::build(&boxes);
+        let mut out = Self {
+            positions,
+            triangles,
+            normals,
+            tri_bvh,
+            segments,
+            seg_bvh: Bvh::default(),
+        };
+        let seg_boxes: Vec<(Vec3, Vec3)> = out
+            .segments
+            .iter()
+            .map(|s| {
+                let (a, b) = out.segment_ends(s);
+                (a.min(b), a.max(b))
+            })
+            .collect();
+        out.seg_bvh = Bvh::build(&seg_boxes);
+        out
+    }
+
+    /// Number of triangles of the reference surface.
+    pub fn triangle_count(&self) -> usize {
+        self.triangles.len()
+    }
+
+    /// Unit normal of triangle `face` (zero when it has no area).
+    pub fn face_normal(&self, face: u32) -> Vec3 {
+        self.normals[face as usize]
+    }
+
+    /// The point with barycentric coordinates `bary` in triangle `face`.
+    pub fn point_at(&self, face: u32, bary: Vec3) -> Vec3 {
+        let [a, b, c] = self.triangles[face as usize].map(|v| self.positions[v as usize]);
+        a * bary.x + b * bary.y + c * bary.z
+    }
+
+    #[inline]
+    fn tri_closest(&self, t: u32, p: Vec3) -> (Vec3, Vec3) {
+        let [a, b, c] = self.triangles[t as usize].map(|v| self.positions[v as usize]);
+        closest_point_on_triangle(p, a, b, c)
+    }
+
+    #[inline]
+    fn segment_ends(&self, s: &Segment) -> (Vec3, Vec3) {
+        let tri = self.triangles[s.face as usize];
+        let i = s.corner as usize;
+        (
+            self.positions[tri[i] as usize],
+            self.positions[tri[next(i as u32) as usize] as usize],
+        )
+    }
+
+    /// The closest point of the surface to `p`. Ties go to the lower face id.
+    /// Returns `None` only for a surface without triangles.
+    pub fn project(&self, p: Vec3) -> Option<SurfacePoint> {
+        let (face, _) = self.tri_bvh.nearest(p, NONE, f32::INFINITY, |t| {
+            (self.tri_closest(t, p).0 - p).length_squared()
+        });
+        (face != NONE).then(|| {
+            let (point, bary) = self.tri_closest(face, p);
+            SurfacePoint { point, face, bary }
+        })
+    }
+
+    /// Like [`Self::project`], with `hint` a triangle likely to be near
+    /// (speeds up the search; the result is the same).
+    pub fn project_near(&self, p: Vec3, hint: u32) -> Option<SurfacePoint> {
+        let (mut best, mut best_d2) = (NONE, f32::INFINITY);
+        if (hint as usize) < self.triangles.len() {
+            best = hint;
+            best_d2 = (self.tri_closest(hint, p).0 - p).length_squared();
+        }
+        let (face, _) = self.tri_bvh.nearest(p, best, best_d2, |t| {
+            (self.tri_closest(t, p).0 - p).length_squared()
+        });
+        (face != NONE).then(|| {
+            let (point, bary) = self.tri_closest(face, p);
+            SurfacePoint { point, face, bary }
+        })
+    }
+
+    /// The closest point to `p` among the triangles facing the same way as
+    /// `normal` (positive dot product), so that a point is not snapped onto
+    /// the far side of a thin part; `hint` is a triangle likely to be near
+    /// (speeds up the search). Falls back to [`Self::project`] when no
+    /// triangle faces that way.
+    pub fn project_facing(&self, p: Vec3, normal: Vec3, hint: u32) -> Option<SurfacePoint> {
+        let facing = |t: u32| self.normals[t as usize].dot(normal) > 0.0;
+        let (mut best, mut best_d2) = (NONE, f32::INFINITY);
+        if (hint as usize) < self.triangles.len() && facing(hint) {
+            best = hint;
+            best_d2 = (self.tri_closest(hint, p).0 - p).length_squared();
+        }
+        let (face, _) = self.tri_bvh.nearest(p, best, best_d2, |t| {
+            if facing(t) {
+                (self.tri_closest(t, p).0 - p).length_squared()
+            } else {
+                f32::INFINITY
+            }
+        });
+        if face == NONE {
+            return self.project(p);
+        }
+        let (point, bary) = self.tri_closest(face, p);
+        Some(SurfacePoint { point, face, bary })
+    }
+
+    /// The closest point to `p` on boundary loop `loop_id` (see
+    /// `prepare::number_boundary_loops`); `None` without such a loop.
+    pub(crate) fn project_to_boundary(&self, p: Vec3, loop_id: u32) -> Option<SurfacePoint> {
+        let seg_closest = |s: &Segment| {
+            let (a, b) = self.segment_ends(s);
+            let ab = b - a;
+            let len2 = ab.length_squared();
+            let u = if len2 > 0.0 {
+                ((p - a).dot(ab) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a + u * ab, u)
+        };
+        let (si, _) = self.seg_bvh.nearest(p, NONE, f32::INFINITY, |i| {
+            let s = &self.segments[i as usize];
+            if s.loop_id == loop_id {
+                (seg_closest(s).0 - p).length_squared()
+            } else {
+                f32::INFINITY
+            }
+        });
+        if si == NONE {
+            return None;
+        }
+        let s = &self.segments[si as usize];
+        let (point, u) = seg_closest(s);
+        let mut bary = [0.0f32; 3];
+        bary[s.corner as usize] = 1.0 - u;
+        bary[next(s.corner as u32) as usize] = u;
+        Some(SurfacePoint {
+            point,
+            face: s.face,
+            bary: Vec3::from_array(bary),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
+
+    #[test]
+    fn closest_point_regions() {
+        let (a, b, c) = (Vec3::ZERO, Vec3::X, Vec3::Y);
+        let (q, w) = closest_point_on_triangle(Vec3::new(0.2, 0.2, 1.0), a, b, c);
+        assert!((q - Vec3::new(0.2, 0.2, 0.0)).length() < 1e-6);
+        assert!((w - Vec3::new(0.6, 0.2, 0.2)).length() < 1e-6);
+        let (q, _) = closest_point_on_triangle(Vec3::new(-1.0, -1.0, 0.0), a, b, c);
+        assert_eq!(q, a);
+        let (q, w) = closest_point_on_triangle(Vec3::new(1.0, 1.0, 0.0), a, b, c);
+        assert!((q - Vec3::new(0.5, 0.5, 0.0)).length() < 1e-6);
+        assert!((w - Vec3::new(0.0, 0.5, 0.5)).length() < 1e-6);
+    }
+
+    #[test]
+    fn bvh_matches_brute_force() {
+        let mesh = builtin_mesh("torus", &BuiltinOptions::default()).unwrap();
+        let proj = SurfaceProjector::new(&mesh);
+        let tri = mesh.triangulated();
+        let mut state = 12345u32;
+        let mut rnd = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32 * 3.0 - 1.5
+        };
+        for _ in 0..200 {
+            let p = Vec3::new(rnd(), rnd(), rnd());
+            let got = proj.project(p).unwrap();
+            let best = tri
+                .faces()
+                .map(|f| {
+                    let [a, b, c] = [f[0], f[1], f[2]].map(|v| tri.positions[v as usize]);
+                    (closest_point_on_triangle(p, a, b, c).0 - p).length()
+                })
+                .fold(f32::INFINITY, f32::min);
+            assert!(((got.point - p).length() - best).abs() < 1e-5);
+            assert!((proj.point_at(got.face, got.bary) - got.point).length() < 1e-5);
+        }
+    }
+}
