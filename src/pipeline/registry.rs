@@ -189,6 +189,7 @@ pub fn registry() -> Vec<StageInfo> {
     vec![
         entry::<orientation::Orientation>(),
         entry::<init_colours::InitColours>(),
+        entry::<retile::Retile>(),
         entry::<jump_map::JumpMapStage>(),
         entry::<jump_surface::JumpSurface>(),
         entry::<jump_image::JumpImage>(),

@@ -8,4 +8,5 @@ pub mod jump_map;
 pub mod jump_surface;
 pub mod orientation;
 pub mod result_metrics;
+pub mod retile;
 pub mod world;

@@ -1,0 +1,174 @@
+//! Stage `retile`: re-tiles the input mesh so its vertices are uniformly
+//! distributed at a chosen density and builds the Wei & Levoy 2001 §3.1 mesh
+//! pyramid (each coarser level a quarter of the vertices). Level entities get
+//! `MeshLevel(l)` (0 finest) and a `SourceCorrespondence` to map results back
+//! onto the input; the finest level becomes the active mesh.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::retile::{RetileSettings, RetileTarget, retile};
+use crate::mesh::{PolyMesh, Topology};
+use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use serde::{Deserialize, Serialize};
+
+/// Settings of `retile`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RetileStageSettings {
+    /// Vertices of the finest level (used when `edge_length` is 0).
+    pub vertices: u32,
+    /// Target edge length of the finest level, world units; 0 = use `vertices`.
+    pub edge_length: f32,
+    /// Pyramid levels.
+    pub levels: u32,
+    /// Remeshing iterations per level.
+    pub iterations: u32,
+}
+
+impl Default for RetileStageSettings {
+    fn default() -> Self {
+        Self {
+            vertices: 24_576,
+            edge_length: 0.0,
+            levels: 4,
+            iterations: 10,
+        }
+    }
+}
+
+impl StageSettings for RetileStageSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "vertices",
+            unit: "vertices",
+            range: ParamRange::Int(12, 50_000_000),
+            doc: "vertices of the finest level; the density sets the texture scale (Wei & Levoy Fig. 2)",
+        },
+        ParamDoc {
+            name: "edge_length",
+            unit: "world units",
+            range: ParamRange::Float(0.0, 1e9),
+            doc: "target edge length of the finest level instead of a vertex count; 0 = use `vertices`",
+        },
+        ParamDoc {
+            name: "levels",
+            unit: "",
+            range: ParamRange::Int(1, 8),
+            doc: "pyramid levels; each coarser level has a quarter of the vertices (paper: 4)",
+        },
+        ParamDoc {
+            name: "iterations",
+            unit: "",
+            range: ParamRange::Int(1, 100),
+            doc: "isotropic remeshing iterations per level (split, collapse, flip, relax, project)",
+        },
+    ];
+}
+
+/// Where each vertex of a retiled level lies on the input surface: a face
+/// of the triangulated input and barycentric coordinates in it.
+#[derive(Component, Clone, Debug, Default)]
+pub struct SourceCorrespondence {
+    /// Face of `input.triangulated()`.
+    pub face: Vec<u32>,
+    /// Barycentric coordinates in that face.
+    pub bary: Vec<glam::Vec3>,
+}
+
+/// Edge-length coefficient of variation (std / mean) of a mesh.
+pub fn edge_length_cv(mesh: &PolyMesh) -> f32 {
+    let topo = Topology::build(mesh);
+    let lens: Vec<f64> = topo
+        .edges
+        .iter()
+        .map(|e| (mesh.positions[e[0] as usize] - mesh.positions[e[1] as usize]).length() as f64)
+        .collect();
+    let n = lens.len().max(1) as f64;
+    let mean = lens.iter().sum::<f64>() / n;
+    let var = lens.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / n;
+    (var.sqrt() / mean.max(1e-30)) as f32
+}
+
+/// The `retile` stage.
+pub struct Retile;
+
+impl Stage for Retile {
+    const KIND: &'static str = "retile";
+    const SUMMARY: &'static str = "uniform re-tiling at a chosen density and the mesh pyramid (isotropic remeshing onto the input)";
+    const PAPER: &'static str = "Wei & Levoy 2001 §3.1";
+    type Settings = RetileStageSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::MeshPyramid]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               mut active: ResMut<ActiveMesh>,
+               seed: Res<RunSeed>,
+               mut spacing: ResMut<TexelSpacing>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               sources: Query<(Entity, &Geometry), With<SourceMesh>>| {
+            let Ok((source_entity, source)) = sources.single() else {
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "no input mesh to retile",
+                );
+                return;
+            };
+            let target = if settings.edge_length > 0.0 {
+                RetileTarget::EdgeLength(settings.edge_length)
+            } else {
+                RetileTarget::Vertices(settings.vertices)
+            };
+            let rs = RetileSettings {
+                target,
+                levels: settings.levels,
+                iterations: settings.iterations,
+                seed: seed.derive(ctx.index, 0),
+            };
+            let pyramid = match retile(&source.0, &rs) {
+                Ok(p) => p,
+                Err(e) => {
+                    fail(&mut failure, ctx.index, Self::KIND, e.to_string());
+                    return;
+                }
+            };
+            // The input is no longer a pyramid level: the retiled levels are.
+            commands.entity(source_entity).remove::<MeshLevel>();
+            let mut counts = Vec::new();
+            let mut cvs = Vec::new();
+            for (l, level) in pyramid.levels.into_iter().enumerate() {
+                counts.push(level.mesh.vertex_count());
+                cvs.push(edge_length_cv(&level.mesh));
+                if l == 0 {
+                    spacing.0 = level.mesh.average_edge_length().max(f32::MIN_POSITIVE);
+                }
+                let e = commands
+                    .spawn((
+                        MeshLevel(l as u8),
+                        Geometry(level.mesh),
+                        SourceCorrespondence {
+                            face: level.source_face,
+                            bary: level.source_bary,
+                        },
+                    ))
+                    .id();
+                if l == 0 {
+                    active.0 = e;
+                }
+            }
+            metrics.record(ctx.index, "level_vertices", &counts);
+            metrics.record(ctx.index, "level_edge_length_cv", &cvs);
+        })
+        .into_configs()
+    }
+}
