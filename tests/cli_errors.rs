@@ -141,6 +141,11 @@ fn bad_meshes_are_refused_with_what_and_where() {
     );
     mesh_case("empty.obj", "", &["no faces"]);
     mesh_case("trunc.off", "OFF\n4 2 0\n0 0 0\n1 0 0\n", &["trunc.off"]);
+    mesh_case(
+        "trunc.obj",
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nv 1 1",
+        &["line 5", "truncated"],
+    );
     mesh_case("mesh.xyz", "1 2 3\n", &[".obj"]);
 }
 
