@@ -287,3 +287,59 @@ fn jump_image_beats_a_shuffle_and_writes_three_images() {
     let img = image::open(out.join("jump_image.png")).unwrap();
     assert_eq!((img.width(), img.height()), (160, 96));
 }
+
+#[test]
+fn baked_atlas_renders_like_the_blended_uvs() {
+    use surfsynth::output::render::{RenderOptions, Shading, View, render};
+    let text = config(
+        "builtin:torus",
+        "builtin:bricks",
+        "repeat",
+        40.0,
+        "emerging_front",
+    ) + "\n[[stage]]\nkind = \"export\"\nformats = [\"baked\"]\nbake_size = 2048\n";
+    let mut w = run_world(&text);
+    let active = w.resource::<ActiveMesh>().0;
+    let ex = w.resource::<Exemplar>().clone();
+    let (tri_mesh, atlas_uvs, baked) = w.resource::<ExportJob>().baked.clone().expect("baked");
+    let mut q = w.query::<(&Geometry, &BlendUvs)>();
+    let (g, blend) = q.get(&w, active).unwrap();
+    let view = View {
+        azimuth_deg: 30.0,
+        elevation_deg: 40.0,
+    };
+    let opts = RenderOptions::default();
+    let a = render(
+        &g.0,
+        &Shading::BlendedUvs {
+            layers: &blend.0,
+            texture: &ex.image,
+            wrap: ex.wrap,
+        },
+        &view,
+        128,
+        &opts,
+    );
+    let b = render(
+        &tri_mesh,
+        &Shading::CornerUvs {
+            uvs: &atlas_uvs,
+            texture: &baked,
+            wrap: surfsynth::image::sample::Wrap::Clamp,
+        },
+        &view,
+        128,
+        &opts,
+    );
+    let diff: f32 = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y).abs())
+        .sum::<f32>()
+        / a.data.len() as f32;
+    assert!(
+        diff < 0.03,
+        "mean difference between blended and baked renders: {diff}"
+    );
+}

@@ -36,6 +36,19 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     dir, &job.stem, &job.mesh, uvs, texture, colours,
                 )?);
             }
+            "baked" => {
+                if let Some((mesh, uvs, image)) = &job.baked {
+                    let stem = format!("{}_baked", job.stem);
+                    files.extend(super::obj::write_obj(
+                        dir,
+                        &stem,
+                        mesh,
+                        Some(uvs.as_slice()),
+                        Some(image),
+                        None,
+                    )?);
+                }
+            }
             "preview" => {
                 files.extend(super::render::write_previews(
                     dir,

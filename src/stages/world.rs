@@ -182,6 +182,9 @@ pub struct ExportJob {
     pub previews: Vec<Image>,
     /// Further images to write as PNG, by file name (`jump_image.png`, ...).
     pub images: Vec<(String, Image)>,
+    /// The result baked into a texture atlas: the triangulated mesh, its
+    /// per-corner atlas coordinates and the atlas image.
+    pub baked: Option<(PolyMesh, Vec<Vec2>, Image)>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),

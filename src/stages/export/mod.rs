@@ -21,6 +21,8 @@ pub struct ExportSettings {
     pub preview_size: u32,
     /// File name stem of the mesh files.
     pub name: String,
+    /// Side of the baked atlas texture, pixels.
+    pub bake_size: u32,
 }
 
 impl Default for ExportSettings {
@@ -29,6 +31,7 @@ impl Default for ExportSettings {
             formats: vec!["ply".into(), "obj".into(), "preview".into()],
             preview_size: 512,
             name: "result".into(),
+            bake_size: 1024,
         }
     }
 }
@@ -38,14 +41,20 @@ impl StageSettings for ExportSettings {
         ParamDoc {
             name: "formats",
             unit: "",
-            range: ParamRange::OneOf(&["ply", "obj", "preview"]),
-            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture when the result has them, else vertex colours); preview: 3 shaded PNG views",
+            range: ParamRange::OneOf(&["ply", "obj", "preview", "baked"]),
+            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture when the result has them, else vertex colours); preview: 3 shaded PNG views; baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas",
         },
         ParamDoc {
             name: "preview_size",
             unit: "pixels",
             range: ParamRange::Int(64, 4096),
             doc: "width and height of each preview image",
+        },
+        ParamDoc {
+            name: "bake_size",
+            unit: "pixels",
+            range: ParamRange::Int(64, 16384),
+            doc: "side of the baked atlas texture (format `baked`)",
         },
         ParamDoc {
             name: "name",
@@ -67,6 +76,40 @@ impl StageSettings for ExportSettings {
         }
         Ok(())
     }
+}
+
+/// Bakes per-corner UVs (blended when blend layers exist) into a
+/// per-triangle atlas; `None` when the result has no UVs.
+fn bake(
+    mesh: &crate::mesh::PolyMesh,
+    uvs: Option<&CornerUvs>,
+    blend: Option<&BlendUvs>,
+    exemplar: &Exemplar,
+    size: u32,
+) -> Option<(crate::mesh::PolyMesh, Vec<glam::Vec2>, crate::image::Image)> {
+    use crate::kernels::bake_triangles::{atlas_corner_uvs, bake_blended};
+    let (tris, _) = mesh.triangulate_corners();
+    let layers: Vec<[[glam::Vec2; 3]; 3]> = match (blend, uvs) {
+        (Some(b), _) if b.0.len() == tris.len() => b.0.clone(),
+        (_, Some(u)) if u.0.len() == mesh.corner_count() => tris
+            .iter()
+            .map(|t| {
+                let l = t.map(|c| u.0[c as usize]);
+                [l; 3]
+            })
+            .collect(),
+        _ => return None,
+    };
+    let image = bake_blended(&layers, &exemplar.image, exemplar.wrap, size);
+    let triangles: Vec<[u32; 3]> = tris
+        .iter()
+        .map(|t| t.map(|c| mesh.corner_vertex[c as usize]))
+        .collect();
+    let tri_mesh = crate::mesh::PolyMesh::from_triangles(mesh.positions.clone(), &triangles);
+    let atlas_uvs: Vec<glam::Vec2> = (0..tris.len())
+        .flat_map(|t| atlas_corner_uvs(t, tris.len(), size))
+        .collect();
+    Some((tri_mesh, atlas_uvs, image))
 }
 
 type ExportQuery<'w, 's> = Query<
@@ -139,6 +182,12 @@ impl Stage for Export {
                 Vec::new()
             };
             let images = std::mem::take(&mut job.images);
+            let baked = if settings.formats.iter().any(|f| f == "baked") {
+                let _span = tracing::info_span!("bake").entered();
+                bake(mesh, uvs, blend, &exemplar, settings.bake_size)
+            } else {
+                None
+            };
             *job = ExportJob {
                 formats: settings.formats.clone(),
                 stem: settings.name.clone(),
@@ -147,6 +196,7 @@ impl Stage for Export {
                 uvs: uvs.map(|u| (u.0.clone(), exemplar.image.clone())),
                 previews,
                 images,
+                baked,
             };
         })
         .into_configs()
