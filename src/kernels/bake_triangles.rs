@@ -28,7 +28,7 @@ pub fn atlas_corner_uvs(t: usize, count: usize, size: u32) -> [Vec2; 3] {
         (cx + 1.0) * w - m,
         (cy + 1.0) * w - m,
     );
-    if t % 2 == 0 {
+    if t.is_multiple_of(2) {
         [Vec2::new(x0, y1), Vec2::new(x1, y1), Vec2::new(x0, y0)]
     } else {
         [Vec2::new(x1, y0), Vec2::new(x0, y0), Vec2::new(x1, y1)]
