@@ -189,6 +189,9 @@ pub fn registry() -> Vec<StageInfo> {
     vec![
         entry::<orientation::Orientation>(),
         entry::<init_colours::InitColours>(),
+        entry::<builtin_pyramid::BuiltinPyramid>(),
+        entry::<relax_orientation::RelaxOrientation>(),
+        entry::<wl_match::Match>(),
         entry::<export::Export>(),
     ]
 }

@@ -1,8 +1,11 @@
 //! Stages: one folder per stage with its settings, systems and registration.
 //! The world model (components and resources) is in [`world`].
 
+pub mod builtin_pyramid;
 pub mod export;
 pub mod init_colours;
 pub mod orientation;
+pub mod relax_orientation;
 pub mod result_metrics;
+pub mod wl_match;
 pub mod world;
