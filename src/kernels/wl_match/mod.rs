@@ -386,7 +386,9 @@ pub fn wei_levoy_synthesis(
                     let mut r: Vec<u32> = st
                         .iter()
                         .filter(|s| s.is_covered())
-                        .flat_map(|s| s.vertices)
+                        .flat_map(|s| {
+                            (0..3).filter(|&k| s.weights[k] != 0.0).map(|k| s.vertices[k])
+                        })
                         .collect();
                     r.sort_unstable();
                     r.dedup();

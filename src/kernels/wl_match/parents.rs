@@ -240,7 +240,9 @@ fn intersect(origin: Vec3, dir: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Option<(f32,
     let f = 1.0 / det;
     let s0 = origin - a;
     let u = f * s0.dot(h);
-    let tol = 1e-6;
+    // Lines through a shared edge or vertex hit one of its triangles even
+    // after rounding (coordinates far from the origin lose digits).
+    let tol = 1e-4;
     if !(-tol..=1.0 + tol).contains(&u) {
         return None;
     }
