@@ -387,7 +387,9 @@ pub fn wei_levoy_synthesis(
                         .iter()
                         .filter(|s| s.is_covered())
                         .flat_map(|s| {
-                            (0..3).filter(|&k| s.weights[k] != 0.0).map(|k| s.vertices[k])
+                            (0..3)
+                                .filter(|&k| s.weights[k] != 0.0)
+                                .map(|k| s.vertices[k])
                         })
                         .collect();
                     r.sort_unstable();
