@@ -1,6 +1,7 @@
 //! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
 
 pub mod bake_triangles;
+pub mod flatten;
 pub mod frames;
 pub mod geodesic;
 pub mod jump_map;
@@ -8,7 +9,10 @@ pub mod jump_surface;
 pub mod max_flow;
 pub mod metrics;
 pub mod orientation_field;
+pub mod relax_orientation;
 pub mod retile;
 pub mod sqrt2;
 pub mod surface_sample;
 pub mod vertex_order;
+pub mod wl_match;
+

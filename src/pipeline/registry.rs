@@ -193,6 +193,9 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<jump_map::JumpMapStage>(),
         entry::<jump_surface::JumpSurface>(),
         entry::<jump_image::JumpImage>(),
+        entry::<builtin_pyramid::BuiltinPyramid>(),
+        entry::<relax_orientation::RelaxOrientation>(),
+        entry::<wl_match::Match>(),
         entry::<export::Export>(),
     ]
 }

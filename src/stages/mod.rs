@@ -1,12 +1,15 @@
 //! Stages: one folder per stage with its settings, systems and registration.
 //! The world model (components and resources) is in [`world`].
 
+pub mod builtin_pyramid;
 pub mod export;
 pub mod init_colours;
 pub mod jump_image;
 pub mod jump_map;
 pub mod jump_surface;
 pub mod orientation;
+pub mod relax_orientation;
 pub mod result_metrics;
 pub mod retile;
+pub mod wl_match;
 pub mod world;

@@ -207,3 +207,38 @@ pub fn fail(failure: &mut StageFailure, index: usize, kind: &str, message: impl 
         });
     }
 }
+
+// ----- mesh pyramid ------------------------------------------------------------
+
+/// The entities of the mesh pyramid, finest level first: every entity with a
+/// [`MeshLevel`] except the source mesh, or the source mesh alone (a one-level
+/// pyramid) when there is no other. `levels` lists `(entity, level, is the
+/// source mesh)`.
+///
+/// # Errors
+/// A message naming the problem when the levels are not `0, 1, 2, …` each
+/// exactly once.
+pub fn pyramid_entities(
+    levels: impl IntoIterator<Item = (Entity, MeshLevel, bool)>,
+) -> Result<Vec<Entity>, String> {
+    let all: Vec<(Entity, MeshLevel, bool)> = levels.into_iter().collect();
+    let has_pyramid = all.iter().any(|(_, _, source)| !source);
+    let mut chosen: Vec<(MeshLevel, Entity)> = all
+        .into_iter()
+        .filter(|(_, _, source)| *source != has_pyramid)
+        .map(|(e, l, _)| (l, e))
+        .collect();
+    chosen.sort();
+    for (i, (level, _)) in chosen.iter().enumerate() {
+        if level.0 as usize != i {
+            return Err(format!(
+                "the mesh pyramid's levels are {:?}; expected 0, 1, 2, … each once",
+                chosen.iter().map(|(l, _)| l.0).collect::<Vec<_>>()
+            ));
+        }
+    }
+    if chosen.is_empty() {
+        return Err("there is no mesh".into());
+    }
+    Ok(chosen.into_iter().map(|(_, e)| e).collect())
+}

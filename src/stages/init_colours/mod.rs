@@ -1,5 +1,8 @@
 //! Stage `init_colours`: every vertex takes the colour of a random exemplar
-//! texel (Wei & Levoy 2001 §3.1, Table 2), remembering which texel.
+//! texel (Wei & Levoy 2001 §3.1, Table 2), remembering which texel. On a mesh
+//! pyramid, every level `l` draws from level `l` of the exemplar's Gaussian
+//! pyramid ("assigning random colors from the corresponding level in G_a"),
+//! which equalises the colour histograms level by level.
 
 use crate::config::params::{ParamDoc, StageSettings};
 use crate::pipeline::{Datum, Stage, StageCtx};
@@ -72,16 +75,48 @@ impl Stage for InitColours {
                active: Res<ActiveMesh>,
                seed: Res<RunSeed>,
                exemplar: Res<Exemplar>,
+               levels: Query<(Entity, &MeshLevel, Has<SourceMesh>), With<Geometry>>,
                meshes: Query<&Geometry>| {
-            let Ok(geometry) = meshes.get(active.0) else {
-                return;
-            };
-            let (colours, texels) = random_texels(
+            // Pyramid levels other than the loaded mesh, finest first.
+            let pyramid: Vec<Entity> = pyramid_entities(
+                levels
+                    .iter()
+                    .filter(|(_, _, source)| !source)
+                    .map(|(e, l, s)| (e, *l, s)),
+            )
+            .unwrap_or_default();
+            let images = crate::image::pyramid::gaussian_pyramid(
                 &exemplar.image,
-                geometry.0.vertex_count(),
-                seed.derive(ctx.index, 0),
+                pyramid.len().max(1),
+                exemplar.wrap,
             );
-            commands.entity(active.0).insert((colours, texels));
+            for (l, &e) in pyramid.iter().enumerate() {
+                let Ok(geometry) = meshes.get(e) else {
+                    continue;
+                };
+                let (colours, mut texels) = random_texels(
+                    &images[l],
+                    geometry.0.vertex_count(),
+                    seed.derive(ctx.index, l as u64),
+                );
+                // Texels in pixels of the exemplar itself (level 0).
+                let scale = (1u32 << l) as f32;
+                for t in &mut texels.0 {
+                    *t = (*t - Vec2::splat(0.5)) * scale + Vec2::splat(0.5);
+                }
+                commands.entity(e).insert((colours, texels));
+            }
+            if !pyramid.contains(&active.0) {
+                let Ok(geometry) = meshes.get(active.0) else {
+                    return;
+                };
+                let (colours, texels) = random_texels(
+                    &exemplar.image,
+                    geometry.0.vertex_count(),
+                    seed.derive(ctx.index, 0),
+                );
+                commands.entity(active.0).insert((colours, texels));
+            }
         })
         .into_configs()
     }

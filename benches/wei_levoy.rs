@@ -1,0 +1,226 @@
+//! Wei & Levoy 2001 on the sphere of Fig. 7: orientation relaxation (30
+//! sweeps) and synthesis from a 64² exemplar over a 4-level pyramid, with each
+//! search back-end; and the exhaustive search kernel alone, whose throughput
+//! criterion reports in flop/s (2 flops per multiply-add of the matrix
+//! products).
+//!
+//! The paper's sphere has 24 576 vertices; icospheres have 10 242 or 40 962,
+//! so both pyramids are measured (levels with 10 242/2 562/642/162 and
+//! 40 962/10 242/2 562/642 vertices). The paper's timings (450 MHz Pentium II):
+//! relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
+//!
+//! Run with `cargo bench --bench wei_levoy`; keep a baseline with
+//! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
+//! change with `-- --baseline main`. Select a group with a filter, e.g.
+//! `cargo bench --bench wei_levoy -- exhaustive_search`.
+
+use std::time::Duration;
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use glam::Vec3;
+use std::hint::black_box;
+use surfsynth::image::pyramid::gaussian_pyramid;
+use surfsynth::image::sample::Wrap;
+use surfsynth::image::{ExemplarOptions, Image, builtin_exemplar, load_image};
+use surfsynth::kernels::flatten::TriangleAdjacency;
+use surfsynth::kernels::relax_orientation::{
+    OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
+};
+use surfsynth::kernels::wl_match::features::exemplar_features;
+use surfsynth::kernels::wl_match::search::{Match, build_search};
+use surfsynth::kernels::wl_match::{
+    PAPER_NEIGHBOURHOODS, SearchKind, SynthesisLevel, WlSettings, neighbourhood_parts,
+    wei_levoy_synthesis,
+};
+use surfsynth::mesh::{PolyMesh, Topology};
+use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
+
+/// The 64² exemplar: the top-left of the shared stones photograph, or the
+/// builtin bricks when the shared data is not beside the clone.
+fn exemplar() -> Image {
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/textures/stones.png");
+    match load_image(&path) {
+        Ok(img) => {
+            let mut out = Image::new(64, 64, img.channels);
+            for y in 0..64 {
+                for x in 0..64 {
+                    out.pixel_mut(x, y).copy_from_slice(img.pixel(x, y));
+                }
+            }
+            out
+        }
+        Err(_) => builtin_exemplar(
+            "bricks",
+            &ExemplarOptions {
+                size: 64,
+                ..Default::default()
+            },
+        )
+        .expect("builtin exemplar"),
+    }
+}
+
+struct Level {
+    mesh: PolyMesh,
+    normals: Vec<Vec3>,
+    topology: Topology,
+    adjacency: TriangleAdjacency,
+}
+
+fn sphere_pyramid(subdivisions: u32) -> Vec<Level> {
+    builtin_pyramid(&BuiltinPyramidSettings {
+        mesh: "icosphere".into(),
+        levels: 4,
+        subdivisions,
+        ..Default::default()
+    })
+    .expect("icosphere pyramid")
+    .into_iter()
+    .map(|mesh| Level {
+        normals: mesh.vertex_normals(),
+        topology: Topology::build(&mesh),
+        adjacency: TriangleAdjacency::new(&mesh),
+        mesh,
+    })
+    .collect()
+}
+
+fn views(levels: &[Level]) -> Vec<OrientationLevel<'_>> {
+    levels
+        .iter()
+        .map(|l| OrientationLevel {
+            positions: &l.mesh.positions,
+            normals: &l.normals,
+            topology: &l.topology,
+            adjacency: &l.adjacency,
+        })
+        .collect()
+}
+
+fn relax_settings() -> RelaxSettings {
+    RelaxSettings {
+        mode: OrientationMode::Relax,
+        symmetry: 4,
+        iterations: 30,
+        seed: 1,
+    }
+}
+
+fn bench_relax(c: &mut Criterion) {
+    let mut group = c.benchmark_group("wl_relax_orientation_30");
+    group.sample_size(10);
+    for (label, s) in [("10k", 5u32), ("41k", 6)] {
+        let levels = sphere_pyramid(s);
+        let views = views(&levels);
+        group.throughput(Throughput::Elements(levels[0].mesh.vertex_count() as u64));
+        group.bench_with_input(BenchmarkId::new("sphere", label), &views, |b, v| {
+            b.iter(|| black_box(relax_orientation(black_box(v), &relax_settings())))
+        });
+    }
+    group.finish();
+}
+
+fn bench_synthesis(c: &mut Criterion) {
+    let ex = exemplar();
+    let mut group = c.benchmark_group("wl_synthesis_64px_4_levels");
+    group.sample_size(10);
+    group.measurement_time(Duration::from_secs(30));
+    for (label, s) in [("10k", 5u32), ("41k", 6)] {
+        let levels = sphere_pyramid(s);
+        let frames = relax_orientation(&views(&levels), &relax_settings()).frames;
+        let inputs: Vec<SynthesisLevel> = levels
+            .iter()
+            .zip(&frames)
+            .map(|(l, f)| SynthesisLevel {
+                mesh: &l.mesh,
+                frames: f,
+            })
+            .collect();
+        group.throughput(Throughput::Elements(levels[0].mesh.vertex_count() as u64));
+        for (name, search) in [
+            ("exhaustive", SearchKind::Exhaustive),
+            (
+                "pca_kdtree",
+                SearchKind::PcaKdTree {
+                    dims: 8,
+                    candidates: 16,
+                },
+            ),
+            (
+                "tsvq",
+                SearchKind::Tsvq {
+                    leaf_size: 8,
+                    leaves: 1,
+                },
+            ),
+        ] {
+            let settings = WlSettings {
+                search,
+                wrap: Wrap::Repeat,
+                ..Default::default()
+            };
+            group.bench_with_input(
+                BenchmarkId::new(name, label),
+                &inputs,
+                |b, inputs: &Vec<SynthesisLevel>| {
+                    b.iter(|| {
+                        black_box(wei_levoy_synthesis(inputs, &ex, &settings, None).expect("runs"))
+                    })
+                },
+            );
+        }
+    }
+    group.finish();
+}
+
+/// The finest level's pass-2 search alone: 7×7 on level 0 plus 5×5 on level
+/// 1, RGB (222 values), over every pixel of the 64² exemplar, in blocks of 32
+/// queries run in parallel as pass 2 does.
+fn bench_exhaustive_search(c: &mut Criterion) {
+    use rayon::prelude::*;
+    let ex = exemplar();
+    let pyramid = gaussian_pyramid(&ex, 4, Wrap::Repeat);
+    let parts = neighbourhood_parts(PAPER_NEIGHBOURHOODS[3], 4);
+    let db = exemplar_features(&pyramid, 0, &parts, Wrap::Repeat);
+    let (rows, dim) = (db.rows(), db.dim);
+    // Queries: exemplar neighbourhoods with a little deterministic noise.
+    let nq = 4096usize;
+    let queries: Vec<f32> = (0..nq * dim)
+        .map(|i| {
+            let r = (i / dim * 7919) % rows;
+            let noise =
+                ((i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 40) as f32 / (1u64 << 24) as f32;
+            db.row(r)[i % dim] + 0.05 * (noise - 0.5)
+        })
+        .collect();
+    let search = build_search(SearchKind::Exhaustive, db, 0);
+    let mut group = c.benchmark_group("wl_exhaustive_search");
+    group.sample_size(10);
+    // Flops of the matrix products: 2 per multiply-add, dim + 1 per pair.
+    group.throughput(Throughput::Elements((2 * nq * rows * (dim + 1)) as u64));
+    group.bench_function(BenchmarkId::new("flops_64px_222d", nq), |b| {
+        b.iter(|| {
+            let mut out = vec![
+                Match {
+                    index: 0,
+                    distance: 0.0
+                };
+                nq
+            ];
+            out.par_chunks_mut(32)
+                .zip(queries.par_chunks(32 * dim))
+                .for_each(|(o, q)| search.search(q, o));
+            black_box(out)
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    bench_exhaustive_search,
+    bench_relax,
+    bench_synthesis
+);
+criterion_main!(benches);

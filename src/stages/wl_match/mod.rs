@@ -1,0 +1,403 @@
+//! Stage `match`: Wei & Levoy 2001 surface texture synthesis over the mesh
+//! pyramid (Table 3): per-vertex multi-resolution neighbourhoods by
+//! flattening (§3.3), two passes per level in random order (§3.2), with an
+//! exhaustive or accelerated search. Writes colours and matched exemplar
+//! texels on every level; level 0 becomes the active mesh.
+//!
+//! Works on whatever mesh levels exist: the non-source `MeshLevel` entities
+//! (from `retile` or `builtin_pyramid`), or the source mesh alone as a
+//! one-level pyramid.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::flatten::TriangleAdjacency;
+use crate::kernels::frames::TangentFrame;
+use crate::kernels::relax_orientation::{OrientationLevel, transfer_frames};
+use crate::kernels::wl_match::{
+    InitialColours, NeighbourhoodSpec, SearchKind, SynthesisLevel, WlSettings, wei_levoy_synthesis,
+};
+use crate::mesh::{PolyMesh, Topology};
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use glam::Vec2;
+use serde::{Deserialize, Serialize};
+
+/// The search back-end, as named in configs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SearchBackend {
+    /// Exact exhaustive L2 search.
+    #[default]
+    Exhaustive,
+    /// PCA + kd-tree, candidates re-ranked exactly (approximate).
+    PcaKdtree,
+    /// Tree-structured vector quantisation (approximate, the paper's).
+    Tsvq,
+}
+
+/// Settings of `match`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MatchSettings {
+    /// `[size, levels]` per pyramid level, coarsest first.
+    pub neighbourhoods: Vec<[u32; 2]>,
+    /// Search back-end.
+    pub search: SearchBackend,
+    /// 2: extrapolation pass then full pass (paper); 1: full pass only.
+    pub passes: u32,
+    /// pca_kdtree: principal components indexed.
+    pub pca_dims: u32,
+    /// pca_kdtree: candidates re-ranked per query.
+    pub candidates: u32,
+    /// tsvq: largest leaf.
+    pub leaf_size: u32,
+    /// tsvq: leaves searched per query.
+    pub leaves: u32,
+    /// How far along the normal a parent face may lie, in coarser-level
+    /// template spacings.
+    pub parent_reach: f32,
+}
+
+impl Default for MatchSettings {
+    fn default() -> Self {
+        Self {
+            neighbourhoods: vec![[1, 1], [3, 2], [5, 2], [7, 2]],
+            search: SearchBackend::Exhaustive,
+            passes: 2,
+            pca_dims: 8,
+            candidates: 16,
+            leaf_size: 8,
+            leaves: 1,
+            parent_reach: 4.0,
+        }
+    }
+}
+
+impl StageSettings for MatchSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "neighbourhoods",
+            unit: "[points per side, levels]",
+            range: ParamRange::Int(1, 31),
+            doc: "neighbourhood {n×n, k} per pyramid level, coarsest first (the finest level takes the last entry); n odd, k in 1..=8",
+        },
+        ParamDoc {
+            name: "search",
+            unit: "",
+            range: ParamRange::OneOf(&["exhaustive", "pca_kdtree", "tsvq"]),
+            doc: "exhaustive: exact L2 over every exemplar neighbourhood; pca_kdtree: kd-tree on principal components, candidates re-ranked exactly; tsvq: tree-structured VQ (the paper's acceleration)",
+        },
+        ParamDoc {
+            name: "passes",
+            unit: "",
+            range: ParamRange::Int(1, 2),
+            doc: "2: a pass with coarser levels only, then one with the whole neighbourhood (§3.2); 1: only the second",
+        },
+        ParamDoc {
+            name: "pca_dims",
+            unit: "components",
+            range: ParamRange::Int(1, 8),
+            doc: "pca_kdtree: principal components the kd-tree indexes",
+        },
+        ParamDoc {
+            name: "candidates",
+            unit: "",
+            range: ParamRange::Int(1, 1024),
+            doc: "pca_kdtree: nearest candidates in PCA space re-ranked by the exact distance",
+        },
+        ParamDoc {
+            name: "leaf_size",
+            unit: "vectors",
+            range: ParamRange::Int(1, 4096),
+            doc: "tsvq: largest cluster left unsplit",
+        },
+        ParamDoc {
+            name: "leaves",
+            unit: "",
+            range: ParamRange::Int(1, 4096),
+            doc: "tsvq: leaves searched best-first per query (1: greedy descent, as the paper)",
+        },
+        ParamDoc {
+            name: "parent_reach",
+            unit: "template spacings",
+            range: ParamRange::Float(0.01, 1000.0),
+            doc: "farthest a coarser level may lie along a vertex normal to count as its parent face; beyond, default colours (footnote 2)",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if self.neighbourhoods.is_empty() {
+            return Err((
+                "neighbourhoods".into(),
+                "needs at least one [size, levels] entry".into(),
+            ));
+        }
+        for (i, [size, levels]) in self.neighbourhoods.iter().enumerate() {
+            if size % 2 == 0 || *levels == 0 || *levels > 8 {
+                return Err((
+                    "neighbourhoods".into(),
+                    format!(
+                        "entry {} = [{size}, {levels}] is not allowed; size must be odd (1..=31) and levels in 1..=8",
+                        i + 1
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl MatchSettings {
+    fn kernel_settings(&self, seed: u64, wrap: crate::image::sample::Wrap) -> WlSettings {
+        WlSettings {
+            neighbourhoods: self
+                .neighbourhoods
+                .iter()
+                .map(|&[size, levels]| NeighbourhoodSpec { size, levels })
+                .collect(),
+            search: match self.search {
+                SearchBackend::Exhaustive => SearchKind::Exhaustive,
+                SearchBackend::PcaKdtree => SearchKind::PcaKdTree {
+                    dims: self.pca_dims as usize,
+                    candidates: self.candidates as usize,
+                },
+                SearchBackend::Tsvq => SearchKind::Tsvq {
+                    leaf_size: self.leaf_size as usize,
+                    leaves: self.leaves as usize,
+                },
+            },
+            passes: self.passes,
+            seed,
+            wrap,
+            parent_reach: self.parent_reach,
+        }
+    }
+}
+
+/// The `match` stage.
+pub struct Match;
+
+type LevelQuery<'w, 's> =
+    Query<'w, 's, (Entity, &'static MeshLevel, Has<SourceMesh>), With<Geometry>>;
+type DataQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static Frames>,
+        Option<&'static VertexColours>,
+        Option<&'static SourceTexels>,
+    ),
+>;
+
+impl Stage for Match {
+    const KIND: &'static str = "match";
+    const SUMMARY: &'static str =
+        "Wei-Levoy synthesis: flattened multi-resolution neighbourhoods matched coarse to fine";
+    const PAPER: &'static str = "Wei & Levoy 2001 §3.2-3.3, Table 3";
+    type Settings = MatchSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh, Datum::Frames]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Colours]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               seed: Res<RunSeed>,
+               exemplar: Res<Exemplar>,
+               active: Res<ActiveMesh>,
+               mut spacing_res: ResMut<TexelSpacing>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               levels: LevelQuery,
+               data: DataQuery| {
+            let fail = |message: String| PipelineError::Stage {
+                index: ctx.index + 1,
+                kind: Self::KIND.into(),
+                message,
+            };
+            let entities = match pyramid_entities(levels.iter().map(|(e, l, s)| (e, *l, s))) {
+                Ok(e) => e,
+                Err(m) => {
+                    failure.0 = Some(fail(m));
+                    return;
+                }
+            };
+            let meshes: Vec<&PolyMesh> = entities
+                .iter()
+                .filter_map(|&e| data.get(e).ok().map(|d| &d.0.0))
+                .collect();
+            let given: Vec<Option<&[TangentFrame]>> = entities
+                .iter()
+                .map(|&e| data.get(e).ok().and_then(|d| d.1).map(|f| &f.0[..]))
+                .collect();
+            let frames = match complete_frames(&meshes, &given, &data, active.0) {
+                Ok(f) => f,
+                Err(m) => {
+                    failure.0 = Some(fail(m));
+                    return;
+                }
+            };
+            let count = entities.len();
+            // The coarsest level starts from init_colours' pixels when it has them.
+            let coarsest = entities[count - 1];
+            let scale = (1u32 << (count - 1)) as f32;
+            let init = data.get(coarsest).ok().and_then(|(g, _, c, t)| {
+                let (c, t) = (c?, t?);
+                let nv = g.0.vertex_count();
+                let ch = exemplar.image.channels as usize;
+                (c.channels == ch && c.values.len() == nv * ch && t.0.len() == nv).then(|| {
+                    let texels: Vec<[u32; 2]> =
+                        t.0.iter()
+                            .map(|p| {
+                                [
+                                    ((p.x - 0.5) / scale).round() as u32,
+                                    ((p.y - 0.5) / scale).round() as u32,
+                                ]
+                            })
+                            .collect();
+                    (c.values.clone(), texels)
+                })
+            });
+            let pyramid_top =
+                crate::image::pyramid::gaussian_pyramid(&exemplar.image, count, exemplar.wrap);
+            let top = &pyramid_top[count - 1];
+            let init =
+                init.filter(|(_, t)| t.iter().all(|p| p[0] < top.width && p[1] < top.height));
+            let inputs: Vec<SynthesisLevel> = meshes
+                .iter()
+                .zip(&frames)
+                .map(|(m, f)| SynthesisLevel { mesh: m, frames: f })
+                .collect();
+            let kernel = settings.kernel_settings(seed.derive(ctx.index, 0), exemplar.wrap);
+            let result = wei_levoy_synthesis(
+                &inputs,
+                &exemplar.image,
+                &kernel,
+                init.as_ref()
+                    .map(|(values, texels)| InitialColours { values, texels }),
+            );
+            let results = match result {
+                Ok(r) => r,
+                Err(e) => {
+                    failure.0 = Some(fail(e.to_string()));
+                    return;
+                }
+            };
+            let reports: Vec<_> = results.iter().map(|r| r.report.clone()).collect();
+            let search_seconds: f64 = reports.iter().map(|r| r.search_seconds).sum();
+            let values: u64 = reports.iter().map(|r| r.exhaustive_values).sum();
+            metrics.record(ctx.index, "levels", &reports);
+            metrics.record(ctx.index, "search_seconds", search_seconds);
+            if settings.search == SearchBackend::Exhaustive && search_seconds > 0.0 {
+                // Two flops (multiply, add) per compared value in the matrix products.
+                metrics.record(
+                    ctx.index,
+                    "exhaustive_gflops_per_second",
+                    2.0 * values as f64 / search_seconds / 1e9,
+                );
+            }
+            if let Some(r) = reports.first() {
+                metrics.record(ctx.index, "mean_match_distance_finest", r.mean_distance[1]);
+                spacing_res.0 = r.spacing;
+            }
+            let ch = exemplar.image.channels as usize;
+            for (l, (e, r)) in entities.iter().zip(results).enumerate() {
+                let s = (1u32 << l) as f32;
+                let texels: Vec<Vec2> = r
+                    .texels
+                    .iter()
+                    .map(|t| Vec2::new(t[0] as f32 * s + 0.5, t[1] as f32 * s + 0.5))
+                    .collect();
+                commands.entity(*e).insert((
+                    VertexColours {
+                        channels: ch,
+                        values: r.colours,
+                    },
+                    SourceTexels(texels),
+                ));
+                if frames_missing(&given, l) {
+                    commands.entity(*e).insert(Frames(frames[l].clone()));
+                }
+            }
+            commands.insert_resource(ActiveMesh(entities[0]));
+        })
+        .into_configs()
+    }
+}
+
+fn frames_missing(given: &[Option<&[TangentFrame]>], l: usize) -> bool {
+    given[l].is_none()
+}
+
+/// Frames for every level: the given ones; levels without frames (or with the
+/// wrong count) take frames transferred from the nearest level that has them,
+/// else from the active mesh when it is outside the pyramid.
+fn complete_frames(
+    meshes: &[&PolyMesh],
+    given: &[Option<&[TangentFrame]>],
+    data: &DataQuery,
+    active: Entity,
+) -> Result<Vec<Vec<TangentFrame>>, String> {
+    let ok = |l: usize| given[l].filter(|f| f.len() == meshes[l].vertex_count());
+    let external = data
+        .get(active)
+        .ok()
+        .and_then(|(g, f, _, _)| f.map(|f| (&g.0, &f.0[..])))
+        .filter(|(g, f)| f.len() == g.vertex_count());
+    let mut out = Vec::with_capacity(meshes.len());
+    for l in 0..meshes.len() {
+        if let Some(f) = ok(l) {
+            out.push(f.to_vec());
+            continue;
+        }
+        let nearest = (0..meshes.len())
+            .filter(|&k| ok(k).is_some())
+            .min_by_key(|&k| k.abs_diff(l));
+        let (from_mesh, from_frames) = match (nearest, external) {
+            (Some(k), _) => (meshes[k], ok(k).unwrap_or(&[])),
+            (None, Some(e)) => e,
+            (None, None) => {
+                return Err(
+                    "needs tangent frames on the mesh: add `orientation` or `relax_orientation` before it"
+                        .into(),
+                );
+            }
+        };
+        out.push(transfer_between(from_mesh, from_frames, meshes[l]));
+    }
+    Ok(out)
+}
+
+/// Frames of `to` interpolated from `from`'s (no symmetry assumed).
+fn transfer_between(from: &PolyMesh, frames: &[TangentFrame], to: &PolyMesh) -> Vec<TangentFrame> {
+    let level = |m: &PolyMesh| {
+        (
+            m.vertex_normals(),
+            Topology::build(m),
+            TriangleAdjacency::new(m),
+        )
+    };
+    let (fnorm, ftopo, fadj) = level(from);
+    let (tnorm, ttopo, tadj) = level(to);
+    transfer_frames(
+        &OrientationLevel {
+            positions: &from.positions,
+            normals: &fnorm,
+            topology: &ftopo,
+            adjacency: &fadj,
+        },
+        frames,
+        &OrientationLevel {
+            positions: &to.positions,
+            normals: &tnorm,
+            topology: &ttopo,
+            adjacency: &tadj,
+        },
+        1,
+    )
+}
