@@ -15,4 +15,3 @@ pub mod sqrt2;
 pub mod surface_sample;
 pub mod vertex_order;
 pub mod wl_match;
-

@@ -30,6 +30,8 @@ pub struct JumpMapStageSettings {
     pub max_components: u32,
     /// Approximate-nearest-neighbour error tolerance.
     pub ann_epsilon: f32,
+    /// Nearest-neighbour search: `auto`, `kd_tree` or `exhaustive`.
+    pub ann_search: String,
     /// Jumps kept per pixel (k).
     pub jumps: u32,
     /// Candidates per kept jump (s).
@@ -50,6 +52,7 @@ impl Default for JumpMapStageSettings {
             pca_variance: d.pca_variance,
             max_components: d.max_components,
             ann_epsilon: d.ann_epsilon,
+            ann_search: "auto".into(),
             jumps: d.jumps_per_pixel,
             candidates: d.candidate_factor,
             alpha: d.alpha,
@@ -97,6 +100,12 @@ impl StageSettings for JumpMapStageSettings {
             doc: "relative error tolerance of the approximate nearest-neighbour search (paper 10%)",
         },
         ParamDoc {
+            name: "ann_search",
+            unit: "",
+            range: ParamRange::OneOf(&["auto", "kd_tree", "exhaustive"]),
+            doc: "kd_tree: (1+ε)-approximate search over a kd-tree of the leading PCA components, refined on all; exhaustive: exact blocked brute force; auto: the kd-tree only where it was measured faster (≤ 8 components and ≥ 32768 pixels)",
+        },
+        ParamDoc {
             name: "jumps",
             unit: "per pixel",
             range: ParamRange::Int(1, 16),
@@ -139,6 +148,11 @@ impl JumpMapStageSettings {
             pca_variance: self.pca_variance,
             max_components: self.max_components,
             ann_epsilon: self.ann_epsilon,
+            ann_search: match self.ann_search.as_str() {
+                "kd_tree" => crate::kernels::jump_map::AnnSearch::KdTree,
+                "exhaustive" => crate::kernels::jump_map::AnnSearch::Exhaustive,
+                _ => crate::kernels::jump_map::AnnSearch::Auto,
+            },
             jumps_per_pixel: self.jumps,
             candidate_factor: self.candidates,
             alpha: self.alpha,
