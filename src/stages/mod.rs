@@ -3,6 +3,8 @@
 
 pub mod export;
 pub mod init_colours;
+pub mod lapped_paste;
 pub mod orientation;
 pub mod result_metrics;
+pub mod tangent_field;
 pub mod world;

@@ -182,6 +182,8 @@ pub struct ExportJob {
     pub previews: Vec<Image>,
     /// Further images to write as PNG, by file name (`jump_image.png`, ...).
     pub images: Vec<(String, Image)>,
+    /// Lapped-texture pastes for runtime pasting (format `pastes`).
+    pub pastes: Option<PasteExport>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
@@ -189,3 +191,26 @@ pub struct ExportJob {
 /// of base vertex: the 3-way blend of Zelinka & Garland §6.5.
 #[derive(Component, Clone, Debug, Default)]
 pub struct BlendUvs(pub Vec<[[Vec2; 3]; 3]>);
+
+/// A lapped texture for runtime pasting (Praun et al. 2000 §4): the texture
+/// patches and, in paste order, each paste's faces (those not hidden by
+/// later pastes) with their corners' texture coordinates.
+#[derive(Clone, Debug, Default)]
+pub struct PasteExport {
+    /// RGBA texture patches.
+    pub textures: Vec<Image>,
+    /// The pastes, in drawing order.
+    pub pastes: Vec<PasteRecord>,
+}
+
+/// One paste of a [`PasteExport`].
+#[derive(Clone, Debug, Default)]
+pub struct PasteRecord {
+    /// Index into [`PasteExport::textures`].
+    pub texture: u32,
+    /// Mesh faces to draw.
+    pub faces: Vec<u32>,
+    /// Texture coordinates of their corners, compactly (the corners of
+    /// `faces[0]`, then of `faces[1]`, ...), `v = 0` at the top row.
+    pub uvs: Vec<Vec2>,
+}

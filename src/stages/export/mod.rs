@@ -3,8 +3,9 @@
 //! systems never touch the file system.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::output::render::{RenderOptions, Shading, render_views};
+use crate::output::render::{Layer, RenderOptions, Shading, render_views};
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::lapped_paste::components::*;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -38,8 +39,8 @@ impl StageSettings for ExportSettings {
         ParamDoc {
             name: "formats",
             unit: "",
-            range: ParamRange::OneOf(&["ply", "obj", "preview"]),
-            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture when the result has them, else vertex colours); preview: 3 shaded PNG views",
+            range: ParamRange::OneOf(&["ply", "obj", "preview", "pastes"]),
+            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture — or a lapped texture's atlas — when the result has them, else vertex colours); preview: 3 shaded PNG views (lapped pastes composited in order; with an atlas also atlas_preview_*.png); pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs",
         },
         ParamDoc {
             name: "preview_size",
@@ -89,45 +90,137 @@ impl Stage for Export {
         (move |active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
                mut job: ResMut<ExportJob>,
-               meshes: Query<(&Geometry, Option<&VertexColours>, Option<&CornerUvs>)>| {
-            let Ok((geometry, colours, uvs)) = meshes.get(active.0) else {
+               meshes: Query<(
+            &Geometry,
+            Option<&VertexColours>,
+            Option<&CornerUvs>,
+            Option<&AtlasTexture>,
+        )>,
+               pastes: Query<PasteQuery>,
+               patch_textures: Option<Res<TexturePatches>>| {
+            let Ok((geometry, colours, uvs, atlas)) = meshes.get(active.0) else {
                 return;
             };
             let mesh = &geometry.0;
+            // Lapped-texture pastes on the active mesh, in paste order.
+            let mut lapped: Vec<_> = pastes.iter().filter(|p| p.0.0 == active.0).collect();
+            lapped.sort_by_key(|p| *p.1);
+            let patch_textures = patch_textures.as_deref().map(|t| t.0.as_slice()).unwrap_or(&[]);
+            let lapped_ok = !lapped.is_empty()
+                && lapped
+                    .iter()
+                    .all(|p| (p.2.0 as usize) < patch_textures.len());
+            let mut images = std::mem::take(&mut job.images);
             let previews = if settings.formats.iter().any(|f| f == "preview") {
                 let _span = tracing::info_span!("render_previews").entered();
-                let shading = match (uvs, colours) {
-                    (Some(uv), _) => Shading::CornerUvs {
+                let layers: Vec<Layer> = if lapped_ok {
+                    lapped
+                        .iter()
+                        .map(|p| Layer {
+                            faces: &p.3.0,
+                            uvs: &p.4.0,
+                            texture: &patch_textures[p.2.0 as usize],
+                            wrap: crate::image::sample::Wrap::Clamp,
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                let shading = match (uvs, colours, atlas) {
+                    _ if lapped_ok => Shading::Layers(&layers),
+                    (Some(uv), _, _) => Shading::CornerUvs {
                         uvs: &uv.0,
                         texture: &exemplar.image,
                         wrap: exemplar.wrap,
                     },
-                    (None, Some(c)) => Shading::VertexColours {
+                    (None, _, Some(a)) => Shading::CornerUvs {
+                        uvs: &a.uvs,
+                        texture: &a.image,
+                        wrap: crate::image::sample::Wrap::Clamp,
+                    },
+                    (None, Some(c), None) => Shading::VertexColours {
                         values: &c.values,
                         channels: c.channels,
                     },
-                    (None, None) => Shading::Plain,
+                    (None, None, None) => Shading::Plain,
                 };
-                render_views(
-                    mesh,
-                    &shading,
-                    settings.preview_size,
-                    &RenderOptions::default(),
-                )
+                let options = RenderOptions::default();
+                let views = render_views(mesh, &shading, settings.preview_size, &options);
+                if let (true, Some(a)) = (lapped_ok, atlas) {
+                    let atlas_shading = Shading::CornerUvs {
+                        uvs: &a.uvs,
+                        texture: &a.image,
+                        wrap: crate::image::sample::Wrap::Clamp,
+                    };
+                    let atlas_views =
+                        render_views(mesh, &atlas_shading, settings.preview_size, &options);
+                    for (i, img) in atlas_views.into_iter().enumerate() {
+                        images.push((format!("atlas_preview_{i}.png"), img));
+                    }
+                }
+                views
             } else {
                 Vec::new()
             };
-            let images = std::mem::take(&mut job.images);
+            let paste_export = (lapped_ok && settings.formats.iter().any(|f| f == "pastes")).then(|| {
+                PasteExport {
+                    textures: patch_textures.to_vec(),
+                    pastes: lapped
+                        .iter()
+                        .map(|p| {
+                            let faces: Vec<u32> = p
+                                .3
+                                .0
+                                .iter()
+                                .zip(&p.5.0)
+                                .filter(|(_, drawn)| **drawn)
+                                .map(|(f, _)| *f)
+                                .collect();
+                            let all = &p.4.0;
+                            let mut offset = 0usize;
+                            let mut uvs = Vec::with_capacity(3 * faces.len());
+                            for (f, drawn) in p.3.0.iter().zip(&p.5.0) {
+                                let n = mesh.face_corners(*f as usize).len();
+                                if *drawn {
+                                    uvs.extend_from_slice(&all[offset..offset + n]);
+                                }
+                                offset += n;
+                            }
+                            PasteRecord {
+                                texture: p.2.0,
+                                faces,
+                                uvs,
+                            }
+                        })
+                        .collect(),
+                }
+            });
+            let export_uvs = match (uvs, atlas) {
+                (Some(u), _) => Some((u.0.clone(), exemplar.image.clone())),
+                (None, Some(a)) => Some((a.uvs.clone(), a.image.clone())),
+                (None, None) => None,
+            };
             *job = ExportJob {
                 formats: settings.formats.clone(),
                 stem: settings.name.clone(),
                 mesh: mesh.clone(),
                 colours: colours.cloned(),
-                uvs: uvs.map(|u| (u.0.clone(), exemplar.image.clone())),
+                uvs: export_uvs,
                 previews,
                 images,
+                pastes: paste_export,
             };
         })
         .into_configs()
     }
 }
+
+/// What the export reads of a paste entity.
+type PasteQuery = (
+    &'static PasteOf,
+    &'static PasteOrder,
+    &'static TexturePatchIndex,
+    &'static PatchFaces,
+    &'static PatchUvs,
+    &'static PatchDrawn,
+);
