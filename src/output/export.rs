@@ -62,7 +62,11 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
 /// bottom-up convention) and material `patch_K`. Drawn in file order with
 /// alpha blending, later groups on top, the groups reproduce the lapped
 /// texture.
-pub fn encode_pastes_obj(mesh: &PolyMesh, pastes: &PasteExport, mtl: &str) -> Result<String, OutputError> {
+pub fn encode_pastes_obj(
+    mesh: &PolyMesh,
+    pastes: &PasteExport,
+    mtl: &str,
+) -> Result<String, OutputError> {
     let corners: usize = pastes.pastes.iter().map(|p| p.uvs.len()).sum();
     let faces: usize = pastes.pastes.iter().map(|p| p.faces.len()).sum();
     let mut s = String::with_capacity(32 * (mesh.vertex_count() + corners) + 24 * faces);
@@ -87,10 +91,14 @@ pub fn encode_pastes_obj(mesh: &PolyMesh, pastes: &PasteExport, mtl: &str) -> Re
         let _ = writeln!(s, "g paste_{i:05}\nusemtl patch_{}", paste.texture);
         let mut used = 0usize;
         for &f in &paste.faces {
-            let Some(face) = ((f as usize) < mesh.face_count()).then(|| mesh.face(f as usize)) else {
+            let Some(face) = ((f as usize) < mesh.face_count()).then(|| mesh.face(f as usize))
+            else {
                 return Err(OutputError::Encode {
                     what: "pastes OBJ".into(),
-                    message: format!("paste {i} names face {f}, but the mesh has {} faces", mesh.face_count()),
+                    message: format!(
+                        "paste {i} names face {f}, but the mesh has {} faces",
+                        mesh.face_count()
+                    ),
                 });
             };
             s.push('f');
@@ -104,7 +112,10 @@ pub fn encode_pastes_obj(mesh: &PolyMesh, pastes: &PasteExport, mtl: &str) -> Re
         if used != paste.uvs.len() {
             return Err(OutputError::Encode {
                 what: "pastes OBJ".into(),
-                message: format!("paste {i} has {} texture coordinates for {used} corners", paste.uvs.len()),
+                message: format!(
+                    "paste {i} has {} texture coordinates for {used} corners",
+                    paste.uvs.len()
+                ),
             });
         }
     }

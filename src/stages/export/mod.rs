@@ -105,7 +105,10 @@ impl Stage for Export {
             // Lapped-texture pastes on the active mesh, in paste order.
             let mut lapped: Vec<_> = pastes.iter().filter(|p| p.0.0 == active.0).collect();
             lapped.sort_by_key(|p| *p.1);
-            let patch_textures = patch_textures.as_deref().map(|t| t.0.as_slice()).unwrap_or(&[]);
+            let patch_textures = patch_textures
+                .as_deref()
+                .map(|t| t.0.as_slice())
+                .unwrap_or(&[]);
             let lapped_ok = !lapped.is_empty()
                 && lapped
                     .iter()
@@ -162,39 +165,8 @@ impl Stage for Export {
             } else {
                 Vec::new()
             };
-            let paste_export = (lapped_ok && settings.formats.iter().any(|f| f == "pastes")).then(|| {
-                PasteExport {
-                    textures: patch_textures.to_vec(),
-                    pastes: lapped
-                        .iter()
-                        .map(|p| {
-                            let faces: Vec<u32> = p
-                                .3
-                                .0
-                                .iter()
-                                .zip(&p.5.0)
-                                .filter(|(_, drawn)| **drawn)
-                                .map(|(f, _)| *f)
-                                .collect();
-                            let all = &p.4.0;
-                            let mut offset = 0usize;
-                            let mut uvs = Vec::with_capacity(3 * faces.len());
-                            for (f, drawn) in p.3.0.iter().zip(&p.5.0) {
-                                let n = mesh.face_corners(*f as usize).len();
-                                if *drawn {
-                                    uvs.extend_from_slice(&all[offset..offset + n]);
-                                }
-                                offset += n;
-                            }
-                            PasteRecord {
-                                texture: p.2.0,
-                                faces,
-                                uvs,
-                            }
-                        })
-                        .collect(),
-                }
-            });
+            let paste_export = (lapped_ok && settings.formats.iter().any(|f| f == "pastes"))
+                .then(|| runtime_pastes(mesh, &lapped, patch_textures));
             let export_uvs = match (uvs, atlas) {
                 (Some(u), _) => Some((u.0.clone(), exemplar.image.clone())),
                 (None, Some(a)) => Some((a.uvs.clone(), a.image.clone())),
@@ -224,3 +196,35 @@ type PasteQuery = (
     &'static PatchUvs,
     &'static PatchDrawn,
 );
+
+/// The runtime-pasting export of the pastes (Praun et al. §4): per paste,
+/// only the faces still drawn, with their corners' texture coordinates.
+fn runtime_pastes(
+    mesh: &crate::mesh::PolyMesh,
+    lapped: &[bevy_ecs::query::QueryItem<'_, '_, PasteQuery>],
+    textures: &[crate::image::Image],
+) -> PasteExport {
+    let pastes = lapped
+        .iter()
+        .map(|(_, _, texture, faces, uvs, drawn)| {
+            let mut record = PasteRecord {
+                texture: texture.0,
+                ..Default::default()
+            };
+            let mut offset = 0usize;
+            for (&f, &draw) in faces.0.iter().zip(&drawn.0) {
+                let n = mesh.face_corners(f as usize).len();
+                if draw {
+                    record.faces.push(f);
+                    record.uvs.extend_from_slice(&uvs.0[offset..offset + n]);
+                }
+                offset += n;
+            }
+            record
+        })
+        .collect();
+    PasteExport {
+        textures: textures.to_vec(),
+        pastes,
+    }
+}

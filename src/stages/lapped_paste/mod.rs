@@ -15,6 +15,7 @@ pub mod components;
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::image::sample::Wrap;
+use crate::kernels::lapped::FaceField as FieldView;
 use crate::kernels::lapped::TriMesh;
 use crate::kernels::lapped::atlas::{AtlasSettings, build_atlas};
 use crate::kernels::lapped::coverage::{CoverageSettings, drawn_faces};
@@ -24,7 +25,6 @@ use crate::kernels::lapped::mask::{
 };
 use crate::kernels::lapped::param::CgSettings;
 use crate::kernels::lapped::paste::{LappedTexture, PasteSettings, paste_until_covered};
-use crate::kernels::lapped::FaceField as FieldView;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::tangent_field::FaceField;
@@ -323,7 +323,9 @@ pub fn texture_patches(
         ));
     }
     if side < 8 {
-        return Err(format!("patch_pixels = {side} is too small; use at least 8"));
+        return Err(format!(
+            "patch_pixels = {side} is too small; use at least 8"
+        ));
     }
     (0..settings.patches)
         .map(|k| {
@@ -335,10 +337,7 @@ pub fn texture_patches(
                     Wrap::Repeat => n as u64,
                     Wrap::Clamp => (n - side.min(n)) as u64 + 1,
                 };
-                [
-                    (stream % span(w)) as i64,
-                    ((stream >> 32) % span(h)) as i64,
-                ]
+                [(stream % span(w)) as i64, ((stream >> 32) % span(h)) as i64]
             };
             let mask = match settings.mask {
                 MaskKind::Circle => circle_mask(side),
@@ -384,7 +383,10 @@ fn record_metrics(
     metrics.record(
         index,
         "hull_vertices",
-        textures.iter().map(|t| t.hull.vertices.len()).collect::<Vec<_>>(),
+        textures
+            .iter()
+            .map(|t| t.hull.vertices.len())
+            .collect::<Vec<_>>(),
     );
 }
 

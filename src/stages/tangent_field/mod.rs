@@ -12,10 +12,10 @@
 //! into a new active mesh level first.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::lapped::TriMesh;
 use crate::kernels::lapped::tangent_field::{
     FieldConstraint, field_from_vertex_frames, global_up_field, nearest_face, rbf_field,
 };
-use crate::kernels::lapped::TriMesh;
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::stages::world::*;
@@ -194,7 +194,11 @@ impl StageSettings for TangentFieldSettings {
             if Vec3::from(c.up).length_squared() < 1e-12 {
                 return Err(("constraints".into(), format!("{what}: `up` is zero")));
             }
-            for (name, v) in [("scale", c.scale), ("radius", c.radius), ("weight", c.weight)] {
+            for (name, v) in [
+                ("scale", c.scale),
+                ("radius", c.radius),
+                ("weight", c.weight),
+            ] {
                 if !(v > 0.0 && v.is_finite()) {
                     return Err((
                         "constraints".into(),
@@ -266,7 +270,11 @@ pub fn face_field(
             metrics.insert("rbf_exact".into(), report.exact.into());
             metrics.insert(
                 "constraint_faces".into(),
-                constraints.iter().map(|c| c.face).collect::<Vec<_>>().into(),
+                constraints
+                    .iter()
+                    .map(|c| c.face)
+                    .collect::<Vec<_>>()
+                    .into(),
             );
             t
         }
