@@ -6,6 +6,7 @@ pub mod frames;
 pub mod geodesic;
 pub mod jump_map;
 pub mod jump_surface;
+pub mod lapped;
 pub mod max_flow;
 pub mod metrics;
 pub mod orientation_field;

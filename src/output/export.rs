@@ -1,7 +1,9 @@
 //! Writes what the `export` stage prepared.
 
-use super::OutputError;
-use crate::stages::world::ExportJob;
+use super::{OutputError, write_atomic, write_png};
+use crate::mesh::PolyMesh;
+use crate::stages::world::{ExportJob, PasteExport};
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 /// Writes the job's files into `dir`; returns their paths.
@@ -49,6 +51,11 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     )?);
                 }
             }
+            "pastes" => {
+                if let Some(pastes) = &job.pastes {
+                    files.extend(write_pastes(dir, &job.stem, &job.mesh, pastes)?);
+                }
+            }
             "preview" => {
                 files.extend(super::render::write_previews(
                     dir,
@@ -59,5 +66,102 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
             _ => {}
         }
     }
+    Ok(files)
+}
+
+/// The `.obj` text of a lapped texture for runtime pasting (Praun et al.
+/// 2000 §4): the mesh's vertices once, then one group per paste in paste
+/// order, each with its own texture coordinates (`vt u (1 − v)`, OBJ's
+/// bottom-up convention) and material `patch_K`. Drawn in file order with
+/// alpha blending, later groups on top, the groups reproduce the lapped
+/// texture.
+pub fn encode_pastes_obj(
+    mesh: &PolyMesh,
+    pastes: &PasteExport,
+    mtl: &str,
+) -> Result<String, OutputError> {
+    let corners: usize = pastes.pastes.iter().map(|p| p.uvs.len()).sum();
+    let faces: usize = pastes.pastes.iter().map(|p| p.faces.len()).sum();
+    let mut s = String::with_capacity(32 * (mesh.vertex_count() + corners) + 24 * faces);
+    let draws = faces as f64 / mesh.face_count().max(1) as f64;
+    let _ = writeln!(
+        s,
+        "# written by surfsynth: a lapped texture for runtime pasting\n\
+         # {} pastes; draw the groups in order with alpha blending (each face is drawn {draws:.2} times on average)\n\
+         mtllib {mtl}",
+        pastes.pastes.len()
+    );
+    for p in &mesh.positions {
+        let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
+    }
+    for paste in &pastes.pastes {
+        for uv in &paste.uvs {
+            let _ = writeln!(s, "vt {} {}", uv.x, 1.0 - uv.y);
+        }
+    }
+    let mut vt = 1usize;
+    for (i, paste) in pastes.pastes.iter().enumerate() {
+        let _ = writeln!(s, "g paste_{i:05}\nusemtl patch_{}", paste.texture);
+        let mut used = 0usize;
+        for &f in &paste.faces {
+            let Some(face) = ((f as usize) < mesh.face_count()).then(|| mesh.face(f as usize))
+            else {
+                return Err(OutputError::Encode {
+                    what: "pastes OBJ".into(),
+                    message: format!(
+                        "paste {i} names face {f}, but the mesh has {} faces",
+                        mesh.face_count()
+                    ),
+                });
+            };
+            s.push('f');
+            for &v in face {
+                let _ = write!(s, " {}/{}", v + 1, vt);
+                vt += 1;
+                used += 1;
+            }
+            s.push('\n');
+        }
+        if used != paste.uvs.len() {
+            return Err(OutputError::Encode {
+                what: "pastes OBJ".into(),
+                message: format!(
+                    "paste {i} has {} texture coordinates for {used} corners",
+                    paste.uvs.len()
+                ),
+            });
+        }
+    }
+    Ok(s)
+}
+
+/// Writes `dir/STEM_pastes.obj`, `dir/STEM_pastes.mtl` (materials
+/// `patch_K` with colour and alpha maps) and `dir/STEM_patch_K.png` (RGBA
+/// texture patches); returns the paths, the `.obj` first (written last).
+pub fn write_pastes(
+    dir: &Path,
+    stem: &str,
+    mesh: &PolyMesh,
+    pastes: &PasteExport,
+) -> Result<Vec<PathBuf>, OutputError> {
+    let obj_path = dir.join(format!("{stem}_pastes.obj"));
+    let mtl_name = format!("{stem}_pastes.mtl");
+    let text = encode_pastes_obj(mesh, pastes, &mtl_name)?;
+    let mut files = vec![obj_path.clone()];
+    let mut mtl = String::from("# written by surfsynth: lapped-texture patches (straight alpha)\n");
+    for (k, img) in pastes.textures.iter().enumerate() {
+        let png = format!("{stem}_patch_{k}.png");
+        let path = dir.join(&png);
+        write_png(&path, img)?;
+        files.push(path);
+        let _ = writeln!(
+            mtl,
+            "newmtl patch_{k}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\nmap_Kd {png}\nmap_d {png}"
+        );
+    }
+    let mtl_path = dir.join(&mtl_name);
+    write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;
+    files.push(mtl_path);
+    write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
     Ok(files)
 }

@@ -22,6 +22,8 @@ pub enum Datum {
     JumpMap,
     /// Lapped-texture pastes.
     Patches,
+    /// A per-face tangent field (lapped textures).
+    FaceField,
 }
 
 impl Datum {
@@ -35,6 +37,7 @@ impl Datum {
             Datum::CornerUvs => "per-corner texture coordinates",
             Datum::JumpMap => "a jump map",
             Datum::Patches => "lapped-texture pastes",
+            Datum::FaceField => "a per-face tangent field",
         }
     }
 
@@ -196,6 +199,8 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<builtin_pyramid::BuiltinPyramid>(),
         entry::<relax_orientation::RelaxOrientation>(),
         entry::<wl_match::Match>(),
+        entry::<tangent_field::TangentField>(),
+        entry::<lapped_paste::LappedPaste>(),
         entry::<export::Export>(),
     ]
 }

@@ -185,6 +185,8 @@ pub struct ExportJob {
     /// The result baked into a texture atlas: the triangulated mesh, its
     /// per-corner atlas coordinates and the atlas image.
     pub baked: Option<(PolyMesh, Vec<Vec2>, Image)>,
+    /// Lapped-texture pastes for runtime pasting (format `pastes`).
+    pub pastes: Option<PasteExport>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
@@ -241,4 +243,27 @@ pub fn pyramid_entities(
         return Err("there is no mesh".into());
     }
     Ok(chosen.into_iter().map(|(_, e)| e).collect())
+}
+
+/// A lapped texture for runtime pasting (Praun et al. 2000 §4): the texture
+/// patches and, in paste order, each paste's faces (those not hidden by
+/// later pastes) with their corners' texture coordinates.
+#[derive(Clone, Debug, Default)]
+pub struct PasteExport {
+    /// RGBA texture patches.
+    pub textures: Vec<Image>,
+    /// The pastes, in drawing order.
+    pub pastes: Vec<PasteRecord>,
+}
+
+/// One paste of a [`PasteExport`].
+#[derive(Clone, Debug, Default)]
+pub struct PasteRecord {
+    /// Index into [`PasteExport::textures`].
+    pub texture: u32,
+    /// Mesh faces to draw.
+    pub faces: Vec<u32>,
+    /// Texture coordinates of their corners, compactly (the corners of
+    /// `faces[0]`, then of `faces[1]`, ...), `v = 0` at the top row.
+    pub uvs: Vec<Vec2>,
 }

@@ -3,8 +3,9 @@
 //! systems never touch the file system.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::output::render::{RenderOptions, Shading, render_views};
+use crate::output::render::{Layer, RenderOptions, Shading, render_views};
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::lapped_paste::components::*;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -41,8 +42,8 @@ impl StageSettings for ExportSettings {
         ParamDoc {
             name: "formats",
             unit: "",
-            range: ParamRange::OneOf(&["ply", "obj", "preview", "baked"]),
-            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture when the result has them, else vertex colours); preview: 3 shaded PNG views; baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas",
+            range: ParamRange::OneOf(&["ply", "obj", "preview", "baked", "pastes"]),
+            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs",
         },
         ParamDoc {
             name: "preview_size",
@@ -120,6 +121,7 @@ type ExportQuery<'w, 's> = Query<
         Option<&'static VertexColours>,
         Option<&'static CornerUvs>,
         Option<&'static BlendUvs>,
+        Option<&'static AtlasTexture>,
     ),
 >;
 
@@ -143,62 +145,151 @@ impl Stage for Export {
         (move |active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
                mut job: ResMut<ExportJob>,
-               meshes: ExportQuery| {
-            let Ok((geometry, colours, uvs, blend)) = meshes.get(active.0) else {
+               meshes: ExportQuery,
+               pastes: Query<PasteQuery>,
+               patch_textures: Option<Res<TexturePatches>>| {
+            let Ok((geometry, colours, uvs, blend, atlas)) = meshes.get(active.0) else {
                 return;
             };
             let mesh = &geometry.0;
+            // Lapped-texture pastes on the active mesh, in paste order.
+            let mut lapped: Vec<_> = pastes.iter().filter(|p| p.0.0 == active.0).collect();
+            lapped.sort_by_key(|p| *p.1);
+            let patch_textures = patch_textures
+                .as_deref()
+                .map(|t| t.0.as_slice())
+                .unwrap_or(&[]);
+            let lapped_ok = !lapped.is_empty()
+                && lapped
+                    .iter()
+                    .all(|p| (p.2.0 as usize) < patch_textures.len());
+            let mut images = std::mem::take(&mut job.images);
             let previews = if settings.formats.iter().any(|f| f == "preview") {
                 let _span = tracing::info_span!("render_previews").entered();
-                let shading = match (blend, uvs, colours) {
-                    (Some(b), _, _)
-                        if b.0.len()
-                            == mesh.corner_count().saturating_sub(2 * mesh.face_count()) =>
-                    {
-                        Shading::BlendedUvs {
-                            layers: &b.0,
-                            texture: &exemplar.image,
-                            wrap: exemplar.wrap,
-                        }
-                    }
-                    (_, Some(uv), _) => Shading::CornerUvs {
+                let layers: Vec<Layer> = if lapped_ok {
+                    lapped
+                        .iter()
+                        .map(|p| Layer {
+                            faces: &p.3.0,
+                            uvs: &p.4.0,
+                            texture: &patch_textures[p.2.0 as usize],
+                            wrap: crate::image::sample::Wrap::Clamp,
+                        })
+                        .collect()
+                } else {
+                    Vec::new()
+                };
+                let blend_ok = blend.is_some_and(|b| {
+                    b.0.len() == mesh.corner_count().saturating_sub(2 * mesh.face_count())
+                });
+                let shading = match (uvs, colours, atlas) {
+                    _ if lapped_ok => Shading::Layers(&layers),
+                    _ if blend_ok => Shading::BlendedUvs {
+                        layers: &blend.map(|b| b.0.as_slice()).unwrap_or(&[]),
+                        texture: &exemplar.image,
+                        wrap: exemplar.wrap,
+                    },
+                    (Some(uv), _, _) => Shading::CornerUvs {
                         uvs: &uv.0,
                         texture: &exemplar.image,
                         wrap: exemplar.wrap,
                     },
-                    (_, None, Some(c)) => Shading::VertexColours {
+                    (None, _, Some(a)) => Shading::CornerUvs {
+                        uvs: &a.uvs,
+                        texture: &a.image,
+                        wrap: crate::image::sample::Wrap::Clamp,
+                    },
+                    (None, Some(c), None) => Shading::VertexColours {
                         values: &c.values,
                         channels: c.channels,
                     },
-                    (_, None, None) => Shading::Plain,
+                    (None, None, None) => Shading::Plain,
                 };
-                render_views(
-                    mesh,
-                    &shading,
-                    settings.preview_size,
-                    &RenderOptions::default(),
-                )
+                let options = RenderOptions::default();
+                let views = render_views(mesh, &shading, settings.preview_size, &options);
+                if let (true, Some(a)) = (lapped_ok, atlas) {
+                    let atlas_shading = Shading::CornerUvs {
+                        uvs: &a.uvs,
+                        texture: &a.image,
+                        wrap: crate::image::sample::Wrap::Clamp,
+                    };
+                    let atlas_views =
+                        render_views(mesh, &atlas_shading, settings.preview_size, &options);
+                    for (i, img) in atlas_views.into_iter().enumerate() {
+                        images.push((format!("atlas_preview_{i}.png"), img));
+                    }
+                }
+                views
             } else {
                 Vec::new()
             };
-            let images = std::mem::take(&mut job.images);
             let baked = if settings.formats.iter().any(|f| f == "baked") {
                 let _span = tracing::info_span!("bake").entered();
                 bake(mesh, uvs, blend, &exemplar, settings.bake_size)
             } else {
                 None
             };
+            let paste_export = (lapped_ok && settings.formats.iter().any(|f| f == "pastes"))
+                .then(|| runtime_pastes(mesh, &lapped, patch_textures));
+            let export_uvs = match (uvs, atlas) {
+                (Some(u), _) => Some((u.0.clone(), exemplar.image.clone())),
+                (None, Some(a)) => Some((a.uvs.clone(), a.image.clone())),
+                (None, None) => None,
+            };
             *job = ExportJob {
                 formats: settings.formats.clone(),
                 stem: settings.name.clone(),
                 mesh: mesh.clone(),
                 colours: colours.cloned(),
-                uvs: uvs.map(|u| (u.0.clone(), exemplar.image.clone())),
+                uvs: export_uvs,
                 previews,
                 images,
                 baked,
+                pastes: paste_export,
             };
         })
         .into_configs()
+    }
+}
+
+/// What the export reads of a paste entity.
+type PasteQuery = (
+    &'static PasteOf,
+    &'static PasteOrder,
+    &'static TexturePatchIndex,
+    &'static PatchFaces,
+    &'static PatchUvs,
+    &'static PatchDrawn,
+);
+
+/// The runtime-pasting export of the pastes (Praun et al. §4): per paste,
+/// only the faces still drawn, with their corners' texture coordinates.
+fn runtime_pastes(
+    mesh: &crate::mesh::PolyMesh,
+    lapped: &[bevy_ecs::query::QueryItem<'_, '_, PasteQuery>],
+    textures: &[crate::image::Image],
+) -> PasteExport {
+    let pastes = lapped
+        .iter()
+        .map(|(_, _, texture, faces, uvs, drawn)| {
+            let mut record = PasteRecord {
+                texture: texture.0,
+                ..Default::default()
+            };
+            let mut offset = 0usize;
+            for (&f, &draw) in faces.0.iter().zip(&drawn.0) {
+                let n = mesh.face_corners(f as usize).len();
+                if draw {
+                    record.faces.push(f);
+                    record.uvs.extend_from_slice(&uvs.0[offset..offset + n]);
+                }
+                offset += n;
+            }
+            record
+        })
+        .collect();
+    PasteExport {
+        textures: textures.to_vec(),
+        pastes,
     }
 }

@@ -1,0 +1,563 @@
+//! Growing a surface patch (Praun et al. 2000 §3.3).
+//!
+//! A paste starts at a point on a seed face: the point maps to the texture
+//! patch centre and the face's basis `(S, T)` to the texture axes. Faces are
+//! then added one at a time in order of increasing distance from the seed
+//! (a Dijkstra over face centroids, in patch units), subject to three rules:
+//!
+//! 1. the patch stays homeomorphic to a disc: a face sharing one edge with
+//!    the patch must bring a new vertex, a face sharing two edges fills a
+//!    notch, and a face sharing three edges (which would close the surface)
+//!    is refused;
+//! 2. the patch only grows over an edge whose image still reaches into the
+//!    texture patch's polygonal hull ([`super::hull`]);
+//! 3. growth stops where the distortion becomes excessive: a face whose
+//!    initial parametrisation disagrees with the field by more than
+//!    [`GrowSettings::max_distortion`] is refused.
+//!
+//! A new vertex gets its texture coordinates by the prediction of Maillot et
+//! al. 1993: for each face around it with an already mapped edge, the
+//! triangle similar to the face in 3-D is laid on that edge; the vertex
+//! takes the centroid of these predictions. For isotropic textures each new
+//! face's direction is the mean of its patch neighbours' directions carried
+//! across the shared edges (unfolding) — the propagation of §3.2.
+
+use super::hull::Hull;
+use super::{FaceField, NO_FACE, TriMesh};
+use glam::{Vec2, Vec3};
+use std::cmp::Ordering;
+use std::collections::BinaryHeap;
+
+/// Settings of patch growth.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GrowSettings {
+    /// Largest accepted distortion of a new face: its share
+    /// `(‖d_S‖² + ‖d_T‖²) / 2` of the §3.4 functional under the initial
+    /// parametrisation (0 = perfectly aligned; a rotation by θ gives
+    /// `2 − 2 cos θ`, a scale error by a factor k gives `(k − 1)²`).
+    /// Default 0.6 (about 47°).
+    pub max_distortion: f32,
+    /// Safety bound on the faces of one patch. Default 100 000.
+    pub max_faces: usize,
+}
+
+impl Default for GrowSettings {
+    fn default() -> Self {
+        Self {
+            max_distortion: 0.6,
+            max_faces: 100_000,
+        }
+    }
+}
+
+/// A surface patch and its parametrisation in patch units.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SurfacePatch {
+    /// Mesh faces in the order they were added; `faces[0]` is the seed.
+    pub faces: Vec<u32>,
+    /// Per face, its corners as local vertex ids (the mesh's winding).
+    pub tris: Vec<[u32; 3]>,
+    /// Local vertex → mesh vertex.
+    pub vertices: Vec<u32>,
+    /// Per local vertex, `(s, t)` in patch units; the seed point maps to 0.
+    pub st: Vec<Vec2>,
+    /// Per face, the field vector `T` the parametrisation aligns to.
+    pub face_t: Vec<Vec3>,
+    /// Per face, its growth distance from the seed, patch units.
+    pub face_dist: Vec<f32>,
+    /// Barycentric coordinates of the seed point on `faces[0]`.
+    pub seed_bary: [f32; 3],
+}
+
+impl SurfacePatch {
+    /// `V − E + F` of the patch as a surface (1 for a disc).
+    pub fn euler_characteristic(&self) -> i64 {
+        let mut edges: Vec<(u32, u32)> = self
+            .tris
+            .iter()
+            .flat_map(|t| (0..3).map(move |i| (t[i].min(t[(i + 1) % 3]), t[i].max(t[(i + 1) % 3]))))
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+        self.vertices.len() as i64 - edges.len() as i64 + self.tris.len() as i64
+    }
+
+    /// Number of boundary loops of the patch (1 for a disc).
+    pub fn boundary_loop_count(&self) -> usize {
+        let mut directed: Vec<(u32, u32)> = self
+            .tris
+            .iter()
+            .flat_map(|t| (0..3).map(move |i| (t[i], t[(i + 1) % 3])))
+            .collect();
+        directed.sort_unstable();
+        let is_boundary = |&(a, b): &(u32, u32)| directed.binary_search(&(b, a)).is_err();
+        let boundary: Vec<(u32, u32)> = directed.iter().copied().filter(is_boundary).collect();
+        let mut next = std::collections::HashMap::new();
+        for &(a, b) in &boundary {
+            next.insert(a, b);
+        }
+        let mut seen = std::collections::HashSet::new();
+        let mut loops = 0;
+        for &(a, _) in &boundary {
+            if seen.contains(&a) {
+                continue;
+            }
+            loops += 1;
+            let mut v = a;
+            while seen.insert(v) {
+                match next.get(&v) {
+                    Some(&w) => v = w,
+                    None => break,
+                }
+            }
+        }
+        loops
+    }
+}
+
+#[derive(PartialEq)]
+struct Candidate(f32, u32);
+impl Eq for Candidate {}
+impl PartialOrd for Candidate {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Candidate {
+    fn cmp(&self, other: &Self) -> Ordering {
+        // Min-heap on distance; ties by face id, for determinism.
+        other
+            .0
+            .total_cmp(&self.0)
+            .then_with(|| other.1.cmp(&self.1))
+    }
+}
+
+/// Grows surface patches on one mesh, reusing its scratch arrays between
+/// patches (global-size maps reset by a generation stamp).
+pub struct Grower<'a> {
+    mesh: &'a TriMesh,
+    field: FaceField<'a>,
+    settings: GrowSettings,
+    stamp: u32,
+    face_stamp: Vec<u32>,
+    face_local: Vec<u32>,
+    vertex_stamp: Vec<u32>,
+    vertex_local: Vec<u32>,
+    heap: BinaryHeap<Candidate>,
+}
+
+impl<'a> Grower<'a> {
+    /// A grower for `mesh` and its `field`.
+    pub fn new(mesh: &'a TriMesh, field: FaceField<'a>, settings: GrowSettings) -> Self {
+        Self {
+            mesh,
+            field,
+            settings,
+            stamp: 0,
+            face_stamp: vec![0; mesh.face_count()],
+            face_local: vec![0; mesh.face_count()],
+            vertex_stamp: vec![0; mesh.positions.len()],
+            vertex_local: vec![0; mesh.positions.len()],
+            heap: BinaryHeap::new(),
+        }
+    }
+
+    #[inline]
+    fn in_patch(&self, f: u32) -> bool {
+        self.face_stamp[f as usize] == self.stamp
+    }
+
+    #[inline]
+    fn local_vertex(&self, v: u32) -> Option<u32> {
+        (self.vertex_stamp[v as usize] == self.stamp).then(|| self.vertex_local[v as usize])
+    }
+
+    fn add_vertex(&mut self, patch: &mut SurfacePatch, v: u32, st: Vec2) -> u32 {
+        let local = patch.vertices.len() as u32;
+        self.vertex_stamp[v as usize] = self.stamp;
+        self.vertex_local[v as usize] = local;
+        patch.vertices.push(v);
+        patch.st.push(st);
+        local
+    }
+
+    fn add_face(&mut self, patch: &mut SurfacePatch, f: u32, t: Vec3, dist: f32) {
+        self.face_stamp[f as usize] = self.stamp;
+        self.face_local[f as usize] = patch.faces.len() as u32;
+        let tri = self.mesh.tris[f as usize].map(|v| {
+            self.local_vertex(v)
+                .expect("grow: a face is added after its corners are mapped")
+        });
+        patch.faces.push(f);
+        patch.tris.push(tri);
+        patch.face_t.push(t);
+        patch.face_dist.push(dist);
+    }
+
+    /// Starts a patch at the point with barycentric coordinates `bary` on
+    /// face `seed`. The point maps to the origin and the face's `(S, T)` to
+    /// the texture axes. For an isotropic field, `T` is an arbitrary
+    /// tangent rotated by `angle` radians (the field's length is kept).
+    ///
+    /// # Panics
+    /// When `seed` is not a face of the mesh.
+    pub fn start(&mut self, seed: u32, bary: [f32; 3], angle: f32) -> SurfacePatch {
+        self.stamp = self.stamp.wrapping_add(1);
+        if self.stamp == 0 {
+            // The stamp wrapped: clear the maps once.
+            self.face_stamp.fill(0);
+            self.vertex_stamp.fill(0);
+            self.stamp = 1;
+        }
+        let mesh = self.mesh;
+        let f = seed as usize;
+        let n = mesh.normals[f];
+        let field_t = self.field.t[f];
+        let scale = field_t.length().max(f32::MIN_POSITIVE);
+        let dir = if self.field.isotropic || field_t.length_squared() == 0.0 {
+            let x = mesh.corners(f);
+            let e = (x[1] - x[0]).normalize_or(n.any_orthonormal_vector());
+            let (sin, cos) = angle.sin_cos();
+            e * cos + n.cross(e) * sin
+        } else {
+            field_t / scale
+        };
+        let t = dir * scale;
+        let s = t.cross(n);
+        let p0 = mesh.point(f, bary);
+        let inv = 1.0 / (scale * scale);
+        let mut patch = SurfacePatch {
+            seed_bary: bary,
+            ..Default::default()
+        };
+        for v in mesh.tris[f] {
+            let d = mesh.positions[v as usize] - p0;
+            self.add_vertex(&mut patch, v, Vec2::new(d.dot(s), d.dot(t)) * inv);
+        }
+        self.add_face(&mut patch, seed, t, 0.0);
+        patch
+    }
+
+    /// Grows `patch` over every boundary edge that still reaches into
+    /// `hull`, under the rules of the module docs; returns the number of
+    /// faces added. Call again after the parametrisation changed (§3.4: the
+    /// optimisation may uncover parts of the texture patch).
+    pub fn grow(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
+        self.grow_with(
+            patch,
+            &|a: Vec2, b: Vec2| hull.segment_intersects(a, b),
+            &mut |_: u32, _: [Vec2; 3]| true,
+        )
+    }
+
+    /// [`Grower::grow`] with the hull test replaced by `reaches(a, b)` (does
+    /// the edge with images `a b` still need covering?) and a last veto:
+    /// `admit(face, st)` is asked once every other rule accepted the face
+    /// with corner coordinates `st`; the face is added exactly when it
+    /// returns true. The texture atlas (§4) uses this for its normal-cone and
+    /// overlap constraints.
+    pub fn grow_with(
+        &mut self,
+        patch: &mut SurfacePatch,
+        reaches: &dyn Fn(Vec2, Vec2) -> bool,
+        admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
+    ) -> usize {
+        let mesh = self.mesh;
+        self.heap.clear();
+        for (lf, &f) in patch.faces.iter().enumerate() {
+            for &g in &mesh.neighbours[f as usize] {
+                if g != NO_FACE && !self.in_patch(g) {
+                    let d = patch.face_dist[lf] + self.step(patch.face_t[lf], f, g);
+                    self.heap.push(Candidate(d, g));
+                }
+            }
+        }
+        let mut added = 0;
+        while let Some(Candidate(dist, g)) = self.heap.pop() {
+            if self.in_patch(g) {
+                continue;
+            }
+            if patch.faces.len() >= self.settings.max_faces {
+                break;
+            }
+            if self.try_add(patch, g, dist, reaches, admit) {
+                added += 1;
+                let lf = patch.faces.len() - 1;
+                for &h in &mesh.neighbours[g as usize] {
+                    if h != NO_FACE && !self.in_patch(h) {
+                        let d = dist + self.step(patch.face_t[lf], g, h);
+                        self.heap.push(Candidate(d, h));
+                    }
+                }
+            }
+        }
+        added
+    }
+
+    /// Distance from face `f` to its neighbour `g` in patch units.
+    #[inline]
+    fn step(&self, t: Vec3, f: u32, g: u32) -> f32 {
+        let c = &self.mesh.centroids;
+        c[f as usize].distance(c[g as usize]) / t.length().max(f32::MIN_POSITIVE)
+    }
+
+    /// The field vector of face `g` joining the patch.
+    fn face_tangent(&self, patch: &SurfacePatch, g: u32) -> Vec3 {
+        let mesh = self.mesh;
+        let own = self.field.t[g as usize];
+        if !self.field.isotropic && own.length_squared() > 0.0 {
+            return own;
+        }
+        let mut sum = Vec3::ZERO;
+        let mut scale = 0.0f32;
+        let mut count = 0.0f32;
+        for &f in &mesh.neighbours[g as usize] {
+            if f != NO_FACE && self.in_patch(f) {
+                let tf = patch.face_t[self.face_local[f as usize] as usize];
+                sum += mesh
+                    .transport(tf, f as usize, g as usize)
+                    .normalize_or_zero();
+                scale += tf.length();
+                count += 1.0;
+            }
+        }
+        let n = mesh.normals[g as usize];
+        let dir = (sum - n * n.dot(sum))
+            .try_normalize()
+            .unwrap_or_else(|| n.any_orthonormal_vector());
+        let len = if own.length_squared() > 0.0 {
+            own.length()
+        } else {
+            scale / count.max(1.0)
+        };
+        dir * len
+    }
+
+    /// The Maillot et al. prediction of mesh vertex `w`'s coordinates from
+    /// the faces around it with both other corners mapped.
+    fn predict(&self, patch: &SurfacePatch, w: u32) -> Option<Vec2> {
+        let mesh = self.mesh;
+        let p = &mesh.positions;
+        let mut sum = Vec2::ZERO;
+        let mut count = 0.0f32;
+        for &h in mesh.vertex_faces(w) {
+            let t = mesh.tris[h as usize];
+            let Some(k) = t.iter().position(|&v| v == w) else {
+                continue;
+            };
+            // The face as (a, b, w), counter-clockwise.
+            let (a, b) = (t[(k + 1) % 3], t[(k + 2) % 3]);
+            let (Some(la), Some(lb)) = (self.local_vertex(a), self.local_vertex(b)) else {
+                continue;
+            };
+            let (pa, pb, pw) = (p[a as usize], p[b as usize], p[w as usize]);
+            let e = pb - pa;
+            let len2 = e.length_squared();
+            if len2 <= f32::MIN_POSITIVE {
+                continue;
+            }
+            let x = (pw - pa).dot(e) / len2;
+            let y = ((pw - pa) - e * x).length() / len2.sqrt();
+            let (sa, sb) = (patch.st[la as usize], patch.st[lb as usize]);
+            let edge = sb - sa;
+            sum += sa + edge * x + edge.perp() * y;
+            count += 1.0;
+        }
+        (count > 0.0).then(|| sum / count)
+    }
+
+    fn try_add(
+        &mut self,
+        patch: &mut SurfacePatch,
+        g: u32,
+        dist: f32,
+        reaches: &dyn Fn(Vec2, Vec2) -> bool,
+        admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
+    ) -> bool {
+        let mesh = self.mesh;
+        let tri = mesh.tris[g as usize];
+        let nb = mesh.neighbours[g as usize];
+        let shared = nb.map(|f| f != NO_FACE && self.in_patch(f));
+        let k = shared.iter().filter(|&&s| s).count();
+        if k == 0 || k == 3 {
+            return false;
+        }
+        // Rule 2: some shared edge still reaches into the texture patch.
+        let reaches = (0..3).filter(|&i| shared[i]).any(|i| {
+            match (
+                self.local_vertex(tri[i]),
+                self.local_vertex(tri[(i + 1) % 3]),
+            ) {
+                (Some(a), Some(b)) => reaches(patch.st[a as usize], patch.st[b as usize]),
+                _ => false,
+            }
+        });
+        if !reaches {
+            return false;
+        }
+        // Rule 1: a disc stays a disc.
+        let new_vertex = if k == 1 {
+            let i = (0..3).find(|&i| shared[i]).unwrap_or(0);
+            let w = tri[(i + 2) % 3];
+            if self.local_vertex(w).is_some() {
+                return false;
+            }
+            Some(w)
+        } else {
+            None
+        };
+        let t = self.face_tangent(patch, g);
+        let predicted = match new_vertex {
+            Some(w) => match self.predict(patch, w) {
+                Some(st) => Some((w, st)),
+                None => return false,
+            },
+            None => None,
+        };
+        // Rule 3: bounded distortion.
+        let st = tri.map(|v| match (self.local_vertex(v), predicted) {
+            (Some(l), _) => patch.st[l as usize],
+            (None, Some((w, st))) if w == v => st,
+            _ => Vec2::ZERO,
+        });
+        if face_distortion(mesh, g as usize, t, st) > self.settings.max_distortion || !admit(g, st)
+        {
+            return false;
+        }
+        if let Some((w, st)) = predicted {
+            self.add_vertex(patch, w, st);
+        }
+        self.add_face(patch, g, t, dist);
+        true
+    }
+}
+
+/// The share `(‖d_S‖² + ‖d_T‖²) / 2` of face `f` in the functional of §3.4
+/// when its corners map to `st` and its field vector is `t`: 0 when the
+/// parametrisation maps `(S, T)` exactly onto the texture axes. Degenerate
+/// faces count as undistorted.
+pub fn face_distortion(mesh: &TriMesh, f: usize, t: Vec3, st: [Vec2; 3]) -> f32 {
+    let grad = mesh.barycentric_gradients(f);
+    if grad[0] == Vec3::ZERO {
+        return 0.0;
+    }
+    let s = t.cross(mesh.normals[f]);
+    let mut phi_t = Vec2::ZERO;
+    let mut phi_s = Vec2::ZERO;
+    for i in 0..3 {
+        phi_t += st[i] * grad[i].dot(t);
+        phi_s += st[i] * grad[i].dot(s);
+    }
+    0.5 * ((phi_s - Vec2::X).length_squared() + (phi_t - Vec2::Y).length_squared())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernels::lapped::hull::mask_hull;
+    use crate::kernels::lapped::mask::{circle_mask, splotch_mask};
+    use crate::kernels::lapped::tangent_field::global_up_field;
+    use crate::kernels::lapped::test_meshes::{grid, sphere};
+
+    fn hull_of(mask: &crate::kernels::lapped::mask::Mask) -> Hull {
+        let c = Vec2::new(mask.width as f32 / 2.0, mask.height as f32 / 2.0);
+        mask_hull(mask, c, mask.width as f32, 16)
+    }
+
+    #[test]
+    fn flat_grid_patch_is_the_similarity_and_stays_near_the_hull() {
+        let m = TriMesh::new(&grid(30, 0.1)).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 1.0);
+        let field = FaceField {
+            t: &t,
+            isotropic: false,
+        };
+        let hull = hull_of(&circle_mask(64));
+        let mut g = Grower::new(&m, field, GrowSettings::default());
+        let seed = 2 * (15 * 29 + 15);
+        let mut p = g.start(seed, [1.0 / 3.0; 3], 0.0);
+        g.grow(&mut p, &hull);
+        assert!(p.faces.len() > 100, "{}", p.faces.len());
+        assert_eq!(p.euler_characteristic(), 1);
+        assert_eq!(p.boundary_loop_count(), 1);
+        // On a flat mesh with a constant field, st is the world offset.
+        let c = m.point(seed as usize, [1.0 / 3.0; 3]);
+        for (l, &v) in p.vertices.iter().enumerate() {
+            let d = m.positions[v as usize] - c;
+            assert!((p.st[l] - Vec2::new(d.x, d.y)).length() < 1e-4);
+        }
+        // Every face has an edge reaching into the hull (the grown band is
+        // at most one face wide beyond it).
+        for (lf, tri) in p.tris.iter().enumerate() {
+            let reaches = (0..3).any(|i| {
+                hull.segment_intersects(p.st[tri[i] as usize], p.st[tri[(i + 1) % 3] as usize])
+            });
+            assert!(reaches, "face {lf} lies outside the hull");
+        }
+    }
+
+    #[test]
+    fn patches_on_closed_meshes_are_discs() {
+        let mesh = sphere(3);
+        let m = TriMesh::new(&mesh).unwrap();
+        // Large texture scale: the hull covers the whole sphere, so only the
+        // disc rule stops growth.
+        let t = global_up_field(&m, Vec3::Y, 4.0);
+        for isotropic in [false, true] {
+            let field = FaceField { t: &t, isotropic };
+            let settings = GrowSettings {
+                max_distortion: f32::INFINITY,
+                ..Default::default()
+            };
+            let mut g = Grower::new(&m, field, settings);
+            let hull = hull_of(&splotch_mask(64, 5));
+            for seed in [0u32, 17, 600] {
+                let mut p = g.start(seed, [0.2, 0.3, 0.5], 1.0);
+                g.grow(&mut p, &hull);
+                assert_eq!(p.euler_characteristic(), 1, "seed {seed}");
+                assert_eq!(p.boundary_loop_count(), 1, "seed {seed}");
+                assert!(p.faces.len() > 500, "{}", p.faces.len());
+            }
+        }
+    }
+
+    #[test]
+    fn distortion_stops_growth() {
+        let mesh = sphere(3);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 4.0);
+        let field = FaceField {
+            t: &t,
+            isotropic: false,
+        };
+        let hull = hull_of(&circle_mask(64));
+        let mut loose = Grower::new(
+            &m,
+            field,
+            GrowSettings {
+                max_distortion: f32::INFINITY,
+                ..Default::default()
+            },
+        );
+        let mut strict = Grower::new(
+            &m,
+            field,
+            GrowSettings {
+                max_distortion: 0.05,
+                ..Default::default()
+            },
+        );
+        let mut a = loose.start(40, [1.0 / 3.0; 3], 0.0);
+        loose.grow(&mut a, &hull);
+        let mut b = strict.start(40, [1.0 / 3.0; 3], 0.0);
+        strict.grow(&mut b, &hull);
+        assert!(
+            b.faces.len() < a.faces.len() / 2,
+            "{} vs {}",
+            b.faces.len(),
+            a.faces.len()
+        );
+        assert_eq!(b.euler_characteristic(), 1);
+    }
+}

@@ -1,0 +1,396 @@
+//! The parametrisation of a surface patch aligned to the field (Praun et
+//! al. 2000 §3.4).
+//!
+//! For each face with field vector `T` (and `S = T × N`), write `T` and `S`
+//! as zero-sum combinations of the corners, `T = Σ α_i x_i`,
+//! `S = Σ β_i x_i` (with `α_i = ∇λ_i · T`, `β_i = ∇λ_i · S`). The map is
+//! linear on the face, so `φ(T) = Σ α_i φ(x_i)`, and the functional
+//!
+//! ```text
+//! E(φ) = Σ_f ‖φ(S) − ŝ‖² + ‖φ(T) − t̂‖²
+//! ```
+//!
+//! is quadratic. It splits into the two texture coordinates, which share one
+//! matrix: `M = Σ_f α αᵀ + β βᵀ` (a Laplacian-like, positive semi-definite
+//! matrix whose null space is the constants), with right-hand sides
+//! `Σ_f β` for `s` and `Σ_f α` for `t`. The minimum is unique up to a
+//! translation, fixed by mapping the seed point to the patch centre.
+//! The systems are solved by Jacobi-preconditioned conjugate gradients,
+//! warm-started from the initial parametrisation of §3.3, in `f64`.
+
+use super::TriMesh;
+use super::grow::SurfacePatch;
+use glam::{DVec2, DVec3, Vec2, Vec3};
+
+/// Settings of the conjugate-gradient solve.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CgSettings {
+    /// Stop when `‖r‖ ≤ tolerance · ‖b‖`. Default 1e-6.
+    pub tolerance: f64,
+    /// Iteration cap per coordinate. Default 1000.
+    pub max_iterations: usize,
+}
+
+impl Default for CgSettings {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-6,
+            max_iterations: 1000,
+        }
+    }
+}
+
+/// What one optimisation did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct ParamReport {
+    /// CG iterations, both coordinates together.
+    pub iterations: usize,
+    /// Whether both solves reached the tolerance.
+    pub converged: bool,
+    /// The functional after the solve.
+    pub energy: f64,
+}
+
+/// A symmetric sparse matrix in CSR form.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Csr {
+    /// Row offsets, `n + 1` entries.
+    pub start: Vec<u32>,
+    /// Column of each entry.
+    pub col: Vec<u32>,
+    /// Value of each entry.
+    pub val: Vec<f64>,
+}
+
+impl Csr {
+    /// Number of rows.
+    pub fn rows(&self) -> usize {
+        self.start.len().saturating_sub(1)
+    }
+
+    /// `y = A x`.
+    pub fn mul(&self, x: &[f64], y: &mut [f64]) {
+        for (r, out) in y.iter_mut().enumerate() {
+            let (a, b) = (self.start[r] as usize, self.start[r + 1] as usize);
+            *out = self.col[a..b]
+                .iter()
+                .zip(&self.val[a..b])
+                .map(|(&c, &v)| v * x[c as usize])
+                .sum();
+        }
+    }
+
+    /// The diagonal.
+    pub fn diagonal(&self) -> Vec<f64> {
+        (0..self.rows())
+            .map(|r| {
+                let (a, b) = (self.start[r] as usize, self.start[r + 1] as usize);
+                (a..b)
+                    .find(|&k| self.col[k] as usize == r)
+                    .map_or(0.0, |k| self.val[k])
+            })
+            .collect()
+    }
+}
+
+/// The per-face coefficients `(α, β)` of §3.4 for face `f` with field `t`,
+/// computed in `f64` and made to sum to exactly zero (the functional's null
+/// space must be exactly the constants, or CG picks up a spurious
+/// near-constant mode).
+pub fn face_coefficients(mesh: &TriMesh, f: usize, t: Vec3) -> ([f64; 3], [f64; 3]) {
+    let x = mesh.corners(f).map(|p| p.as_dvec3());
+    let n2 = (x[1] - x[0]).cross(x[2] - x[0]);
+    let twice_area = n2.length();
+    if twice_area <= f64::MIN_POSITIVE {
+        return ([0.0; 3], [0.0; 3]);
+    }
+    let n = n2 / twice_area;
+    let t = t.as_dvec3();
+    let s = t.cross(n);
+    let grad: [DVec3; 3] = [0, 1, 2].map(|i| n.cross(x[(i + 2) % 3] - x[(i + 1) % 3]) / twice_area);
+    let mut alpha = grad.map(|g| g.dot(t));
+    let mut beta = grad.map(|g| g.dot(s));
+    alpha[2] = -alpha[0] - alpha[1];
+    beta[2] = -beta[0] - beta[1];
+    (alpha, beta)
+}
+
+/// The normal equations of §3.4 for a patch: `(M, b_s, b_t)` over its local
+/// vertices.
+pub fn alignment_system(mesh: &TriMesh, patch: &SurfacePatch) -> (Csr, Vec<f64>, Vec<f64>) {
+    let n = patch.vertices.len();
+    let mut triplets: Vec<(u32, u32, f64)> = Vec::with_capacity(9 * patch.faces.len());
+    let mut bs = vec![0.0f64; n];
+    let mut bt = vec![0.0f64; n];
+    for (lf, &f) in patch.faces.iter().enumerate() {
+        let (alpha, beta) = face_coefficients(mesh, f as usize, patch.face_t[lf]);
+        let tri = patch.tris[lf];
+        for i in 0..3 {
+            bs[tri[i] as usize] += beta[i];
+            bt[tri[i] as usize] += alpha[i];
+            for j in 0..3 {
+                triplets.push((tri[i], tri[j], alpha[i] * alpha[j] + beta[i] * beta[j]));
+            }
+        }
+    }
+    triplets.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    let mut m = Csr {
+        start: vec![0; n + 1],
+        col: Vec::with_capacity(triplets.len() / 2),
+        val: Vec::with_capacity(triplets.len() / 2),
+    };
+    let mut last: Option<(u32, u32)> = None;
+    for (r, c, v) in triplets {
+        if last == Some((r, c)) {
+            if let Some(x) = m.val.last_mut() {
+                *x += v;
+            }
+        } else {
+            m.col.push(c);
+            m.val.push(v);
+            m.start[r as usize + 1] += 1;
+            last = Some((r, c));
+        }
+    }
+    for r in 0..n {
+        m.start[r + 1] += m.start[r];
+    }
+    (m, bs, bt)
+}
+
+/// Solves `A x = b` by Jacobi-preconditioned conjugate gradients from the
+/// initial `x`; returns `(iterations, converged)`. `A` must be symmetric
+/// positive semi-definite and `b` in its range.
+pub fn conjugate_gradient(
+    a: &Csr,
+    b: &[f64],
+    x: &mut [f64],
+    settings: &CgSettings,
+) -> (usize, bool) {
+    let n = b.len();
+    let inv_diag: Vec<f64> = a
+        .diagonal()
+        .iter()
+        .map(|&d| if d > 0.0 { 1.0 / d } else { 1.0 })
+        .collect();
+    let dot = |u: &[f64], v: &[f64]| u.iter().zip(v).map(|(a, b)| a * b).sum::<f64>();
+    let b_norm = dot(b, b).sqrt();
+    let goal = settings.tolerance * b_norm;
+    let mut r = vec![0.0f64; n];
+    a.mul(x, &mut r);
+    for i in 0..n {
+        r[i] = b[i] - r[i];
+    }
+    if b_norm == 0.0 || dot(&r, &r).sqrt() <= goal {
+        return (0, true);
+    }
+    let mut z: Vec<f64> = r.iter().zip(&inv_diag).map(|(r, d)| r * d).collect();
+    let mut p = z.clone();
+    let mut rz = dot(&r, &z);
+    let mut ap = vec![0.0f64; n];
+    for it in 1..=settings.max_iterations {
+        a.mul(&p, &mut ap);
+        let pap = dot(&p, &ap);
+        if pap <= 0.0 {
+            return (it, dot(&r, &r).sqrt() <= goal);
+        }
+        let step = rz / pap;
+        for i in 0..n {
+            x[i] += step * p[i];
+            r[i] -= step * ap[i];
+        }
+        if dot(&r, &r).sqrt() <= goal {
+            return (it, true);
+        }
+        for i in 0..n {
+            z[i] = r[i] * inv_diag[i];
+        }
+        let rz_next = dot(&r, &z);
+        let beta = rz_next / rz;
+        rz = rz_next;
+        for i in 0..n {
+            p[i] = z[i] + beta * p[i];
+        }
+    }
+    (settings.max_iterations, false)
+}
+
+/// The functional `Σ_f ‖d_S‖² + ‖d_T‖²` of the patch's current
+/// parametrisation.
+pub fn alignment_energy(mesh: &TriMesh, patch: &SurfacePatch) -> f64 {
+    patch
+        .faces
+        .iter()
+        .enumerate()
+        .map(|(lf, &f)| {
+            let (alpha, beta) = face_coefficients(mesh, f as usize, patch.face_t[lf]);
+            if alpha == [0.0; 3] && beta == [0.0; 3] {
+                return 0.0;
+            }
+            let st = patch.tris[lf].map(|v| patch.st[v as usize].as_dvec2());
+            let phi_t: DVec2 = (0..3).map(|i| st[i] * alpha[i]).sum();
+            let phi_s: DVec2 = (0..3).map(|i| st[i] * beta[i]).sum();
+            (phi_s - DVec2::X).length_squared() + (phi_t - DVec2::Y).length_squared()
+        })
+        .sum()
+}
+
+/// Optimises the patch's parametrisation in place (§3.4): solves both
+/// coordinates by CG from the current values, then translates so that the
+/// seed point maps to the origin (the patch centre).
+pub fn optimise_parametrisation(
+    mesh: &TriMesh,
+    patch: &mut SurfacePatch,
+    settings: &CgSettings,
+) -> ParamReport {
+    let _span =
+        tracing::trace_span!("optimise_parametrisation", faces = patch.faces.len()).entered();
+    let (m, bs, bt) = alignment_system(mesh, patch);
+    let mut s: Vec<f64> = patch.st.iter().map(|p| p.x as f64).collect();
+    let mut t: Vec<f64> = patch.st.iter().map(|p| p.y as f64).collect();
+    let (is, cs) = conjugate_gradient(&m, &bs, &mut s, settings);
+    let (it, ct) = conjugate_gradient(&m, &bt, &mut t, settings);
+    let seed = patch.tris[0];
+    let b = patch.seed_bary;
+    let centre = DVec2::new(
+        (0..3).map(|i| s[seed[i] as usize] * b[i] as f64).sum(),
+        (0..3).map(|i| t[seed[i] as usize] * b[i] as f64).sum(),
+    );
+    for (i, st) in patch.st.iter_mut().enumerate() {
+        *st = Vec2::new((s[i] - centre.x) as f32, (t[i] - centre.y) as f32);
+    }
+    ParamReport {
+        iterations: is + it,
+        converged: cs && ct,
+        energy: alignment_energy(mesh, patch),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kernels::lapped::FaceField;
+    use crate::kernels::lapped::grow::{GrowSettings, Grower};
+    use crate::kernels::lapped::hull::Hull;
+    use crate::kernels::lapped::tangent_field::global_up_field;
+    use crate::kernels::lapped::test_meshes::{grid, sphere};
+
+    fn square_hull(r: f32) -> Hull {
+        Hull::new(vec![
+            Vec2::new(-r, -r),
+            Vec2::new(r, -r),
+            Vec2::new(r, r),
+            Vec2::new(-r, r),
+        ])
+    }
+
+    #[test]
+    fn flat_grid_with_constant_field_gives_the_exact_similarity() {
+        // A jittered grid, a rotated and scaled constant field, and a
+        // perturbed start: the optimum is the similarity (zero residual).
+        let mut mesh = grid(12, 0.25);
+        for (i, p) in mesh.positions.iter_mut().enumerate() {
+            let h = crate::stages::world::mix(3, i as u64, 0);
+            p.x += ((h & 0xFFFF) as f32 / 65535.0 - 0.5) * 0.08;
+            p.y += (((h >> 16) & 0xFFFF) as f32 / 65535.0 - 0.5) * 0.08;
+        }
+        let m = TriMesh::new(&mesh).unwrap();
+        let up = Vec3::new(0.6, 0.8, 0.0);
+        let scale = 1.7;
+        let t = global_up_field(&m, up, scale);
+        let field = FaceField {
+            t: &t,
+            isotropic: false,
+        };
+        let mut g = Grower::new(&m, field, GrowSettings::default());
+        let seed = 2 * (5 * 11 + 5);
+        let bary = [0.2, 0.5, 0.3];
+        let mut p = g.start(seed, bary, 0.0);
+        g.grow(&mut p, &square_hull(0.8));
+        assert!(p.faces.len() > 50);
+        for (i, st) in p.st.iter_mut().enumerate() {
+            *st += Vec2::new((i % 7) as f32 * 0.01, (i % 5) as f32 * -0.02);
+        }
+        let report = optimise_parametrisation(
+            &m,
+            &mut p,
+            &CgSettings {
+                tolerance: 1e-12,
+                max_iterations: 10_000,
+            },
+        );
+        assert!(report.converged && report.energy < 1e-8, "{report:?}");
+        let c = m.point(seed as usize, bary);
+        let right = up.normalize().cross(Vec3::Z);
+        for (l, &v) in p.vertices.iter().enumerate() {
+            let d = m.positions[v as usize] - c;
+            let expected = Vec2::new(d.dot(right), d.dot(up.normalize())) / scale;
+            assert!(
+                (p.st[l] - expected).length() < 1e-5,
+                "{:?} vs {expected:?}",
+                p.st[l]
+            );
+        }
+    }
+
+    #[test]
+    fn cg_matches_a_dense_least_squares_solve() {
+        let mesh = sphere(2);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::new(0.3, 1.0, 0.2), 0.8);
+        for isotropic in [false, true] {
+            let field = FaceField { t: &t, isotropic };
+            let mut g = Grower::new(
+                &m,
+                field,
+                GrowSettings {
+                    max_distortion: 2.0,
+                    ..Default::default()
+                },
+            );
+            let mut p = g.start(7, [0.5, 0.25, 0.25], 0.3);
+            g.grow(&mut p, &square_hull(0.6));
+            let nv = p.vertices.len();
+            assert!(nv > 10 && nv < 200, "{nv}");
+            optimise_parametrisation(
+                &m,
+                &mut p,
+                &CgSettings {
+                    tolerance: 1e-13,
+                    max_iterations: 10_000,
+                },
+            );
+            // Dense least squares: rows (per face) β·s − 1, α·s, β·t, α·t − 1,
+            // plus one row pinning the seed point at the origin.
+            let rows = 2 * p.faces.len() + 1;
+            let mut a = faer::Mat::<f64>::zeros(rows, nv);
+            let mut bs = faer::Mat::<f64>::zeros(rows, 1);
+            let mut bt = faer::Mat::<f64>::zeros(rows, 1);
+            for (lf, &f) in p.faces.iter().enumerate() {
+                let (alpha, beta) = face_coefficients(&m, f as usize, p.face_t[lf]);
+                for i in 0..3 {
+                    let v = p.tris[lf][i] as usize;
+                    a[(2 * lf, v)] += beta[i];
+                    a[(2 * lf + 1, v)] += alpha[i];
+                }
+                bs[(2 * lf, 0)] = 1.0;
+                bt[(2 * lf + 1, 0)] = 1.0;
+            }
+            for i in 0..3 {
+                a[(rows - 1, p.tris[0][i] as usize)] += p.seed_bary[i] as f64 * 100.0;
+            }
+            let qr = a.col_piv_qr();
+            use faer::linalg::solvers::SolveLstsq;
+            let xs = qr.solve_lstsq(&bs);
+            let xt = qr.solve_lstsq(&bt);
+            for l in 0..nv {
+                let dense = Vec2::new(xs[(l, 0)] as f32, xt[(l, 0)] as f32);
+                assert!(
+                    (p.st[l] - dense).length() < 1e-4,
+                    "isotropic {isotropic}, vertex {l}: CG {:?} vs dense {dense:?}",
+                    p.st[l]
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,322 @@
+//! The paste loop of lapped textures (Praun et al. 2000 §3): repeatedly
+//! pick a random texture patch and a random point on a face that is not yet
+//! covered, grow a surface patch around it (§3.3), flatten it over the
+//! texture patch (§3.4), record the paste (§3.5) and update the coverage
+//! (§3.6), until every face is covered.
+//!
+//! Early on, seed points favour faces where parametrisations are hard —
+//! high curvature and discontinuities of the field — so that their
+//! distortion gets covered by later pastes (§3.3): while fewer than
+//! [`PasteSettings::difficult_until`] of the faces are covered, a face's
+//! chance is its area times `1 + difficult_first · difficulty`, afterwards
+//! just its area. A face seeded [`PasteSettings::max_seeds_per_face`] times
+//! without becoming covered is given up and reported.
+//!
+//! The loop is sequential (each paste depends on the coverage so far) and
+//! draws all its random numbers from one seeded stream, so results do not
+//! depend on the number of threads; the coverage rasteriser inside is
+//! parallel over faces.
+
+use super::coverage::{Coverage, CoverageSettings, sample_levels};
+use super::grow::{GrowSettings, Grower};
+use super::mask::TexturePatch;
+use super::param::{CgSettings, optimise_parametrisation};
+use super::tangent_field::field_discontinuity;
+use super::{FaceField, NO_FACE, TriMesh};
+use crate::progress::Progress;
+use glam::Vec2;
+use rand::{Rng, SeedableRng};
+
+/// Settings of the paste loop.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PasteSettings {
+    /// Patch growth.
+    pub grow: GrowSettings,
+    /// The parametrisation solve.
+    pub cg: CgSettings,
+    /// How often a patch may grow again after an optimisation uncovered
+    /// part of the texture patch (§3.3, last paragraph). Default 2.
+    pub regrow_rounds: u32,
+    /// The coverage test.
+    pub coverage: CoverageSettings,
+    /// Extra seed weight of difficult faces early on (0 turns it off).
+    /// Default 4.
+    pub difficult_first: f32,
+    /// Fraction of covered faces until which difficult faces are favoured.
+    /// Default 0.5.
+    pub difficult_until: f32,
+    /// Largest number of pastes; 0 means `4 × faces + 64`.
+    pub max_pastes: usize,
+    /// Seeds per face before it is given up. Default 8.
+    pub max_seeds_per_face: u32,
+    /// Seed of the random stream.
+    pub seed: u64,
+}
+
+impl Default for PasteSettings {
+    fn default() -> Self {
+        Self {
+            grow: GrowSettings::default(),
+            cg: CgSettings::default(),
+            regrow_rounds: 2,
+            coverage: CoverageSettings::default(),
+            difficult_first: 4.0,
+            difficult_until: 0.5,
+            max_pastes: 0,
+            max_seeds_per_face: 8,
+            seed: 0,
+        }
+    }
+}
+
+/// One recorded paste operation (§3.5, §4 "runtime pasting"): the texture
+/// patch, the surface patch faces and their corners' texture coordinates.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Paste {
+    /// Index of the texture patch.
+    pub texture: u32,
+    /// Mesh faces, seed first.
+    pub faces: Vec<u32>,
+    /// Per face, its corners' texture coordinates (`[0, 1]` over the texture
+    /// patch image, `v = 0` at the top row), in the mesh's corner order.
+    pub uvs: Vec<[Vec2; 3]>,
+}
+
+/// What the loop did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PasteReport {
+    /// Number of pastes.
+    pub pastes: usize,
+    /// Mean number of pastes holding a face.
+    pub mean_pastes_per_face: f64,
+    /// Mean number of faces per paste.
+    pub mean_faces_per_paste: f64,
+    /// Faces still not covered (given up, or the paste budget ran out).
+    pub uncovered_faces: Vec<u32>,
+    /// Faces added by growing again after an optimisation.
+    pub regrown_faces: usize,
+    /// Total conjugate-gradient iterations.
+    pub cg_iterations: usize,
+    /// Solves that stopped at the iteration cap.
+    pub unconverged_solves: usize,
+}
+
+/// A lapped texture: the pastes in order and the final coverage.
+#[derive(Clone, Debug, Default)]
+pub struct LappedTexture {
+    /// Paste operations, in order (later ones are drawn on top).
+    pub pastes: Vec<Paste>,
+    /// Coverage of every face, with the pastes holding it.
+    pub coverage: Coverage,
+    /// Summary.
+    pub report: PasteReport,
+}
+
+/// How hard a face is to parametrise, `[0, 1]`: the larger of its largest
+/// dihedral angle with a neighbour and (for anisotropic fields) its largest
+/// field discontinuity, each over 90°.
+pub fn face_difficulty(mesh: &TriMesh, field: FaceField) -> Vec<f32> {
+    let jump = if field.isotropic {
+        vec![0.0; mesh.face_count()]
+    } else {
+        field_discontinuity(mesh, field.t)
+    };
+    (0..mesh.face_count())
+        .map(|f| {
+            let n = mesh.normals[f];
+            let bend = mesh.neighbours[f]
+                .iter()
+                .filter(|&&g| g != NO_FACE)
+                .map(|&g| n.dot(mesh.normals[g as usize]).clamp(-1.0, 1.0).acos())
+                .fold(0.0f32, f32::max);
+            (bend.max(jump[f]) / std::f32::consts::FRAC_PI_2).min(1.0)
+        })
+        .collect()
+}
+
+/// Pastes texture patches until every face of `mesh` is covered (§3).
+///
+/// `textures` must not be empty. The field's length must be positive on
+/// every face (world units per patch unit).
+///
+/// # Panics
+/// When `textures` is empty or `field.t` is shorter than the face count.
+pub fn paste_until_covered(
+    mesh: &TriMesh,
+    field: FaceField,
+    textures: &[TexturePatch],
+    settings: &PasteSettings,
+    progress: &Progress,
+) -> LappedTexture {
+    let _span = tracing::info_span!("paste_until_covered", faces = mesh.face_count()).entered();
+    assert!(
+        !textures.is_empty(),
+        "paste_until_covered: no texture patch"
+    );
+    let fc = mesh.face_count();
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(settings.seed);
+    let difficulty = face_difficulty(mesh, field);
+    let unit_px = textures
+        .iter()
+        .map(TexturePatch::unit_px)
+        .fold(1.0f32, f32::max);
+    let levels = sample_levels(&mesh.areas, field.t, unit_px, settings.coverage.max_level);
+    let mut coverage = Coverage::new(levels);
+    // Degenerate faces show nothing: they count as covered.
+    for f in 0..fc {
+        if mesh.areas[f] <= 0.0 {
+            coverage.covered[f] = true;
+        }
+    }
+    let mut seeds = vec![0u32; fc];
+    let mut open: Vec<u32> = (0..fc as u32)
+        .filter(|&f| !coverage.covered[f as usize])
+        .collect();
+    let max_pastes = if settings.max_pastes == 0 {
+        4 * fc + 64
+    } else {
+        settings.max_pastes
+    };
+    let mut grower = Grower::new(mesh, field, settings.grow);
+    let mut pastes: Vec<Paste> = Vec::new();
+    let mut report = PasteReport::default();
+    let mut covered_count = fc - open.len();
+    progress.inc(covered_count as u64);
+    let mut weights: Vec<f64> = Vec::new();
+    while pastes.len() < max_pastes && !open.is_empty() {
+        // Choose the seed face: area-weighted, difficult faces first early on.
+        let early = (covered_count as f32) < settings.difficult_until * fc as f32;
+        let boost = if early { settings.difficult_first } else { 0.0 };
+        weights.clear();
+        let mut total = 0.0f64;
+        for &f in &open {
+            total +=
+                mesh.areas[f as usize] as f64 * (1.0 + (boost * difficulty[f as usize]) as f64);
+            weights.push(total);
+        }
+        let pick = rng.random::<f64>() * total;
+        let k = weights.partition_point(|&w| w <= pick).min(open.len() - 1);
+        let face = open[k];
+        seeds[face as usize] += 1;
+        let bary = match coverage.uncovered_point[face as usize] {
+            Some(b) => b,
+            None => {
+                let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
+                if r1 + r2 > 1.0 {
+                    (r1, r2) = (1.0 - r1, 1.0 - r2);
+                }
+                [1.0 - r1 - r2, r1, r2]
+            }
+        };
+        let texture = rng.random_range(0..textures.len()) as u32;
+        let angle = rng.random::<f32>() * std::f32::consts::TAU;
+        let patch_tex = &textures[texture as usize];
+
+        // Grow, flatten, grow again where the optimisation uncovered the
+        // texture patch.
+        let mut patch = grower.start(face, bary, angle);
+        grower.grow(&mut patch, &patch_tex.hull);
+        for round in 0..=settings.regrow_rounds {
+            let r = optimise_parametrisation(mesh, &mut patch, &settings.cg);
+            report.cg_iterations += r.iterations;
+            report.unconverged_solves += usize::from(!r.converged);
+            if round == settings.regrow_rounds {
+                break;
+            }
+            let added = grower.grow(&mut patch, &patch_tex.hull);
+            report.regrown_faces += added;
+            if added == 0 {
+                break;
+            }
+        }
+
+        let uvs: Vec<[Vec2; 3]> = patch
+            .tris
+            .iter()
+            .map(|t| t.map(|v| patch_tex.uv_of(patch.st[v as usize])))
+            .collect();
+        let index = pastes.len() as u32;
+        coverage.add_paste(
+            index,
+            texture,
+            &patch.faces,
+            &uvs,
+            textures,
+            &settings.coverage,
+        );
+        pastes.push(Paste {
+            texture,
+            faces: patch.faces,
+            uvs,
+        });
+        let before = open.len();
+        open.retain(|&f| {
+            !coverage.covered[f as usize] && seeds[f as usize] < settings.max_seeds_per_face
+        });
+        // Faces leave `open` when covered (or given up).
+        let settled = before - open.len();
+        covered_count += settled;
+        progress.inc(settled as u64);
+    }
+    report.pastes = pastes.len();
+    report.mean_pastes_per_face = coverage.mean_layers();
+    report.mean_faces_per_paste = if pastes.is_empty() {
+        0.0
+    } else {
+        pastes.iter().map(|p| p.faces.len()).sum::<usize>() as f64 / pastes.len() as f64
+    };
+    report.uncovered_faces = (0..fc as u32)
+        .filter(|&f| !coverage.covered[f as usize])
+        .collect();
+    LappedTexture {
+        pastes,
+        coverage,
+        report,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::image::sample::Wrap;
+    use crate::kernels::lapped::mask::{TexturePatch, splotch_mask};
+    use crate::kernels::lapped::tangent_field::global_up_field;
+    use crate::kernels::lapped::test_meshes::sphere;
+    use glam::Vec3;
+
+    #[test]
+    fn sphere_gets_covered() {
+        let mesh = sphere(3);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 0.6);
+        let ex = Image::new(32, 32, 3);
+        let tex = TexturePatch::cut(
+            &ex,
+            Wrap::Repeat,
+            [0, 0],
+            &splotch_mask(32, 1),
+            3.0,
+            16,
+            "t",
+        )
+        .unwrap();
+        for isotropic in [false, true] {
+            let field = FaceField { t: &t, isotropic };
+            let out = paste_until_covered(
+                &m,
+                field,
+                std::slice::from_ref(&tex),
+                &PasteSettings::default(),
+                &Progress::hidden(),
+            );
+            assert!(out.report.uncovered_faces.is_empty(), "{:?}", out.report);
+            assert!(
+                out.report.pastes > 5 && out.report.pastes < 400,
+                "{:?}",
+                out.report
+            );
+            assert!(out.coverage.covered.iter().all(|&c| c));
+        }
+    }
+}

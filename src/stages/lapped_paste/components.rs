@@ -1,0 +1,57 @@
+//! The components and resources of lapped-texture pastes.
+//!
+//! Every paste is an entity with [`PasteOf`] (the mesh entity it is pasted
+//! on), [`PasteOrder`], [`TexturePatchIndex`], [`PatchFaces`],
+//! [`PatchUvs`] and [`PatchDrawn`]: the record of one paste operation of
+//! Praun et al. 2000 §3.5 ("texture patch index, list of surface patch
+//! faces, and texture coordinates"), in paste order. The texture patches
+//! themselves are the [`TexturePatches`] resource; an atlas, when built, is
+//! an [`AtlasTexture`] on the mesh entity.
+
+use crate::image::Image;
+use bevy_ecs::prelude::*;
+use glam::Vec2;
+
+/// The mesh entity a paste belongs to.
+#[derive(Component, Clone, Copy, Debug)]
+pub struct PasteOf(pub Entity);
+
+/// Position of the paste in paste order: later pastes are drawn on top.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct PasteOrder(pub u32);
+
+/// Which texture patch ([`TexturePatches`]) the paste uses.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TexturePatchIndex(pub u32);
+
+/// The mesh faces of the surface patch, seed face first.
+#[derive(Component, Clone, Debug, Default)]
+pub struct PatchFaces(pub Vec<u32>);
+
+/// Texture coordinates of the corners of [`PatchFaces`], compactly: the
+/// corners of `faces[0]` in the face's corner order, then `faces[1]`'s, …
+/// (the layout of `output::render::Layer::uvs`); `[0, 1]` over the texture
+/// patch image, `v = 0` at its top row.
+#[derive(Component, Clone, Debug, Default)]
+pub struct PatchUvs(pub Vec<Vec2>);
+
+/// Per face of [`PatchFaces`], whether runtime pasting must draw it: false
+/// when later pastes hide it completely or the paste is transparent there
+/// (Praun et al. §4).
+#[derive(Component, Clone, Debug, Default)]
+pub struct PatchDrawn(pub Vec<bool>);
+
+/// The texture patches: RGBA images (straight alpha) with a transparent
+/// border, addressed with clamping.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct TexturePatches(pub Vec<Image>);
+
+/// A texture atlas of the lapped texture on a mesh entity (Praun et al.
+/// §4): per-corner coordinates into the composited atlas image.
+#[derive(Component, Clone, Debug, Default)]
+pub struct AtlasTexture {
+    /// One coordinate per mesh corner, `[0, 1]`, `v = 0` at the top row.
+    pub uvs: Vec<Vec2>,
+    /// The atlas (RGB).
+    pub image: Image,
+}

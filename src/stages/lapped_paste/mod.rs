@@ -1,0 +1,534 @@
+//! Stage `lapped_paste`: lapped textures (Praun, Finkelstein & Hoppe 2000).
+//! Texture patches are cut from the exemplar with an alpha mask (§3.1) and
+//! pasted onto surface patches grown on the active mesh (§3.3) and
+//! parametrised along the `tangent_field` (§3.4), until every face is
+//! covered (§3.6). Each paste becomes an entity (see [`components`]);
+//! faces that later pastes hide completely are flagged for runtime pasting
+//! (§4), and optionally the pastes are composited into a texture atlas (§4).
+//!
+//! Reads: the active mesh's `Geometry` and `FaceField`, the exemplar.
+//! Writes: paste entities, the `TexturePatches` resource, an
+//! `AtlasTexture` on the mesh (with `atlas_size > 0`), `TexelSpacing`.
+
+pub mod components;
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::image::Image;
+use crate::image::sample::Wrap;
+use crate::kernels::lapped::FaceField as FieldView;
+use crate::kernels::lapped::TriMesh;
+use crate::kernels::lapped::atlas::{AtlasSettings, build_atlas};
+use crate::kernels::lapped::coverage::{CoverageSettings, drawn_faces};
+use crate::kernels::lapped::grow::GrowSettings;
+use crate::kernels::lapped::mask::{
+    Mask, TexturePatch, circle_mask, mask_from_image, splotch_mask,
+};
+use crate::kernels::lapped::param::CgSettings;
+use crate::kernels::lapped::paste::{LappedTexture, PasteSettings, paste_until_covered};
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::progress::Progress;
+use crate::stages::tangent_field::FaceField;
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use components::*;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The shape of the texture patches.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MaskKind {
+    /// A seeded irregular blob, different for every texture patch.
+    #[default]
+    Splotch,
+    /// A disc.
+    Circle,
+    /// A user mask image (`mask_image`, the exemplar's size, white = inside).
+    Image,
+}
+
+/// Settings of `lapped_paste`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LappedPasteSettings {
+    /// Shape of the texture patches.
+    pub mask: MaskKind,
+    /// The user mask for `mask = "image"`.
+    pub mask_image: String,
+    /// Number of texture patches (predefined shapes).
+    pub patches: u32,
+    /// Side of the square exemplar region each texture patch is cut from.
+    pub patch_pixels: u32,
+    /// Width of the alpha falloff.
+    pub falloff: f32,
+    /// Vertex budget of each patch's polygonal hull.
+    pub hull_vertices: u32,
+    /// Largest distortion of a face joining a surface patch.
+    pub max_distortion: f32,
+    /// Growth rounds after optimisations.
+    pub regrow_rounds: u32,
+    /// Fraction of a face's samples that must be covered.
+    pub coverage_threshold: f32,
+    /// Extra seed weight of difficult faces early on.
+    pub difficult_first: f32,
+    /// Covered fraction of faces until which difficult faces are favoured.
+    pub difficult_until: f32,
+    /// Paste budget (0 = 4 × faces + 64).
+    pub max_pastes: u32,
+    /// Seeds per face before it is given up.
+    pub max_seeds_per_face: u32,
+    /// Side of the texture atlas (0 = no atlas).
+    pub atlas_size: u32,
+    /// Normal cone of atlas charts.
+    pub atlas_normal_cone: f32,
+    /// Gutter around atlas charts.
+    pub atlas_padding: u32,
+}
+
+impl Default for LappedPasteSettings {
+    fn default() -> Self {
+        let paste = PasteSettings::default();
+        let atlas = AtlasSettings::default();
+        Self {
+            mask: MaskKind::Splotch,
+            mask_image: String::new(),
+            patches: 1,
+            patch_pixels: 0,
+            falloff: 3.0,
+            hull_vertices: 16,
+            max_distortion: paste.grow.max_distortion,
+            regrow_rounds: paste.regrow_rounds,
+            coverage_threshold: paste.coverage.threshold,
+            difficult_first: paste.difficult_first,
+            difficult_until: paste.difficult_until,
+            max_pastes: 0,
+            max_seeds_per_face: paste.max_seeds_per_face,
+            atlas_size: 0,
+            atlas_normal_cone: atlas.normal_cone_deg,
+            atlas_padding: atlas.padding_px,
+        }
+    }
+}
+
+impl StageSettings for LappedPasteSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "mask",
+            unit: "",
+            range: ParamRange::OneOf(&["splotch", "circle", "image"]),
+            doc: "texture patch shape: a seeded irregular splotch, a circle, or `mask_image` (Praun et al. §3.1)",
+        },
+        ParamDoc {
+            name: "mask_image",
+            unit: "",
+            range: ParamRange::Any("an image path"),
+            doc: "mask = \"image\": a mask of the exemplar's size, white = inside the texture patch",
+        },
+        ParamDoc {
+            name: "patches",
+            unit: "",
+            range: ParamRange::Int(1, 64),
+            doc: "number of texture patches (each paste picks one at random); extra ones are cut at random places with their own splotch",
+        },
+        ParamDoc {
+            name: "patch_pixels",
+            unit: "pixels",
+            range: ParamRange::Int(0, 4096),
+            doc: "side of the square exemplar region of a predefined shape; 0 = the exemplar's smaller side",
+        },
+        ParamDoc {
+            name: "falloff",
+            unit: "pixels",
+            range: ParamRange::Float(0.0, 64.0),
+            doc: "alpha falls from 1 to 0 over this distance to the patch boundary",
+        },
+        ParamDoc {
+            name: "hull_vertices",
+            unit: "",
+            range: ParamRange::Int(3, 1024),
+            doc: "vertex budget of the conservative polygonal hull that bounds patch growth",
+        },
+        ParamDoc {
+            name: "max_distortion",
+            unit: "",
+            range: ParamRange::Float(0.0, 1e6),
+            doc: "largest (|d_S|² + |d_T|²)/2 of a face joining a patch under its initial parametrisation (0.6 ≈ 47° of rotation)",
+        },
+        ParamDoc {
+            name: "regrow_rounds",
+            unit: "",
+            range: ParamRange::Int(0, 16),
+            doc: "times a patch grows again where the optimisation uncovered the texture patch",
+        },
+        ParamDoc {
+            name: "coverage_threshold",
+            unit: "fraction",
+            range: ParamRange::Float(0.01, 1.0),
+            doc: "a face is covered when this fraction of its texel samples is opaque",
+        },
+        ParamDoc {
+            name: "difficult_first",
+            unit: "",
+            range: ParamRange::Float(0.0, 1e3),
+            doc: "extra seed weight of high-curvature faces and field discontinuities early on (0 = uniform by area)",
+        },
+        ParamDoc {
+            name: "difficult_until",
+            unit: "fraction",
+            range: ParamRange::Float(0.0, 1.0),
+            doc: "difficult faces are favoured while fewer than this fraction of faces is covered",
+        },
+        ParamDoc {
+            name: "max_pastes",
+            unit: "",
+            range: ParamRange::Int(0, 10_000_000),
+            doc: "paste budget; 0 = 4 × faces + 64",
+        },
+        ParamDoc {
+            name: "max_seeds_per_face",
+            unit: "",
+            range: ParamRange::Int(1, 10_000),
+            doc: "pastes seeded on one face before it is reported as not coverable",
+        },
+        ParamDoc {
+            name: "atlas_size",
+            unit: "pixels",
+            range: ParamRange::Int(0, 16384),
+            doc: "side of the texture atlas the pastes are composited into (Praun et al. §4); 0 = no atlas",
+        },
+        ParamDoc {
+            name: "atlas_normal_cone",
+            unit: "degrees",
+            range: ParamRange::Float(1.0, 89.0),
+            doc: "atlas charts keep every face normal within this angle of the chart seed's",
+        },
+        ParamDoc {
+            name: "atlas_padding",
+            unit: "pixels",
+            range: ParamRange::Int(0, 64),
+            doc: "gutter around each atlas chart, filled by dilation",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if self.mask == MaskKind::Image {
+            if self.mask_image.is_empty() {
+                return Err((
+                    "mask_image".into(),
+                    "mask = \"image\" needs a mask image path".into(),
+                ));
+            }
+            crate::image::load_image(Path::new(&self.mask_image))
+                .map_err(|e| ("mask_image".to_string(), e.to_string()))?;
+        } else if !self.mask_image.is_empty() {
+            return Err((
+                "mask_image".into(),
+                "only used with mask = \"image\"".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+impl LappedPasteSettings {
+    /// The kernel settings.
+    pub fn paste_settings(&self, seed: u64) -> PasteSettings {
+        PasteSettings {
+            grow: GrowSettings {
+                max_distortion: self.max_distortion,
+                ..Default::default()
+            },
+            cg: CgSettings::default(),
+            regrow_rounds: self.regrow_rounds,
+            coverage: CoverageSettings {
+                threshold: self.coverage_threshold,
+                ..Default::default()
+            },
+            difficult_first: self.difficult_first,
+            difficult_until: self.difficult_until,
+            max_pastes: self.max_pastes as usize,
+            max_seeds_per_face: self.max_seeds_per_face,
+            seed,
+        }
+    }
+}
+
+/// Cuts the texture patches of `settings` out of the exemplar. `mask` is
+/// the user mask for `mask = "image"`. Errors name what to fix.
+pub fn texture_patches(
+    exemplar: &Image,
+    wrap: Wrap,
+    settings: &LappedPasteSettings,
+    mask: Option<&Image>,
+    seed: u64,
+) -> Result<Vec<TexturePatch>, String> {
+    let (w, h) = (exemplar.width, exemplar.height);
+    let hull_vertices = settings.hull_vertices as usize;
+    if settings.mask == MaskKind::Image {
+        let img = mask.ok_or("mask = \"image\" needs `mask_image`")?;
+        if (img.width, img.height) != (w, h) {
+            return Err(format!(
+                "mask_image is {}x{}, but the exemplar is {w}x{h}; they must match",
+                img.width, img.height
+            ));
+        }
+        let full = mask_from_image(img);
+        // Crop to the inside pixels plus a one-pixel transparent border.
+        let (mut x0, mut y0, mut x1, mut y1) = (i64::MAX, i64::MAX, i64::MIN, i64::MIN);
+        for y in 0..h as i64 {
+            for x in 0..w as i64 {
+                if full.at(x, y) {
+                    (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+                }
+            }
+        }
+        if x0 > x1 {
+            return Err("mask_image has no white (inside) pixel".into());
+        }
+        let (cw, ch) = ((x1 - x0 + 3) as u32, (y1 - y0 + 3) as u32);
+        let mut inside = vec![false; (cw * ch) as usize];
+        for y in 0..ch as i64 {
+            for x in 0..cw as i64 {
+                inside[(y * cw as i64 + x) as usize] = full.at(x0 - 1 + x, y0 - 1 + y);
+            }
+        }
+        let cropped = Mask {
+            width: cw,
+            height: ch,
+            inside,
+        };
+        let patch = TexturePatch::cut(
+            exemplar,
+            wrap,
+            [x0 - 1, y0 - 1],
+            &cropped,
+            settings.falloff,
+            hull_vertices,
+            "mask_image",
+        )
+        .map_err(|e| e.to_string())?;
+        return Ok(vec![patch]);
+    }
+    let side = if settings.patch_pixels == 0 {
+        w.min(h)
+    } else {
+        settings.patch_pixels
+    };
+    if side > w.min(h) && wrap == Wrap::Clamp {
+        return Err(format!(
+            "patch_pixels = {side} exceeds the exemplar's smaller side {} (a larger region needs exemplar_wrap = \"repeat\")",
+            w.min(h)
+        ));
+    }
+    if side < 8 {
+        return Err(format!(
+            "patch_pixels = {side} is too small; use at least 8"
+        ));
+    }
+    (0..settings.patches)
+        .map(|k| {
+            let stream = mix(seed, k as u64, 1);
+            let origin = if k == 0 {
+                [(w as i64 - side as i64) / 2, (h as i64 - side as i64) / 2]
+            } else {
+                let span = |n: u32| match wrap {
+                    Wrap::Repeat => n as u64,
+                    Wrap::Clamp => (n - side.min(n)) as u64 + 1,
+                };
+                [(stream % span(w)) as i64, ((stream >> 32) % span(h)) as i64]
+            };
+            let mask = match settings.mask {
+                MaskKind::Circle => circle_mask(side),
+                _ => splotch_mask(side, mix(seed, k as u64, 2)),
+            };
+            TexturePatch::cut(
+                exemplar,
+                wrap,
+                origin,
+                &mask,
+                settings.falloff,
+                hull_vertices,
+                "predefined",
+            )
+            .map_err(|e| e.to_string())
+        })
+        .collect()
+}
+
+/// Records the paste loop's results as metrics of stage `index`.
+fn record_metrics(
+    metrics: &mut Metrics,
+    index: usize,
+    out: &LappedTexture,
+    draws_per_face: f64,
+    textures: &[TexturePatch],
+) {
+    let r = &out.report;
+    metrics.record(index, "pastes", r.pastes);
+    metrics.record(index, "mean_pastes_per_face", r.mean_pastes_per_face);
+    metrics.record(index, "mean_draws_per_face", draws_per_face);
+    metrics.record(index, "mean_faces_per_paste", r.mean_faces_per_paste);
+    metrics.record(index, "uncovered_faces", r.uncovered_faces.len());
+    metrics.record(
+        index,
+        "uncovered_face_ids",
+        r.uncovered_faces.iter().take(100).collect::<Vec<_>>(),
+    );
+    metrics.record(index, "regrown_faces", r.regrown_faces);
+    metrics.record(index, "cg_iterations", r.cg_iterations);
+    metrics.record(index, "unconverged_solves", r.unconverged_solves);
+    metrics.record(index, "texture_patches", textures.len());
+    metrics.record(
+        index,
+        "hull_vertices",
+        textures
+            .iter()
+            .map(|t| t.hull.vertices.len())
+            .collect::<Vec<_>>(),
+    );
+}
+
+/// The `lapped_paste` stage.
+pub struct LappedPaste;
+
+impl Stage for LappedPaste {
+    const KIND: &'static str = "lapped_paste";
+    const SUMMARY: &'static str = "lapped textures: paste alpha-masked texture patches along the tangent field until the mesh is covered; optional atlas";
+    const PAPER: &'static str = "Praun, Finkelstein & Hoppe 2000 §3, §4";
+    type Settings = LappedPasteSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh, Datum::FaceField]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Patches]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        // The user mask is read when the schedule is built (systems do no
+        // file I/O); it was already checked when the config was loaded.
+        let mask_image = (settings.mask == MaskKind::Image)
+            .then(|| crate::image::load_image(Path::new(&settings.mask_image)))
+            .transpose()
+            .map_err(|e| e.to_string());
+        (move |mut commands: Commands,
+               active: Res<ActiveMesh>,
+               exemplar: Res<Exemplar>,
+               seed: Res<RunSeed>,
+               mut spacing: ResMut<TexelSpacing>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               meshes: Query<(&Geometry, &FaceField)>,
+               old: Query<(Entity, &PasteOf)>| {
+            let fail = |message: String| PipelineError::Stage {
+                index: ctx.index + 1,
+                kind: Self::KIND.into(),
+                message,
+            };
+            let Ok((geometry, field)) = meshes.get(active.0) else {
+                failure.0 = Some(fail(
+                    "the active mesh has no tangent field; add `tangent_field` right before".into(),
+                ));
+                return;
+            };
+            let tri = match TriMesh::new(&geometry.0) {
+                Ok(t) if field.t.len() == t.face_count() => t,
+                Ok(_) => {
+                    failure.0 = Some(fail(
+                        "the tangent field does not fit the mesh; run `tangent_field` after the last stage that changes the mesh".into(),
+                    ));
+                    return;
+                }
+                Err(e) => {
+                    failure.0 = Some(fail(e.to_string()));
+                    return;
+                }
+            };
+            let mask = match &mask_image {
+                Ok(m) => m.as_ref(),
+                Err(e) => {
+                    failure.0 = Some(fail(e.clone()));
+                    return;
+                }
+            };
+            let textures = match texture_patches(
+                &exemplar.image,
+                exemplar.wrap,
+                &settings,
+                mask,
+                seed.derive(ctx.index, 1),
+            ) {
+                Ok(t) => t,
+                Err(message) => {
+                    failure.0 = Some(fail(message));
+                    return;
+                }
+            };
+            let paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
+            let view = FieldView {
+                t: &field.t,
+                isotropic: field.isotropic,
+            };
+            let progress = Progress::new(tri.face_count() as u64, "lapped_paste");
+            let out = paste_until_covered(&tri, view, &textures, &paste_settings, &progress);
+            progress.finish();
+            let sizes: Vec<usize> = out.pastes.iter().map(|p| p.faces.len()).collect();
+            let drawn = drawn_faces(&out.coverage, &sizes, &textures, &paste_settings.coverage);
+            let draws: usize = drawn.iter().map(|d| d.iter().filter(|&&x| x).count()).sum();
+            let draws_per_face = draws as f64 / tri.face_count().max(1) as f64;
+            record_metrics(&mut metrics, ctx.index, &out, draws_per_face, &textures);
+
+            // World units per exemplar texel, for the quality metrics.
+            let mean_scale =
+                field.t.iter().map(|t| t.length() as f64).sum::<f64>() / field.t.len().max(1) as f64;
+            let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
+            spacing.0 = (mean_scale as f32 / unit_px).max(f32::MIN_POSITIVE);
+
+            if settings.atlas_size > 0 {
+                let atlas_settings = AtlasSettings {
+                    size: settings.atlas_size,
+                    normal_cone_deg: settings.atlas_normal_cone,
+                    padding_px: settings.atlas_padding,
+                    ..Default::default()
+                };
+                match build_atlas(&tri, &out.coverage, &textures, &atlas_settings) {
+                    Some(atlas) => {
+                        metrics.record(ctx.index, "atlas_charts", atlas.charts.count);
+                        metrics.record(ctx.index, "atlas_fill", atlas.fill);
+                        metrics.record(ctx.index, "atlas_texels_per_unit", atlas.texels_per_unit);
+                        commands.entity(active.0).insert(AtlasTexture {
+                            uvs: atlas.corner_uvs.iter().flatten().copied().collect(),
+                            image: atlas.image,
+                        });
+                    }
+                    None => metrics.record(
+                        ctx.index,
+                        "atlas",
+                        "skipped: the chart gutters alone do not fit; raise atlas_size or lower atlas_padding",
+                    ),
+                }
+            }
+
+            for (entity, of) in &old {
+                if of.0 == active.0 {
+                    commands.entity(entity).despawn();
+                }
+            }
+            for (i, (paste, drawn)) in out.pastes.into_iter().zip(drawn).enumerate() {
+                commands.spawn((
+                    PasteOf(active.0),
+                    PasteOrder(i as u32),
+                    TexturePatchIndex(paste.texture),
+                    PatchFaces(paste.faces),
+                    PatchUvs(paste.uvs.into_iter().flatten().collect()),
+                    PatchDrawn(drawn),
+                ));
+            }
+            commands.insert_resource(TexturePatches(
+                textures.into_iter().map(|t| t.image).collect(),
+            ));
+        })
+        .into_configs()
+    }
+}

@@ -1,0 +1,372 @@
+//! Stage `tangent_field`: the per-face tangential vector field `T` of lapped
+//! textures (Praun et al. 2000 §3.2) on the active mesh — its direction is
+//! the texture's up, its length the texture scale (world units per texture
+//! patch width). Modes: a global up direction projected onto each face; a
+//! few constraints interpolated with Gaussian radial basis functions over
+//! mesh distance on top of that global field (Fig. 1, "changing local
+//! orientation and scale"); or the `t` axes of the `orientation` stage's
+//! frames. With `isotropic = true` only the scale is used and each paste
+//! propagates its own orientation.
+//!
+//! Lapped textures work on triangles: a polygon mesh is fan-triangulated
+//! into a new active mesh level first.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::lapped::TriMesh;
+use crate::kernels::lapped::tangent_field::{
+    FieldConstraint, field_from_vertex_frames, global_up_field, nearest_face, rbf_field,
+};
+use crate::mesh::Topology;
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// The per-face field `T` on a mesh entity (Praun et al. §3.2): in the face
+/// plane, direction = texture up, length = world units per texture patch
+/// unit (the patch image's larger side).
+#[derive(Component, Clone, Debug, Default)]
+pub struct FaceField {
+    /// One vector per face.
+    pub t: Vec<Vec3>,
+    /// Isotropic texture: only the lengths matter.
+    pub isotropic: bool,
+}
+
+/// Where the field comes from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FieldMode {
+    /// `up` projected onto every face.
+    #[default]
+    Global,
+    /// `constraints` interpolated over the global field.
+    Constraints,
+    /// The `t` axes of the per-vertex frames of an `orientation` stage.
+    Frames,
+}
+
+/// Unit of lengths (`patch_size`, constraint radii).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LengthUnit {
+    /// Fractions of the mesh's bounding-box diagonal.
+    #[default]
+    Diagonal,
+    /// World units.
+    World,
+}
+
+/// A constraint in the config:
+/// `{ at = [x, y, z], up = [x, y, z], scale = 1.0, radius = 0.2, weight = 1.0 }`
+/// (or `face = N` instead of `at`).
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ConstraintSpec {
+    /// The face it sits on, or...
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub face: Option<u32>,
+    /// ...a point whose nearest face (by centroid) takes it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<[f32; 3]>,
+    /// Texture up direction there (world space, projected onto the face).
+    pub up: [f32; 3],
+    /// Texture scale there, relative to `patch_size` (> 0).
+    #[serde(default = "one")]
+    pub scale: f32,
+    /// Radius of the Gaussian, in `units` (> 0).
+    pub radius: f32,
+    /// Weight of the basis function (> 0).
+    #[serde(default = "one")]
+    pub weight: f32,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+/// Settings of `tangent_field`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TangentFieldSettings {
+    /// Global, constraints or frames.
+    pub mode: FieldMode,
+    /// The global up direction.
+    pub up: [f32; 3],
+    /// Isotropic texture (orientation propagated per paste).
+    pub isotropic: bool,
+    /// World size of one texture patch, in `units`.
+    pub patch_size: f32,
+    /// Unit of `patch_size` and of constraint radii.
+    pub units: LengthUnit,
+    /// Constraints mode: the constraints.
+    pub constraints: Vec<ConstraintSpec>,
+    /// Constraints mode: weight of the global field against the Gaussians.
+    pub background_weight: f32,
+}
+
+impl Default for TangentFieldSettings {
+    fn default() -> Self {
+        Self {
+            mode: FieldMode::Global,
+            up: [0.0, 1.0, 0.0],
+            isotropic: false,
+            patch_size: 0.15,
+            units: LengthUnit::Diagonal,
+            constraints: Vec::new(),
+            background_weight: 0.05,
+        }
+    }
+}
+
+impl StageSettings for TangentFieldSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "mode",
+            unit: "",
+            range: ParamRange::OneOf(&["global", "constraints", "frames"]),
+            doc: "global: `up` projected onto every face; constraints: Gaussian RBF interpolation of `constraints` over mesh distance, blended with the global field; frames: the t axes of an earlier `orientation` stage",
+        },
+        ParamDoc {
+            name: "up",
+            unit: "world axes",
+            range: ParamRange::Float(-1e6, 1e6),
+            doc: "texture up direction in world space (non-zero); where it is parallel to a face normal an arbitrary tangent is used",
+        },
+        ParamDoc {
+            name: "isotropic",
+            unit: "",
+            range: ParamRange::Any("true or false"),
+            doc: "isotropic texture: only the scale is used, each paste propagates its own random orientation (Praun et al. §3.2)",
+        },
+        ParamDoc {
+            name: "patch_size",
+            unit: "units",
+            range: ParamRange::Float(1e-6, 1e6),
+            doc: "world size of one texture patch (its larger side), the length of T",
+        },
+        ParamDoc {
+            name: "units",
+            unit: "",
+            range: ParamRange::OneOf(&["diagonal", "world"]),
+            doc: "unit of patch_size and constraint radii: fractions of the bounding-box diagonal, or world units",
+        },
+        ParamDoc {
+            name: "constraints",
+            unit: "",
+            range: ParamRange::Any(
+                "list of { at = [x, y, z] | face = N, up = [x, y, z], scale = 1.0, radius = R, weight = 1.0 }",
+            ),
+            doc: "constraints mode: direction, relative scale, Gaussian radius (in units) and weight at a face or the face nearest a point",
+        },
+        ParamDoc {
+            name: "background_weight",
+            unit: "",
+            range: ParamRange::Float(0.0, 1e6),
+            doc: "constraints mode: weight of the global field where the Gaussians fade out",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if Vec3::from(self.up).length_squared() < 1e-12 {
+            return Err(("up".into(), "must not be the zero vector".into()));
+        }
+        if !(self.patch_size > 0.0) {
+            return Err(("patch_size".into(), "must be positive".into()));
+        }
+        if self.mode == FieldMode::Constraints && self.constraints.is_empty() {
+            return Err((
+                "mode".into(),
+                "constraints mode needs at least one entry in `constraints`".into(),
+            ));
+        }
+        for (i, c) in self.constraints.iter().enumerate() {
+            let what = format!("constraint {}", i + 1);
+            if c.face.is_some() == c.at.is_some() {
+                return Err((
+                    "constraints".into(),
+                    format!("{what}: give exactly one of `face` and `at`"),
+                ));
+            }
+            if Vec3::from(c.up).length_squared() < 1e-12 {
+                return Err(("constraints".into(), format!("{what}: `up` is zero")));
+            }
+            for (name, v) in [
+                ("scale", c.scale),
+                ("radius", c.radius),
+                ("weight", c.weight),
+            ] {
+                if !(v > 0.0 && v.is_finite()) {
+                    return Err((
+                        "constraints".into(),
+                        format!("{what}: `{name}` = {v} must be positive"),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Computes the field of `settings` on a triangle mesh; `frames` are the
+/// per-vertex frames for `frames` mode. Errors name what to fix.
+pub fn face_field(
+    mesh: &crate::mesh::PolyMesh,
+    tri: &TriMesh,
+    settings: &TangentFieldSettings,
+    frames: Option<&[crate::kernels::frames::TangentFrame]>,
+) -> Result<(FaceField, serde_json::Map<String, serde_json::Value>), String> {
+    let mut metrics = serde_json::Map::new();
+    let diagonal = mesh
+        .bounding_box()
+        .map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
+    let unit = match settings.units {
+        LengthUnit::Diagonal => diagonal,
+        LengthUnit::World => 1.0,
+    };
+    let scale = settings.patch_size * unit;
+    let up = Vec3::from(settings.up);
+    let t = match settings.mode {
+        FieldMode::Global => global_up_field(tri, up, scale),
+        FieldMode::Frames => {
+            let frames = frames.ok_or("frames mode needs an `orientation` stage before it")?;
+            if frames.len() != mesh.vertex_count() {
+                return Err(format!(
+                    "the frames have {} entries for {} vertices; run `orientation` on this mesh",
+                    frames.len(),
+                    mesh.vertex_count()
+                ));
+            }
+            field_from_vertex_frames(tri, frames, scale, up)
+        }
+        FieldMode::Constraints => {
+            let constraints: Vec<FieldConstraint> = settings
+                .constraints
+                .iter()
+                .map(|c| FieldConstraint {
+                    face: c
+                        .face
+                        .unwrap_or_else(|| nearest_face(tri, Vec3::from(c.at.unwrap_or_default()))),
+                    direction: Vec3::from(c.up),
+                    scale: c.scale,
+                    radius: c.radius * unit,
+                    weight: c.weight,
+                })
+                .collect();
+            let background = global_up_field(tri, up, 1.0);
+            let topo = Topology::build(mesh);
+            let (t, report) = rbf_field(
+                tri,
+                &topo,
+                &constraints,
+                &background,
+                settings.background_weight,
+                scale,
+            )
+            .map_err(|e| e.to_string())?;
+            metrics.insert("rbf_exact".into(), report.exact.into());
+            metrics.insert(
+                "constraint_faces".into(),
+                constraints
+                    .iter()
+                    .map(|c| c.face)
+                    .collect::<Vec<_>>()
+                    .into(),
+            );
+            t
+        }
+    };
+    let lengths: Vec<f32> = t.iter().map(|v| v.length()).collect();
+    let mean = lengths.iter().map(|&l| l as f64).sum::<f64>() / lengths.len().max(1) as f64;
+    let (lo, hi) = lengths
+        .iter()
+        .fold((f32::INFINITY, 0.0f32), |(a, b), &l| (a.min(l), b.max(l)));
+    metrics.insert("patch_size_world".into(), scale.into());
+    metrics.insert("scale_mean".into(), mean.into());
+    metrics.insert("scale_min".into(), lo.into());
+    metrics.insert("scale_max".into(), hi.into());
+    Ok((
+        FaceField {
+            t,
+            isotropic: settings.isotropic,
+        },
+        metrics,
+    ))
+}
+
+/// The `tangent_field` stage.
+pub struct TangentField;
+
+impl Stage for TangentField {
+    const KIND: &'static str = "tangent_field";
+    const SUMMARY: &'static str = "per-face texture up and scale for lapped textures: global up, RBF-interpolated constraints, or frames";
+    const PAPER: &'static str = "Praun, Finkelstein & Hoppe 2000 §3.2";
+    type Settings = TangentFieldSettings;
+
+    fn requires(settings: &Self::Settings) -> Vec<Datum> {
+        if settings.mode == FieldMode::Frames {
+            vec![Datum::Mesh, Datum::Frames]
+        } else {
+            vec![Datum::Mesh]
+        }
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::FaceField]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               mut active: ResMut<ActiveMesh>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               meshes: Query<(&Geometry, Option<&Frames>)>| {
+            let Ok((geometry, frames)) = meshes.get(active.0) else {
+                return;
+            };
+            let fail = |message: String| PipelineError::Stage {
+                index: ctx.index + 1,
+                kind: Self::KIND.into(),
+                message,
+            };
+            // Lapped textures need triangles: fan-triangulate polygons
+            // into a new mesh level (vertices, and so frames, unchanged).
+            let triangulated = (!geometry.0.is_triangle_mesh()).then(|| geometry.0.triangulated());
+            let mesh = triangulated.as_ref().unwrap_or(&geometry.0);
+            let tri = match TriMesh::new(mesh) {
+                Ok(t) => t,
+                Err(e) => {
+                    failure.0 = Some(fail(e.to_string()));
+                    return;
+                }
+            };
+            let frames = frames.map(|f| f.0.as_slice());
+            let (field, stage_metrics) = match face_field(mesh, &tri, &settings, frames) {
+                Ok(x) => x,
+                Err(message) => {
+                    failure.0 = Some(fail(message));
+                    return;
+                }
+            };
+            for (k, v) in stage_metrics {
+                metrics.record(ctx.index, &k, v);
+            }
+            metrics.record(ctx.index, "faces", tri.face_count());
+            metrics.record(ctx.index, "triangulated", triangulated.is_some());
+            match triangulated {
+                Some(mesh) => {
+                    let mut entity = commands.spawn((MeshLevel(0), Geometry(mesh), field));
+                    if let Some(f) = frames {
+                        entity.insert(Frames(f.to_vec()));
+                    }
+                    active.0 = entity.id();
+                }
+                None => {
+                    commands.entity(active.0).insert(field);
+                }
+            }
+        })
+        .into_configs()
+    }
+}

@@ -1,0 +1,423 @@
+//! Lapped textures (Praun, Finkelstein & Hoppe 2000) over the shared mesh
+//! set: the parametrisation is the exact similarity where it can be, patches
+//! are discs inside their hull, every face of every shared closed mesh gets
+//! covered, the field interpolates its constraints, atlas charts never
+//! overlap, and runs are byte-identical at 1 and 2 threads.
+//!
+//! Kernel-level tests (hull containment, CG against a dense least-squares
+//! solve, skyline packing, ...) live next to the kernels in
+//! `src/kernels/lapped/`.
+
+mod common;
+use bevy_ecs::prelude::*;
+use common::*;
+use glam::{Vec2, Vec3};
+use surfsynth::config::ConfigSource;
+use surfsynth::image::Image;
+use surfsynth::image::sample::Wrap;
+use surfsynth::kernels::lapped::atlas::{AtlasSettings, pack_charts, segment_charts};
+use surfsynth::kernels::lapped::coverage::lattice_samples;
+use surfsynth::kernels::lapped::grow::{GrowSettings, Grower};
+use surfsynth::kernels::lapped::mask::{TexturePatch, circle_mask, splotch_mask};
+use surfsynth::kernels::lapped::param::{CgSettings, optimise_parametrisation};
+use surfsynth::kernels::lapped::paste::{PasteSettings, paste_until_covered};
+use surfsynth::kernels::lapped::tangent_field::{FieldConstraint, global_up_field, rbf_field};
+use surfsynth::kernels::lapped::{FaceField, TriMesh};
+use surfsynth::mesh::{LoadOptions, PolyMesh, Topology, load_mesh};
+use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
+use surfsynth::progress::Progress;
+use surfsynth::stages::lapped_paste::components::*;
+use surfsynth::stages::world::*;
+
+const SHARED_CLOSED: [&str; 4] = ["bunny_1k8.obj", "knot.off", "eight.off", "nut.ply"];
+
+fn load(name: &str) -> PolyMesh {
+    load_mesh(&shared(&format!("meshes/{name}")), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{name}: {e}"))
+        .0
+}
+
+fn diagonal(m: &PolyMesh) -> f32 {
+    let (lo, hi) = m.bounding_box().unwrap();
+    (hi - lo).length()
+}
+
+/// A 64-pixel texture patch of a plain exemplar (coverage ignores colour).
+fn texture(splotch: bool) -> TexturePatch {
+    let ex = Image::new(64, 64, 3);
+    let mask = if splotch {
+        splotch_mask(64, 7)
+    } else {
+        circle_mask(64)
+    };
+    TexturePatch::cut(&ex, Wrap::Repeat, [0, 0], &mask, 3.0, 16, "test").unwrap()
+}
+
+#[test]
+fn flat_grid_with_constant_field_is_the_exact_similarity() {
+    // A 20 × 20 grid in the plane z = 1, field rotated by 30° and scaled.
+    let n = 20usize;
+    let p: Vec<Vec3> = (0..n * n)
+        .map(|i| Vec3::new((i % n) as f32 * 0.1, (i / n) as f32 * 0.1, 1.0))
+        .collect();
+    let mut tris = Vec::new();
+    for y in 0..n - 1 {
+        for x in 0..n - 1 {
+            let i = (y * n + x) as u32;
+            tris.push([i, i + 1, i + n as u32]);
+            tris.push([i + 1, i + n as u32 + 1, i + n as u32]);
+        }
+    }
+    let m = TriMesh::new(&PolyMesh::from_triangles(p, &tris)).unwrap();
+    let up = Vec3::new(-0.5, 0.75f32.sqrt(), 0.0);
+    let t = global_up_field(&m, up, 0.9);
+    let field = FaceField {
+        t: &t,
+        isotropic: false,
+    };
+    let mut grower = Grower::new(&m, field, GrowSettings::default());
+    let seed = 2 * (9 * 19 + 9);
+    let bary = [0.6, 0.3, 0.1];
+    let mut patch = grower.start(seed, bary, 0.0);
+    grower.grow(&mut patch, &texture(false).hull);
+    assert!(patch.faces.len() > 40, "{} faces", patch.faces.len());
+    let report = optimise_parametrisation(
+        &m,
+        &mut patch,
+        &CgSettings {
+            tolerance: 1e-12,
+            max_iterations: 5000,
+        },
+    );
+    assert!(report.energy < 1e-9, "residual {report:?}");
+    let centre = m.point(seed as usize, bary);
+    let right = up.cross(Vec3::Z);
+    for (l, &v) in patch.vertices.iter().enumerate() {
+        let d = m.positions[v as usize] - centre;
+        let expected = Vec2::new(d.dot(right), d.dot(up)) / 0.9;
+        assert!(
+            (patch.st[l] - expected).length() < 1e-5,
+            "vertex {v}: {:?} vs the similarity {expected:?}",
+            patch.st[l]
+        );
+    }
+}
+
+#[test]
+fn grown_patches_are_discs_inside_the_hull() {
+    let tex = texture(true);
+    for name in SHARED_CLOSED {
+        let mesh = load(name);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 0.2 * diagonal(&mesh));
+        for isotropic in [false, true] {
+            let field = FaceField { t: &t, isotropic };
+            let mut grower = Grower::new(&m, field, GrowSettings::default());
+            for k in 0..12u32 {
+                let seed = (k * 7919) % m.face_count() as u32;
+                let mut patch = grower.start(seed, [0.3, 0.3, 0.4], k as f32);
+                grower.grow(&mut patch, &tex.hull);
+                let what = format!("{name}, isotropic {isotropic}, seed face {seed}");
+                assert_eq!(patch.euler_characteristic(), 1, "{what}");
+                assert_eq!(patch.boundary_loop_count(), 1, "{what}");
+                // Every face joined over an edge that reaches into the hull.
+                for (lf, tri) in patch.tris.iter().enumerate().skip(1) {
+                    let reaches = (0..3).any(|i| {
+                        tex.hull.segment_intersects(
+                            patch.st[tri[i] as usize],
+                            patch.st[tri[(i + 1) % 3] as usize],
+                        )
+                    });
+                    assert!(reaches, "{what}: face {lf} is outside the hull");
+                }
+                // The grown patch still a disc after regrowing.
+                optimise_parametrisation(&m, &mut patch, &CgSettings::default());
+                grower.grow(&mut patch, &tex.hull);
+                assert_eq!(patch.euler_characteristic(), 1, "{what}, regrown");
+                assert_eq!(patch.boundary_loop_count(), 1, "{what}, regrown");
+            }
+        }
+    }
+}
+
+#[test]
+fn every_face_of_the_shared_closed_meshes_is_covered() {
+    let textures = [texture(true)];
+    for name in SHARED_CLOSED {
+        let mesh = load(name);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 0.15 * diagonal(&mesh));
+        for isotropic in [false, true] {
+            let field = FaceField { t: &t, isotropic };
+            let settings = PasteSettings {
+                seed: 11,
+                ..Default::default()
+            };
+            let out = paste_until_covered(&m, field, &textures, &settings, &Progress::hidden());
+            let what = format!("{name}, isotropic {isotropic}");
+            assert!(
+                out.report.uncovered_faces.is_empty(),
+                "{what}: {:?}",
+                out.report
+            );
+            assert!(
+                out.report.mean_pastes_per_face > 1.0 && out.report.mean_pastes_per_face < 12.0,
+                "{what}: {:?}",
+                out.report
+            );
+            // Independently: every sample of every face is opaque under the
+            // composite of the pastes that hold it.
+            for f in 0..m.face_count() {
+                let layers = &out.coverage.layers[f];
+                assert!(!layers.is_empty(), "{what}: face {f} has no paste");
+                for b in lattice_samples(out.coverage.levels[f]) {
+                    let clear: f32 = layers
+                        .iter()
+                        .map(|l| {
+                            let uv = l.uv[0] * b[0] + l.uv[1] * b[1] + l.uv[2] * b[2];
+                            1.0 - textures[l.texture as usize].alpha_at(uv)
+                        })
+                        .product();
+                    assert!(
+                        clear < 1.0 / 255.0,
+                        "{what}: face {f} shows through at {b:?}"
+                    );
+                }
+            }
+            // The pastes list their faces consistently with the coverage.
+            let held: usize = out.pastes.iter().map(|p| p.faces.len()).sum();
+            let layered: usize = out.coverage.layers.iter().map(Vec::len).sum();
+            assert_eq!(held, layered, "{what}");
+        }
+    }
+}
+
+#[test]
+fn rbf_field_returns_each_constraint_at_its_face() {
+    let mesh = load("bunny_1k8.obj");
+    let m = TriMesh::new(&mesh).unwrap();
+    let topo = Topology::build(&mesh);
+    let background = global_up_field(&m, Vec3::Y, 1.0);
+    let constraints = [
+        FieldConstraint {
+            face: 100,
+            direction: Vec3::new(1.0, 1.0, 0.0),
+            scale: 1.6,
+            radius: 3.0,
+            weight: 1.0,
+        },
+        FieldConstraint {
+            face: 2000,
+            direction: Vec3::new(0.0, 0.3, 1.0),
+            scale: 0.7,
+            radius: 1.5,
+            weight: 2.0,
+        },
+        FieldConstraint {
+            face: 3000,
+            direction: Vec3::X,
+            scale: 1.0,
+            radius: 5.0,
+            weight: 0.5,
+        },
+    ];
+    let (t, report) = rbf_field(&m, &topo, &constraints, &background, 0.05, 2.0).unwrap();
+    assert!(report.exact);
+    for c in &constraints {
+        let f = c.face as usize;
+        let n = m.normals[f];
+        let expected = (c.direction - n * n.dot(c.direction)).normalize() * 2.0 * c.scale;
+        assert!(
+            (t[f] - expected).length() < 1e-3 * expected.length(),
+            "face {f}: {:?} vs the constraint {expected:?}",
+            t[f]
+        );
+    }
+}
+
+#[test]
+fn atlas_charts_do_not_overlap() {
+    let mesh = load("bunny_1k8.obj");
+    let m = TriMesh::new(&mesh).unwrap();
+    let settings = AtlasSettings::default();
+    let charts = segment_charts(&m, &settings);
+    let size = 1024usize;
+    let (uvs, scale) = pack_charts(&charts, size as u32, 2).unwrap();
+    assert!(scale > 0.0);
+    // Rasterise every face at the atlas resolution and count the texel
+    // centres strictly inside more than one face.
+    let mut hits = vec![0u8; size * size];
+    for uv in &uvs {
+        let t = uv.map(|p| p * size as f32);
+        let area = (t[1] - t[0]).perp_dot(t[2] - t[0]);
+        // Texture up is image up (y down): counter-clockwise faces have a
+        // negative signed area in texel coordinates; none is flipped.
+        assert!(area < 0.0, "charts keep the faces' orientation");
+        let lo = t[0].min(t[1]).min(t[2]);
+        let hi = t[0].max(t[1]).max(t[2]);
+        assert!(lo.x >= 0.0 && lo.y >= 0.0 && hi.x <= size as f32 && hi.y <= size as f32);
+        for y in lo.y.floor() as usize..(hi.y.ceil() as usize).min(size) {
+            for x in lo.x.floor() as usize..(hi.x.ceil() as usize).min(size) {
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                let b0 = (t[1] - p).perp_dot(t[2] - p) / area;
+                let b1 = (t[2] - p).perp_dot(t[0] - p) / area;
+                if b0 > 1e-4 && b1 > 1e-4 && 1.0 - b0 - b1 > 1e-4 {
+                    hits[y * size + x] = hits[y * size + x].saturating_add(1);
+                }
+            }
+        }
+    }
+    let overlapping = hits.iter().filter(|&&h| h > 1).count();
+    let covered = hits.iter().filter(|&&h| h > 0).count();
+    assert_eq!(
+        overlapping, 0,
+        "{overlapping} of {covered} texels in two faces"
+    );
+    assert!(
+        covered as f32 > 0.25 * (size * size) as f32,
+        "the atlas is used: {covered} texels"
+    );
+}
+
+const PIPELINE: &str = r#"
+seed = 4
+[input]
+mesh = "../shared/data/meshes/eight.off"
+exemplar = "builtin:noise"
+
+[[stage]]
+kind = "tangent_field"
+isotropic = true
+patch_size = 0.25
+
+[[stage]]
+kind = "lapped_paste"
+atlas_size = 256
+
+[[stage]]
+kind = "export"
+formats = ["obj", "preview", "pastes"]
+preview_size = 96
+"#;
+
+#[test]
+fn pastes_are_entities_in_paste_order() {
+    let mut source = ConfigSource::from_text("lapped.toml", PIPELINE);
+    source.base_dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let p = Pipeline::from_source(source).expect("valid config");
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let mut world = World::new();
+    run_in_world(&p, &mut world, input).expect("pipeline runs");
+    let active = world.resource::<ActiveMesh>().0;
+    let faces = world.get::<Geometry>(active).unwrap().0.face_count();
+    let mut q = world.query::<(&PasteOf, &PasteOrder, &PatchFaces, &PatchUvs, &PatchDrawn)>();
+    let mut orders: Vec<u32> = Vec::new();
+    let mut drawn = 0usize;
+    for (of, order, pf, uvs, d) in q.iter(&world) {
+        assert_eq!(of.0, active);
+        assert_eq!(uvs.0.len(), 3 * pf.0.len(), "one uv per corner");
+        assert_eq!(d.0.len(), pf.0.len());
+        assert!(pf.0.iter().all(|&f| (f as usize) < faces));
+        orders.push(order.0);
+        drawn += d.0.iter().filter(|&&x| x).count();
+    }
+    orders.sort_unstable();
+    assert!(orders.len() > 3);
+    assert_eq!(orders, (0..orders.len() as u32).collect::<Vec<_>>());
+    // Runtime pasting draws each face between once and a few times.
+    let draws = drawn as f64 / faces as f64;
+    assert!((1.0..4.0).contains(&draws), "{draws} draws per face");
+    assert_eq!(world.resource::<TexturePatches>().0.len(), 1);
+    let atlas = world
+        .get::<AtlasTexture>(active)
+        .expect("atlas_size > 0 builds an atlas");
+    assert_eq!(atlas.uvs.len(), 3 * faces);
+    let job = world.resource::<ExportJob>();
+    let pastes = job.pastes.as_ref().expect("the pastes format");
+    assert_eq!(pastes.pastes.len(), orders.len());
+    assert!(job.uvs.is_some(), "the atlas goes into the OBJ");
+    assert_eq!(job.previews.len(), 3);
+    assert!(job.images.iter().any(|(n, _)| n == "atlas_preview_0.png"));
+}
+
+#[test]
+fn runs_are_identical_at_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs/30_lapped_bunny_isotropic.toml");
+    let mut outs = Vec::new();
+    for threads in ["1", "2"] {
+        let out = dir.path().join(format!("t{threads}"));
+        let (code, _, stderr) = run_cli(&[
+            "run",
+            cfg.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--threads",
+            threads,
+            "--set",
+            "output.metric_samples=10",
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        outs.push(out);
+    }
+    for name in [
+        "result_pastes.obj",
+        "result_pastes.mtl",
+        "result_patch_0.png",
+        "preview_0.png",
+        "preview_2.png",
+    ] {
+        let a = std::fs::read(outs[0].join(name)).unwrap();
+        let b = std::fs::read(outs[1].join(name)).unwrap();
+        assert!(a == b, "{name} differs between 1 and 2 threads");
+    }
+    // One OBJ group per paste, in order; every face drawn at least once.
+    let obj = std::fs::read_to_string(outs[0].join("result_pastes.obj")).unwrap();
+    let groups: Vec<&str> = obj.lines().filter(|l| l.starts_with("g ")).collect();
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(outs[0].join("metrics.json")).unwrap())
+            .unwrap();
+    let lapped = &metrics["stages"][1]["metrics"];
+    assert_eq!(groups.len() as u64, lapped["pastes"].as_u64().unwrap());
+    assert_eq!(groups[0], "g paste_00000");
+    assert_eq!(lapped["uncovered_faces"].as_u64(), Some(0));
+    let draws = lapped["mean_draws_per_face"].as_f64().unwrap();
+    assert!((1.0..4.0).contains(&draws), "{draws}");
+    let mesh = load("bunny_1k8.obj");
+    let face_of: std::collections::HashMap<Vec<u32>, usize> = (0..mesh.face_count())
+        .map(|f| (mesh.face(f).to_vec(), f))
+        .collect();
+    let mut drawn = vec![false; mesh.face_count()];
+    let mut group_faces = 0usize;
+    for l in obj.lines().filter(|l| l.starts_with("f ")) {
+        let vs: Vec<u32> = l[2..]
+            .split(' ')
+            .map(|c| c.split('/').next().unwrap().parse::<u32>().unwrap() - 1)
+            .collect();
+        group_faces += 1;
+        // The OBJ keeps each face's corner order.
+        drawn[face_of[&vs]] = true;
+    }
+    assert!(group_faces >= mesh.face_count());
+    assert!(
+        drawn.iter().all(|&d| d),
+        "every face is drawn by some paste"
+    );
+}
+
+#[test]
+fn lapped_configs_are_valid() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut found = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        let name = path.file_name().unwrap().to_string_lossy().into_owned();
+        if name.contains("_lapped_") && name.ends_with(".toml") {
+            let source = ConfigSource::from_file(&path).unwrap();
+            Pipeline::from_source(source).unwrap_or_else(|e| panic!("{name}: {e}"));
+            found += 1;
+        }
+    }
+    assert!(found >= 3);
+}
