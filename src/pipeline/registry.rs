@@ -189,6 +189,9 @@ pub fn registry() -> Vec<StageInfo> {
     vec![
         entry::<orientation::Orientation>(),
         entry::<init_colours::InitColours>(),
+        entry::<subdivide_sqrt2::SubdivideSqrt2>(),
+        entry::<diffuse_orientation::DiffuseOrientation>(),
+        entry::<graph_match::GraphMatch>(),
         entry::<export::Export>(),
     ]
 }
