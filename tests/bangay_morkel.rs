@@ -253,6 +253,7 @@ fn oversampled_and_plain_matching_pick_the_same_texel() {
                     ..settings
                 },
                 &[centre],
+                BatchRule::Exact,
                 1,
                 &mut st,
             );
@@ -323,7 +324,15 @@ fn synthesise_plane(ex: &Image, graph_cut: bool, seed: u64) -> (PolyMesh, Synthe
             let order = if li == 0 && pass == 0 {
                 let up = vec![Vec3::Y; nv];
                 let s = sweep_order(&sweep_field(&mesh.positions, &topo, &up, &[0], 10));
-                let stats = match_pass(&level, &images, &settings, &s, seed, &mut st);
+                let stats = match_pass(
+                    &level,
+                    &images,
+                    &settings,
+                    &s,
+                    BatchRule::Exact,
+                    seed,
+                    &mut st,
+                );
                 assert_eq!(
                     stats.random_starts, 1,
                     "a sweep grows one front from one start"
@@ -336,7 +345,15 @@ fn synthesise_plane(ex: &Image, graph_cut: bool, seed: u64) -> (PolyMesh, Synthe
                 ));
                 o
             };
-            match_pass(&level, &images, &settings, &order, seed, &mut st);
+            match_pass(
+                &level,
+                &images,
+                &settings,
+                &order,
+                BatchRule::Relaxed,
+                seed,
+                &mut st,
+            );
         }
         assert!(
             st.coloured.iter().all(|&c| c),

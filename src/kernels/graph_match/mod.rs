@@ -21,10 +21,12 @@
 //!    [`crate::kernels::graph_cut_transfer`]).
 //!
 //! [`match_pass`] runs this over a vertex order. Vertices whose k-regions
-//! are disjoint do not see each other's results, so runs of consecutive
-//! vertices with pairwise disjoint regions are matched in parallel: the
-//! result is exactly that of the sequential order, whatever the thread
-//! count. A single vertex's search is parallel over candidate tiles.
+//! are disjoint do not see each other's results, so batches of vertices
+//! with pairwise disjoint regions are matched in parallel (consecutive ones
+//! for a sweep order, [`BatchRule::Exact`]; any for a random order,
+//! [`BatchRule::Relaxed`]): the result is exactly that of a sequential
+//! order, whatever the thread count. A batch of one vertex is searched in
+//! parallel over candidate tiles.
 
 mod region;
 mod search;
@@ -251,6 +253,28 @@ fn mix(a: u64, b: u64, c: u64) -> u64 {
     z ^ (z >> 31)
 }
 
+/// How closely a pass must follow its vertex order.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BatchRule {
+    /// Exactly the given order (a sweep front): only runs of *consecutive*
+    /// vertices with pairwise disjoint regions are matched together.
+    #[default]
+    Exact,
+    /// The order may be permuted for parallelism (a random order): a vertex
+    /// whose region overlaps the batch being formed waits for the next one.
+    /// The pass then equals processing, one vertex at a time, the order
+    /// "batch 1, batch 2, …", which depends only on the order and the mesh.
+    Relaxed,
+}
+
+/// Vertices planned ahead of the batches, per planning round.
+const PLAN_AHEAD: usize = 4 * MAX_BATCH;
+
+thread_local! {
+    /// Per-thread region buffers (sized by the mesh, so kept between calls).
+    static SCRATCH: std::cell::RefCell<RegionScratch> = std::cell::RefCell::new(RegionScratch::new());
+}
+
 /// One matching pass over `order` (Bangay & Morkel §3.3, §3.4): each vertex
 /// in turn is matched against `images` and coloured (with its region, when
 /// graph cut is on), reading and writing `state`. Vertices a cut of this
@@ -258,8 +282,12 @@ fn mix(a: u64, b: u64, c: u64) -> u64 {
 /// matching work). `seed` only picks the texel of a vertex that has no
 /// coloured region vertex at all (the start of growth).
 ///
-/// The result equals processing `order` one vertex at a time, and does not
-/// depend on the thread count.
+/// Vertices whose k-regions are disjoint neither read nor write each
+/// other's colours, so they are matched in parallel batches of pairwise
+/// disjoint regions, formed as `rule` allows; regions are planned ahead in
+/// parallel. The result equals processing the (possibly permuted, see
+/// [`BatchRule`]) order one vertex at a time and does not depend on the
+/// thread count.
 ///
 /// Preconditions: `state` and `level` describe the same vertices; `images`
 /// has `state.channels` channels; settings in their documented ranges.
@@ -268,6 +296,7 @@ pub fn match_pass(
     images: &MatchImages,
     settings: &GraphMatchSettings,
     order: &[u32],
+    rule: BatchRule,
     seed: u64,
     state: &mut SynthesisState,
 ) -> PassStats {
@@ -276,70 +305,80 @@ pub fn match_pass(
     let mut stats = PassStats::default();
     let mut covered = vec![false; n];
     let mut batch_mark = vec![0u32; n];
-    let mut batch_id = 1u32;
+    let mut batch_id = 0u32;
     let mut batch: Vec<Planned> = Vec::with_capacity(MAX_BATCH);
-    let mut scratch = RegionScratch::new();
-    let mut spare: Vec<KRegion> = Vec::new();
-    for &v in order {
-        if covered[v as usize] {
-            stats.covered_by_cuts += 1;
+    let mut pending: std::collections::VecDeque<Planned> = std::collections::VecDeque::new();
+    let mut kept: std::collections::VecDeque<Planned> = std::collections::VecDeque::new();
+    let mut next = 0usize;
+    loop {
+        if pending.len() < MAX_BATCH && next < order.len() {
+            let end = (next + PLAN_AHEAD).min(order.len());
+            let chunk = &order[next..end];
+            next = end;
+            let planned: Vec<Planned> = chunk
+                .par_iter()
+                .with_min_len(16)
+                .filter(|&&v| !covered[v as usize])
+                .map(|&v| {
+                    SCRATCH.with(|s| plan_vertex(level, images, settings, v, &mut s.borrow_mut()))
+                })
+                .collect();
+            stats.covered_by_cuts += (chunk.len() - planned.len()) as u64;
+            pending.extend(planned);
+        }
+        if pending.is_empty() {
+            if next >= order.len() {
+                break;
+            }
             continue;
         }
-        let mut planned = plan_vertex(level, images, settings, v, &mut scratch, &mut spare);
-        if planned
-            .region
-            .vertices
-            .iter()
-            .any(|&w| batch_mark[w as usize] == batch_id)
-        {
-            run_batch(
-                level,
-                images,
-                settings,
-                seed,
-                state,
-                &mut covered,
-                &mut batch,
-                &mut stats,
-                &mut spare,
-            );
-            batch_id += 1;
-            if covered[v as usize] {
+        batch_id += 1;
+        while let Some(p) = pending.pop_front() {
+            let centre = p.region.vertices[0] as usize;
+            if covered[centre] {
                 stats.covered_by_cuts += 1;
-                spare.push(std::mem::take(&mut planned.region));
                 continue;
             }
+            let clash = p
+                .region
+                .vertices
+                .iter()
+                .any(|&w| batch_mark[w as usize] == batch_id);
+            if clash || batch.len() == MAX_BATCH {
+                match rule {
+                    BatchRule::Exact => {
+                        pending.push_front(p);
+                        break;
+                    }
+                    BatchRule::Relaxed => {
+                        kept.push_back(p);
+                        if batch.len() == MAX_BATCH {
+                            break;
+                        }
+                        continue;
+                    }
+                }
+            }
+            for &w in &p.region.vertices {
+                batch_mark[w as usize] = batch_id;
+            }
+            batch.push(p);
         }
-        for &w in &planned.region.vertices {
-            batch_mark[w as usize] = batch_id;
+        // Deferred vertices go back to the front, in their order.
+        while let Some(p) = kept.pop_back() {
+            pending.push_front(p);
         }
-        batch.push(planned);
-        if batch.len() == MAX_BATCH {
-            run_batch(
-                level,
-                images,
-                settings,
-                seed,
-                state,
-                &mut covered,
-                &mut batch,
-                &mut stats,
-                &mut spare,
-            );
-            batch_id += 1;
-        }
+        run_batch(
+            level,
+            images,
+            settings,
+            seed,
+            state,
+            &mut covered,
+            &mut batch,
+            &mut stats,
+        );
     }
-    run_batch(
-        level,
-        images,
-        settings,
-        seed,
-        state,
-        &mut covered,
-        &mut batch,
-        &mut stats,
-        &mut spare,
-    );
     stats
 }
 
@@ -349,7 +388,6 @@ fn plan_vertex(
     settings: &GraphMatchSettings,
     v: u32,
     scratch: &mut RegionScratch,
-    spare: &mut Vec<KRegion>,
 ) -> Planned {
     let e = level.mean_edge[v as usize];
     let l = images.level_for(settings.r_scale * e);
@@ -362,7 +400,7 @@ fn plan_vertex(
         settings.k_min,
         settings.k_max,
     );
-    let mut region = spare.pop().unwrap_or_default();
+    let mut region = KRegion::default();
     k_region(
         level.positions,
         level.topo,
@@ -387,7 +425,6 @@ fn run_batch(
     covered: &mut [bool],
     batch: &mut Vec<Planned>,
     stats: &mut PassStats,
-    spare: &mut Vec<KRegion>,
 ) {
     if batch.is_empty() {
         return;
@@ -419,7 +456,7 @@ fn run_batch(
         *stats += o.stats;
     }
     stats.batches += 1;
-    spare.extend(batch.drain(..).map(|p| p.region));
+    batch.clear();
 }
 
 /// Wraps (or clamps) a level-0 pixel coordinate into the exemplar.

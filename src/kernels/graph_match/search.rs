@@ -117,10 +117,6 @@ pub struct BestMatch {
     pub distance: f32,
 }
 
-/// Partial sums are checked against the best full sum so far after every
-/// this many terms.
-const PRUNE_EVERY: usize = 2;
-
 /// Relative slack of the pruning test, so rounding can never prune the
 /// candidate that would win.
 const PRUNE_SLACK: f32 = 1.0 + 1e-5;
@@ -258,12 +254,11 @@ fn score_tile_generic(
         for i in 0..TILE {
             acc[i] += m * t[i];
         }
-        if (g + 1) % PRUNE_EVERY == 0 {
-            let least = acc.iter().fold(f32::INFINITY, |a, &b| a.min(b));
-            let best = f32::from_bits(bound.load(Ordering::Relaxed));
-            if least > best * PRUNE_SLACK {
-                return None;
-            }
+        // After every term: is any lane still within the bound? Written as
+        // an OR of compares, which vectorises (a running minimum does not).
+        let limit = f32::from_bits(bound.load(Ordering::Relaxed)) * PRUNE_SLACK;
+        if !acc.iter().fold(false, |alive, &a| alive | (a <= limit)) {
+            return None;
         }
     }
     let mut best = (acc[0], 0usize);

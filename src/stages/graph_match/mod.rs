@@ -17,8 +17,8 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::graph_match::{
-    GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats, SynthesisState, match_pass,
-    mean_edge_lengths,
+    BatchRule, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats, SynthesisState,
+    match_pass, mean_edge_lengths,
 };
 use crate::kernels::sweep::{sweep_field, sweep_order};
 use crate::mesh::Topology;
@@ -323,7 +323,7 @@ impl Stage for GraphMatch {
                 let passes = settings.passes_for(li);
                 let mut level_stats = PassStats::default();
                 for pass in 0..passes {
-                    let order = if li == 0 && pass == 0 && settings.coarse_order == CoarseOrder::Sweep {
+                    let (order, rule) = if li == 0 && pass == 0 && settings.coarse_order == CoarseOrder::Sweep {
                         let values = match sweep {
                             Some(s) if s.0.len() == nv => s.0.clone(),
                             _ => {
@@ -331,17 +331,18 @@ impl Stage for GraphMatch {
                                 sweep_field(&mesh.positions, &topo, &dirs, &[0], 30)
                             }
                         };
-                        sweep_order(&values)
+                        (sweep_order(&values), BatchRule::Exact)
                     } else {
                         let mut o: Vec<u32> = (0..nv as u32).collect();
                         o.shuffle(&mut seed.rng(idx, ((li as u64) << 16) | pass as u64));
-                        o
+                        (o, BatchRule::Relaxed)
                     };
                     let s = match_pass(
                         &level,
                         &images,
                         &kernel,
                         &order,
+                        rule,
                         seed.derive(idx, (1 << 40) | ((li as u64) << 16) | pass as u64),
                         &mut st,
                     );
