@@ -1,9 +1,12 @@
 //! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
 
 pub mod bake_triangles;
+pub mod diffuse_orientation;
 pub mod flatten;
 pub mod frames;
 pub mod geodesic;
+pub mod graph_cut_transfer;
+pub mod graph_match;
 pub mod jump_map;
 pub mod jump_surface;
 pub mod lapped;
@@ -14,5 +17,6 @@ pub mod relax_orientation;
 pub mod retile;
 pub mod sqrt2;
 pub mod surface_sample;
+pub mod sweep;
 pub mod vertex_order;
 pub mod wl_match;

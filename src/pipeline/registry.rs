@@ -201,6 +201,9 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<wl_match::Match>(),
         entry::<tangent_field::TangentField>(),
         entry::<lapped_paste::LappedPaste>(),
+        entry::<subdivide_sqrt2::SubdivideSqrt2>(),
+        entry::<diffuse_orientation::DiffuseOrientation>(),
+        entry::<graph_match::GraphMatch>(),
         entry::<export::Export>(),
     ]
 }

@@ -2,7 +2,9 @@
 //! The world model (components and resources) is in [`world`].
 
 pub mod builtin_pyramid;
+pub mod diffuse_orientation;
 pub mod export;
+pub mod graph_match;
 pub mod init_colours;
 pub mod jump_image;
 pub mod jump_map;
@@ -12,6 +14,7 @@ pub mod orientation;
 pub mod relax_orientation;
 pub mod result_metrics;
 pub mod retile;
+pub mod subdivide_sqrt2;
 pub mod tangent_field;
 pub mod wl_match;
 pub mod world;

@@ -267,3 +267,23 @@ pub struct PasteRecord {
     /// `faces[0]`, then of `faces[1]`, ...), `v = 0` at the top row.
     pub uvs: Vec<Vec2>,
 }
+
+// ----- √2 hierarchy (Bangay & Morkel) --------------------------------------------
+
+/// Per-vertex sweep value (Turk 2001; Bangay & Morkel 2006 §3.1.1): grows
+/// along the orientation field from an anchor; sorting by it gives the
+/// synthesis order of the coarsest level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct SweepField(pub Vec<f32>);
+
+/// On a √2 hierarchy level: the parents of each of its vertices in the next
+/// coarser level (`MeshLevel(l + 1)`), so attributes travel down the
+/// hierarchy. Absent on the coarsest level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct LevelParents(pub crate::kernels::sqrt2::Parents);
+
+/// The √2 mesh hierarchy made by `subdivide_sqrt2`: its level entities,
+/// finest first (index `l` holds `MeshLevel(l)`). Vertex ids are shared:
+/// vertex `v` of a coarser level is vertex `v` of every finer one.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct Sqrt2Pyramid(pub Vec<Entity>);

@@ -1,0 +1,625 @@
+//! Texture synthesis by k-region graph matching (Bangay & Morkel 2006 §3.3,
+//! with the graph-cut transfer of §3.4).
+//!
+//! For a vertex `P` to colour:
+//! 1. its *k-region* (the vertices at most `k` edges away, Fig. 7) is
+//!    unfolded into texture space: every region vertex gets an offset
+//!    `(uᵢ, vᵢ)` from `P`, accumulated along shortest edge paths and
+//!    averaged over all of them (§3.3.1, [`k_region`]); `k` follows from a
+//!    region size given in texels (§3.3.2, [`region_k`]);
+//! 2. every coloured region vertex reads the Gaussian stack level of its own
+//!    vertex density, `log2(r_scale · ē)` (§3.3.4,
+//!    [`MatchImages::level_for`]), at `Q + (uᵢ, vᵢ)`;
+//! 3. the texel `Q` of the exemplar with the smallest sum of squared colour
+//!    differences wins, searched exhaustively (Algorithm 1,
+//!    [`best_match`]); region vertices that land on the same texel are
+//!    first replaced by their mean colour with their count as weight
+//!    (oversampling, §3.3.3, [`MatchGroups`]);
+//! 4. `P` takes the colour of `Q` on its own level and remembers `Q`
+//!    (`SourceTexels`); with graph cut on, the region around `P` takes the
+//!    exemplar imprint where a minimum cut says so (§3.4,
+//!    [`crate::kernels::graph_cut_transfer`]).
+//!
+//! [`match_pass`] runs this over a vertex order. Vertices whose k-regions
+//! are disjoint do not see each other's results, so batches of vertices
+//! with pairwise disjoint regions are matched in parallel (consecutive ones
+//! for a sweep order, [`BatchRule::Exact`]; any for a random order,
+//! [`BatchRule::Relaxed`]): the result is exactly that of a sequential
+//! order, whatever the thread count. A batch of one vertex is searched in
+//! parallel over candidate tiles.
+
+mod region;
+mod search;
+mod stack;
+
+pub use region::{KRegion, RegionScratch, k_for_side, k_region, mean_edge_lengths, region_k};
+pub use search::{BestMatch, MatchGroups, Sample, best_match};
+pub use stack::{ImageLevels, MatchImages};
+
+use crate::image::sample::Wrap;
+use crate::kernels::frames::TangentFrame;
+use crate::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
+use crate::kernels::sqrt2::Parents;
+use crate::mesh::Topology;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// At most this many vertices are matched as one parallel batch.
+const MAX_BATCH: usize = 64;
+
+/// Settings of region matching.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GraphMatchSettings {
+    /// `r_scale`: texels of the exemplar per world unit (§3.3.2); > 0.
+    pub r_scale: f32,
+    /// `n`: edge of the square neighbourhood in texels of the matched level
+    /// (§3.3.2); > 0.
+    pub region_texels: f32,
+    /// Smallest `k` used (at least 1, so a region has neighbours).
+    pub k_min: u32,
+    /// Largest `k` used (bounds the cost where vertices are dense).
+    pub k_max: u32,
+    /// Oversampling averaging of §3.3.3 (same result, fewer comparisons).
+    pub averaging: bool,
+    /// Graph-cut transfer of the matched neighbourhood onto the region
+    /// (§3.4); when off only the matched vertex is coloured.
+    pub graph_cut: bool,
+    /// `σ` of eq. 1; > 0.
+    pub cut_sigma: f32,
+}
+
+impl Default for GraphMatchSettings {
+    fn default() -> Self {
+        Self {
+            r_scale: 64.0,
+            region_texels: 5.0,
+            k_min: 1,
+            k_max: 12,
+            averaging: true,
+            graph_cut: false,
+            cut_sigma: 1.0,
+        }
+    }
+}
+
+/// A mesh level as the matcher reads it.
+#[derive(Clone, Copy, Debug)]
+pub struct LevelMesh<'a> {
+    /// Vertex positions.
+    pub positions: &'a [Vec3],
+    /// Its topology.
+    pub topo: &'a Topology,
+    /// Tangent frames (s right, t up), one per vertex.
+    pub frames: &'a [TangentFrame],
+    /// Mean edge length per vertex ([`mean_edge_lengths`]).
+    pub mean_edge: &'a [f32],
+}
+
+/// What synthesis has written so far on one level.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SynthesisState {
+    /// Values per colour.
+    pub channels: usize,
+    /// Colours, `channels` per vertex.
+    pub colours: Vec<f32>,
+    /// Matched exemplar coordinate per vertex, in level-0 pixels (pixel
+    /// centres at `i + 0.5`).
+    pub texels: Vec<Vec2>,
+    /// Whether each vertex has a colour yet.
+    pub coloured: Vec<bool>,
+    /// The image level each colour stands for: the level it was copied
+    /// from. A vertex's colour is compared with the exemplar on this level
+    /// (§3.3.4), so colours carried down from a coarser mesh level, which
+    /// stand for larger areas, are matched against blurrier levels than
+    /// colours matched on the current one ("simultaneous matching against
+    /// multiple levels", abstract).
+    pub levels: Vec<u8>,
+}
+
+impl SynthesisState {
+    /// `vertices` vertices without colours.
+    pub fn uncoloured(vertices: usize, channels: usize) -> Self {
+        Self {
+            channels,
+            colours: vec![0.0; vertices * channels],
+            texels: vec![Vec2::ZERO; vertices],
+            coloured: vec![false; vertices],
+            levels: vec![0; vertices],
+        }
+    }
+
+    /// Every vertex coloured with `colours` (`channels` per vertex), taken
+    /// to stand for image level `level`.
+    pub fn from_colours(colours: Vec<f32>, channels: usize, level: u8) -> Self {
+        let n = colours.len() / channels.max(1);
+        Self {
+            channels,
+            colours,
+            texels: vec![Vec2::ZERO; n],
+            coloured: vec![true; n],
+            levels: vec![level; n],
+        }
+    }
+
+    /// The state carried to a refined mesh level through its √2 `parents`:
+    /// an old vertex keeps everything bit for bit; a new one gets the
+    /// weighted mean colour and texel of its parents, is coloured when all
+    /// of them are, and stands for the coarsest level among them.
+    pub fn carried(&self, parents: &Parents) -> Self {
+        let ch = self.channels;
+        let n = parents.len();
+        let mut out = Self::uncoloured(n, ch);
+        for v in 0..n {
+            let (pv, pw) = parents.of(v);
+            if let ([s], [w]) = (pv, pw)
+                && *w == 1.0
+            {
+                let s = *s as usize;
+                out.colours[v * ch..(v + 1) * ch]
+                    .copy_from_slice(&self.colours[s * ch..(s + 1) * ch]);
+                out.texels[v] = self.texels[s];
+                out.coloured[v] = self.coloured[s];
+                out.levels[v] = self.levels[s];
+                continue;
+            }
+            let mut texel = Vec2::ZERO;
+            let (mut coloured, mut level) = (true, 0u8);
+            for (&s, &w) in pv.iter().zip(pw) {
+                let s = s as usize;
+                for c in 0..ch {
+                    out.colours[v * ch + c] += self.colours[s * ch + c] * w;
+                }
+                texel += self.texels[s] * w;
+                coloured &= self.coloured[s];
+                level = level.max(self.levels[s]);
+            }
+            out.texels[v] = texel;
+            out.coloured[v] = coloured;
+            out.levels[v] = level;
+        }
+        out
+    }
+}
+
+/// Counts of one or more passes (the figures of Table 1 and §3.4).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct PassStats {
+    /// Vertices matched.
+    pub matched: u64,
+    /// Vertices skipped because a graph cut of the same pass coloured them.
+    pub covered_by_cuts: u64,
+    /// Vertices that had no coloured region vertex and took a random texel.
+    pub random_starts: u64,
+    /// Region vertices compared per candidate, summed over matched vertices,
+    /// counting every coloured region vertex ("without averaging").
+    pub comparisons_plain: u64,
+    /// The same counting one term per distinct texel ("with averaging").
+    pub comparisons_averaged: u64,
+    /// Graph cuts solved.
+    pub cuts: u64,
+    /// Vertices that took exemplar colours in cuts (the matched vertices
+    /// included).
+    pub cut_vertices: u64,
+    /// Largest number of vertices one cut coloured.
+    pub cut_vertices_max: u64,
+    /// Sum of the cut costs (seams), colour-distance units.
+    pub cut_cost: f64,
+    /// Largest gap between a cut's cost and its max-flow value.
+    pub cut_flow_gap: f64,
+    /// Parallel batches the pass was split into.
+    pub batches: u64,
+}
+
+impl std::ops::AddAssign for PassStats {
+    fn add_assign(&mut self, o: Self) {
+        self.matched += o.matched;
+        self.covered_by_cuts += o.covered_by_cuts;
+        self.random_starts += o.random_starts;
+        self.comparisons_plain += o.comparisons_plain;
+        self.comparisons_averaged += o.comparisons_averaged;
+        self.cuts += o.cuts;
+        self.cut_vertices += o.cut_vertices;
+        self.cut_vertices_max = self.cut_vertices_max.max(o.cut_vertices_max);
+        self.cut_cost += o.cut_cost;
+        self.cut_flow_gap = self.cut_flow_gap.max(o.cut_flow_gap);
+        self.batches += o.batches;
+    }
+}
+
+/// A vertex ready to match: its region and levels.
+struct Planned {
+    region: KRegion,
+    /// Image level of the centre (stack level or pyramid level).
+    level: usize,
+}
+
+/// What matching one vertex decided; applied after its batch.
+struct Outcome {
+    /// Vertex, exemplar texel (level-0 pixels) and the level its colour
+    /// came from.
+    writes: Vec<(u32, Vec2, u8)>,
+    colours: Vec<f32>,
+    stats: PassStats,
+}
+
+/// SplitMix64-style mixing (the same as `stages::world::mix`, kept here so
+/// kernels do not depend on stages).
+fn mix(a: u64, b: u64, c: u64) -> u64 {
+    let mut z = a
+        .wrapping_add(b.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+        .wrapping_add(c.wrapping_mul(0xD1B5_4A32_D192_ED03));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// How closely a pass must follow its vertex order.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BatchRule {
+    /// Exactly the given order (a sweep front): only runs of *consecutive*
+    /// vertices with pairwise disjoint regions are matched together.
+    #[default]
+    Exact,
+    /// The order may be permuted for parallelism (a random order): a vertex
+    /// whose region overlaps the batch being formed waits for the next one.
+    /// The pass then equals processing, one vertex at a time, the order
+    /// "batch 1, batch 2, …", which depends only on the order and the mesh.
+    Relaxed,
+}
+
+/// Vertices planned ahead of the batches, per planning round.
+const PLAN_AHEAD: usize = 4 * MAX_BATCH;
+
+thread_local! {
+    /// Per-thread region buffers (sized by the mesh, so kept between calls).
+    static SCRATCH: std::cell::RefCell<RegionScratch> = std::cell::RefCell::new(RegionScratch::new());
+}
+
+/// One matching pass over `order` (Bangay & Morkel §3.3, §3.4): each vertex
+/// in turn is matched against `images` and coloured (with its region, when
+/// graph cut is on), reading and writing `state`. Vertices a cut of this
+/// pass already coloured are skipped (that is where the transfer saves
+/// matching work). `seed` only picks the texel of a vertex that has no
+/// coloured region vertex at all (the start of growth).
+///
+/// Vertices whose k-regions are disjoint neither read nor write each
+/// other's colours, so they are matched in parallel batches of pairwise
+/// disjoint regions, formed as `rule` allows; regions are planned ahead in
+/// parallel. The result equals processing the (possibly permuted, see
+/// [`BatchRule`]) order one vertex at a time and does not depend on the
+/// thread count.
+///
+/// Preconditions: `state` and `level` describe the same vertices; `images`
+/// has `state.channels` channels; settings in their documented ranges.
+pub fn match_pass(
+    level: &LevelMesh,
+    images: &MatchImages,
+    settings: &GraphMatchSettings,
+    order: &[u32],
+    rule: BatchRule,
+    seed: u64,
+    state: &mut SynthesisState,
+) -> PassStats {
+    let _span = tracing::debug_span!("match_pass", vertices = order.len()).entered();
+    let n = level.positions.len();
+    let mut stats = PassStats::default();
+    let mut covered = vec![false; n];
+    let mut batch_mark = vec![0u32; n];
+    let mut batch_id = 0u32;
+    let mut batch: Vec<Planned> = Vec::with_capacity(MAX_BATCH);
+    let mut pending: std::collections::VecDeque<Planned> = std::collections::VecDeque::new();
+    let mut kept: std::collections::VecDeque<Planned> = std::collections::VecDeque::new();
+    let mut next = 0usize;
+    loop {
+        if pending.len() < MAX_BATCH && next < order.len() {
+            let end = (next + PLAN_AHEAD).min(order.len());
+            let chunk = &order[next..end];
+            next = end;
+            let planned: Vec<Planned> = chunk
+                .par_iter()
+                .with_min_len(16)
+                .filter(|&&v| !covered[v as usize])
+                .map(|&v| {
+                    SCRATCH.with(|s| plan_vertex(level, images, settings, v, &mut s.borrow_mut()))
+                })
+                .collect();
+            stats.covered_by_cuts += (chunk.len() - planned.len()) as u64;
+            pending.extend(planned);
+        }
+        if pending.is_empty() {
+            if next >= order.len() {
+                break;
+            }
+            continue;
+        }
+        batch_id += 1;
+        while let Some(p) = pending.pop_front() {
+            let centre = p.region.vertices[0] as usize;
+            if covered[centre] {
+                stats.covered_by_cuts += 1;
+                continue;
+            }
+            let clash = p
+                .region
+                .vertices
+                .iter()
+                .any(|&w| batch_mark[w as usize] == batch_id);
+            if clash || batch.len() == MAX_BATCH {
+                match rule {
+                    BatchRule::Exact => {
+                        pending.push_front(p);
+                        break;
+                    }
+                    BatchRule::Relaxed => {
+                        kept.push_back(p);
+                        if batch.len() == MAX_BATCH {
+                            break;
+                        }
+                        continue;
+                    }
+                }
+            }
+            for &w in &p.region.vertices {
+                batch_mark[w as usize] = batch_id;
+            }
+            batch.push(p);
+        }
+        // Deferred vertices go back to the front, in their order.
+        while let Some(p) = kept.pop_back() {
+            pending.push_front(p);
+        }
+        run_batch(
+            level,
+            images,
+            settings,
+            seed,
+            state,
+            &mut covered,
+            &mut batch,
+            &mut stats,
+        );
+    }
+    stats
+}
+
+fn plan_vertex(
+    level: &LevelMesh,
+    images: &MatchImages,
+    settings: &GraphMatchSettings,
+    v: u32,
+    scratch: &mut RegionScratch,
+) -> Planned {
+    let e = level.mean_edge[v as usize];
+    let l = images.level_for(settings.r_scale * e);
+    let factor = images.level_factor(l);
+    let k = region_k(
+        settings.region_texels,
+        factor,
+        settings.r_scale,
+        e,
+        settings.k_min,
+        settings.k_max,
+    );
+    let mut region = KRegion::default();
+    k_region(
+        level.positions,
+        level.topo,
+        level.frames,
+        v,
+        k,
+        settings.r_scale / factor,
+        settings.graph_cut,
+        scratch,
+        &mut region,
+    );
+    Planned { region, level: l }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn run_batch(
+    level: &LevelMesh,
+    images: &MatchImages,
+    settings: &GraphMatchSettings,
+    seed: u64,
+    state: &mut SynthesisState,
+    covered: &mut [bool],
+    batch: &mut Vec<Planned>,
+    stats: &mut PassStats,
+) {
+    if batch.is_empty() {
+        return;
+    }
+    let st: &SynthesisState = state;
+    let outcomes: Vec<Outcome> = if batch.len() == 1 {
+        vec![match_vertex(
+            level, images, settings, seed, st, &batch[0], true,
+        )]
+    } else {
+        batch
+            .par_iter()
+            .map(|p| match_vertex(level, images, settings, seed, st, p, false))
+            .collect()
+    };
+    let ch = state.channels;
+    for (p, o) in batch.iter().zip(&outcomes) {
+        let centre = p.region.vertices[0];
+        for (i, &(w, texel, l)) in o.writes.iter().enumerate() {
+            let wi = w as usize;
+            state.colours[wi * ch..(wi + 1) * ch].copy_from_slice(&o.colours[i * ch..(i + 1) * ch]);
+            state.texels[wi] = texel;
+            state.coloured[wi] = true;
+            state.levels[wi] = l;
+            if w != centre {
+                covered[wi] = true;
+            }
+        }
+        *stats += o.stats;
+    }
+    stats.batches += 1;
+    batch.clear();
+}
+
+/// Wraps (or clamps) a level-0 pixel coordinate into the exemplar.
+fn wrap_texel(images: &MatchImages, t: Vec2) -> Vec2 {
+    let img = images.image(0);
+    let (w, h) = (img.width as f32, img.height as f32);
+    match images.wrap() {
+        Wrap::Repeat => Vec2::new(t.x.rem_euclid(w), t.y.rem_euclid(h)),
+        Wrap::Clamp => Vec2::new(t.x.clamp(0.0, w), t.y.clamp(0.0, h)),
+    }
+}
+
+fn match_vertex(
+    level: &LevelMesh,
+    images: &MatchImages,
+    settings: &GraphMatchSettings,
+    seed: u64,
+    state: &SynthesisState,
+    planned: &Planned,
+    parallel: bool,
+) -> Outcome {
+    let ch = state.channels;
+    let region = &planned.region;
+    let centre = region.vertices[0];
+    let lp = planned.level;
+    let factor = images.level_factor(lp);
+    let pyramid = images.kind() == ImageLevels::Pyramid;
+    // Per region vertex: the level of its own density (§3.3.4), which a
+    // transferred colour is taken from.
+    let levels: Vec<usize> = region
+        .vertices
+        .iter()
+        .map(|&w| {
+            if pyramid {
+                lp
+            } else {
+                images.level_for(settings.r_scale * level.mean_edge[w as usize])
+            }
+        })
+        .collect();
+    let mut samples = Vec::with_capacity(region.len());
+    let mut colours = Vec::with_capacity(region.len() * ch);
+    for (i, &w) in region.vertices.iter().enumerate() {
+        let wi = w as usize;
+        if !state.coloured[wi] {
+            continue;
+        }
+        // A colour is compared on the level it stands for.
+        let l = if pyramid {
+            lp
+        } else {
+            (state.levels[wi] as usize).min(images.levels() - 1)
+        };
+        let o = region.offset[i].round();
+        samples.push(Sample {
+            level: l as u32,
+            offset: images.reduce_offset(l, [o.x as i32, o.y as i32]),
+        });
+        colours.extend_from_slice(&state.colours[w as usize * ch..(w as usize + 1) * ch]);
+    }
+    let mut stats = PassStats {
+        matched: 1,
+        comparisons_plain: samples.len() as u64,
+        ..Default::default()
+    };
+    let mut groups = MatchGroups::new();
+    groups.build(&samples, &colours, ch, settings.averaging);
+    // Either way, count the terms averaging would leave (Table 1 reports both).
+    stats.comparisons_averaged = if settings.averaging {
+        groups.len() as u64
+    } else {
+        let mut distinct = samples.clone();
+        distinct.sort_unstable();
+        distinct.dedup();
+        distinct.len() as u64
+    };
+    // Seeds for the pruning bound: where the centre and its coloured
+    // neighbours came from, shifted by their offsets (Ashikhmin-style
+    // coherent candidates). They only tighten the bound.
+    let mut seeds: Vec<[i32; 2]> = Vec::new();
+    for (i, &w) in region.vertices.iter().enumerate() {
+        if region.depth[i] > 1 || !state.coloured[w as usize] {
+            continue;
+        }
+        let t = state.texels[w as usize] / factor - region.offset[i];
+        seeds.push([t.x.floor() as i32, t.y.floor() as i32]);
+    }
+    let q = match best_match(images, lp, &groups, &seeds, parallel) {
+        Some(b) => [b.x, b.y],
+        None => {
+            stats.random_starts = 1;
+            let img = images.image(lp);
+            let r = mix(seed, centre as u64, 0x5EED);
+            [
+                (((r >> 32) * img.width as u64) >> 32) as u32,
+                (((r & 0xFFFF_FFFF) * img.height as u64) >> 32) as u32,
+            ]
+        }
+    };
+    let qc = Vec2::new(q[0] as f32 + 0.5, q[1] as f32 + 0.5);
+    let mut writes = vec![(centre, wrap_texel(images, qc * factor), lp as u8)];
+    let mut out_colours = images.image(lp).pixel(q[0], q[1]).to_vec();
+    if settings.graph_cut && region.len() > 1 {
+        let n = region.len();
+        let mut texture = vec![0.0f32; n * ch];
+        let mut surface = vec![0.0f32; n * ch];
+        let mut coloured = vec![false; n];
+        let mut border = vec![false; n];
+        let mut distance = vec![0.0f32; n];
+        let wrap = images.wrap();
+        for (i, &w) in region.vertices.iter().enumerate() {
+            let wi = w as usize;
+            let at = qc + region.offset[i];
+            if i == 0 {
+                texture[..ch].copy_from_slice(&out_colours);
+            } else {
+                images.image(levels[i]).sample_bilinear(
+                    at.x,
+                    at.y,
+                    wrap,
+                    &mut texture[i * ch..(i + 1) * ch],
+                );
+            }
+            surface[i * ch..(i + 1) * ch].copy_from_slice(&state.colours[wi * ch..(wi + 1) * ch]);
+            coloured[i] = state.coloured[wi];
+            border[i] = region.depth[i] == region.k;
+            distance[i] = region.offset[i].length();
+        }
+        let cut = graph_cut_transfer(
+            &TransferRegion {
+                channels: ch,
+                edges: &region.edges,
+                surface: &surface,
+                texture: &texture,
+                coloured: &coloured,
+                border: &border,
+                distance: &distance,
+                target: 0,
+                diameter: settings.region_texels,
+            },
+            settings.cut_sigma,
+        );
+        let taken = cut.taken() as u64;
+        stats.cuts = 1;
+        stats.cut_vertices = taken;
+        stats.cut_vertices_max = taken;
+        stats.cut_cost = cut.cost;
+        stats.cut_flow_gap = (cut.cost - cut.flow).abs();
+        for i in 1..n {
+            if cut.take_texture[i] {
+                let at = qc + region.offset[i];
+                writes.push((
+                    region.vertices[i],
+                    wrap_texel(images, at * factor),
+                    levels[i] as u8,
+                ));
+                out_colours.extend_from_slice(&texture[i * ch..(i + 1) * ch]);
+            }
+        }
+    }
+    Outcome {
+        writes,
+        colours: out_colours,
+        stats,
+    }
+}

@@ -1,0 +1,330 @@
+//! Exhaustive region/neighbourhood matching (Bangay & Morkel 2006 §3.3.1,
+//! Algorithm 1) with the oversampling reduction of §3.3.3.
+
+use super::stack::{MatchImages, TILE};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+/// Where one coloured region vertex reads the exemplar: a level and an
+/// integer texel offset from the candidate, already reduced with
+/// [`MatchImages::reduce_offset`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Sample {
+    /// Image level.
+    pub level: u32,
+    /// Reduced texel offset `(x, y)` on that level.
+    pub offset: [i32; 2],
+}
+
+/// The terms of the matching sum for one region: each term is one texel
+/// (level and offset), the mean colour of the region vertices that read it
+/// and their number `mᵢ`.
+///
+/// With oversampling averaging (§3.3.3) vertices reading the same texel
+/// share a term: `Σᵢ Σⱼ |vᵢⱼ − wᵢ|² = Σᵢ mᵢ |wᵢ − v̄ᵢ|² + C`, with `C`
+/// independent of the candidate, so the best candidate is the same and
+/// there are fewer terms. Without it every vertex is its own term.
+#[derive(Clone, Debug, Default)]
+pub struct MatchGroups {
+    channels: usize,
+    samples: Vec<Sample>,
+    weight: Vec<f32>,
+    colour: Vec<f32>,
+    order: Vec<u32>,
+    sum: Vec<f64>,
+}
+
+impl MatchGroups {
+    /// Empty groups; buffers grow on first use.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Number of terms (the "vertex comparisons" per candidate of Table 1).
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    /// True when there is nothing to compare (no coloured region vertex).
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Builds the terms from `samples` and their colours (`channels`
+    /// values each, `colours.len() == samples.len() · channels`).
+    ///
+    /// With `averaging`, samples reading the same texel become one term
+    /// weighted by their count with their mean colour, ordered heaviest
+    /// first (ties by level and offset), so partial sums grow fast; without
+    /// it, one term of weight 1 per sample, in the given order.
+    pub fn build(&mut self, samples: &[Sample], colours: &[f32], channels: usize, averaging: bool) {
+        assert_eq!(
+            colours.len(),
+            samples.len() * channels,
+            "one colour per sample"
+        );
+        self.channels = channels;
+        self.samples.clear();
+        self.weight.clear();
+        self.colour.clear();
+        if !averaging {
+            self.samples.extend_from_slice(samples);
+            self.weight.resize(samples.len(), 1.0);
+            self.colour.extend_from_slice(colours);
+            return;
+        }
+        self.order.clear();
+        self.order.extend(0..samples.len() as u32);
+        self.order
+            .sort_unstable_by_key(|&i| (samples[i as usize], i));
+        let mut i = 0;
+        let mut groups: Vec<(u32, Sample, usize)> = Vec::new();
+        self.sum.clear();
+        while i < self.order.len() {
+            let s = samples[self.order[i] as usize];
+            let first = i;
+            let base = self.sum.len();
+            self.sum.resize(base + channels, 0.0);
+            while i < self.order.len() && samples[self.order[i] as usize] == s {
+                let k = self.order[i] as usize;
+                for c in 0..channels {
+                    self.sum[base + c] += colours[k * channels + c] as f64;
+                }
+                i += 1;
+            }
+            groups.push(((i - first) as u32, s, base));
+        }
+        groups.sort_by(|a, b| b.0.cmp(&a.0).then(a.1.cmp(&b.1)));
+        for (m, s, base) in groups {
+            self.samples.push(s);
+            self.weight.push(m as f32);
+            for c in 0..channels {
+                self.colour.push((self.sum[base + c] / m as f64) as f32);
+            }
+        }
+    }
+}
+
+/// The best candidate of a search.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BestMatch {
+    /// Candidate texel on the searched level.
+    pub x: u32,
+    /// Candidate texel row on the searched level.
+    pub y: u32,
+    /// Its weighted sum of squared differences (without the constant `C`
+    /// of §3.3.3 when the terms were averaged).
+    pub distance: f32,
+}
+
+/// Relative slack of the pruning test, so rounding can never prune the
+/// candidate that would win.
+const PRUNE_SLACK: f32 = 1.0 + 1e-5;
+
+/// The candidate texel `Q` on level `level` minimising
+/// `Σ mᵢ |colour(level(i), Q + offsetᵢ) − v̄ᵢ|²` over every texel of the
+/// level (exhaustive, Algorithm 1); ties go to the lowest `y · width + x`.
+/// `None` when `groups` is empty.
+///
+/// Candidates are scored 32 adjacent texels of a row at a time, a tight
+/// loop over contiguous floats (compiled for AVX2 too when the processor
+/// has it; both builds do the same IEEE operations in the same order, so
+/// results are identical). A tile is dropped as soon as all its partial
+/// sums exceed the best full sum found so far (sums only grow), which
+/// never changes the result; `seeds` (texels on `level`, any integers,
+/// reduced like offsets) are scored first to make that bound tight.
+/// `parallel` spreads tiles over rayon's pool; the result does not depend
+/// on it or on the thread count.
+pub fn best_match(
+    images: &MatchImages,
+    level: usize,
+    groups: &MatchGroups,
+    seeds: &[[i32; 2]],
+    parallel: bool,
+) -> Option<BestMatch> {
+    if groups.is_empty() {
+        return None;
+    }
+    let planes = images.planes(level);
+    let (w, h) = (planes.width, planes.height);
+    let bound = AtomicU32::new(f32::INFINITY.to_bits());
+    for &s in seeds {
+        let [x, y] = images.reduce_offset(level, s);
+        let (x, y) = (
+            x.clamp(0, w as i32 - 1) as usize,
+            y.clamp(0, h as i32 - 1) as usize,
+        );
+        let d = distance_at(images, groups, x, y);
+        bound.fetch_min(d.to_bits(), Ordering::Relaxed);
+    }
+    let tiles_per_row = w.div_ceil(TILE);
+    let tiles = tiles_per_row * h;
+    let score = |t: usize| {
+        let (y, x0) = (t / tiles_per_row, (t % tiles_per_row) * TILE);
+        score_tile(images, groups, y, x0, w, &bound)
+    };
+    let key = |a: &(f32, u32), b: &(f32, u32)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+    let best = if parallel {
+        (0..tiles).into_par_iter().filter_map(score).min_by(key)
+    } else {
+        (0..tiles).filter_map(score).min_by(key)
+    }?;
+    Some(BestMatch {
+        x: best.1 % w as u32,
+        y: best.1 / w as u32,
+        distance: best.0,
+    })
+}
+
+/// The sum at one candidate, with exactly the operations of `score_tile`.
+fn distance_at(images: &MatchImages, groups: &MatchGroups, x: usize, y: usize) -> f32 {
+    let ch = groups.channels;
+    let mut acc = 0.0f32;
+    for (g, s) in groups.samples.iter().enumerate() {
+        let p = images.planes(s.level as usize);
+        let mut t = 0.0f32;
+        for c in 0..ch {
+            let d = p.data[p.index(c, x, y, s.offset[0], s.offset[1])] - groups.colour[g * ch + c];
+            t += d * d;
+        }
+        acc += groups.weight[g] * t;
+    }
+    acc
+}
+
+fn score_tile(
+    images: &MatchImages,
+    groups: &MatchGroups,
+    y: usize,
+    x0: usize,
+    width: usize,
+    bound: &AtomicU32,
+) -> Option<(f32, u32)> {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor supports AVX2 (checked just above).
+            return unsafe { score_tile_avx2(images, groups, y, x0, width, bound) };
+        }
+    }
+    score_tile_generic(images, groups, y, x0, width, bound)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn score_tile_avx2(
+    images: &MatchImages,
+    groups: &MatchGroups,
+    y: usize,
+    x0: usize,
+    width: usize,
+    bound: &AtomicU32,
+) -> Option<(f32, u32)> {
+    score_tile_generic(images, groups, y, x0, width, bound)
+}
+
+#[inline(always)]
+fn score_tile_generic(
+    images: &MatchImages,
+    groups: &MatchGroups,
+    y: usize,
+    x0: usize,
+    width: usize,
+    bound: &AtomicU32,
+) -> Option<(f32, u32)> {
+    let ch = groups.channels;
+    let mut acc = [0.0f32; TILE];
+    let live = (width - x0).min(TILE);
+    acc[live..].fill(f32::INFINITY);
+    for (g, s) in groups.samples.iter().enumerate() {
+        let p = images.planes(s.level as usize);
+        let colour = &groups.colour[g * ch..(g + 1) * ch];
+        let mut t = [0.0f32; TILE];
+        for (c, &v) in colour.iter().enumerate() {
+            let base = p.index(c, x0, y, s.offset[0], s.offset[1]);
+            let row: &[f32; TILE] = p.data[base..base + TILE]
+                .try_into()
+                .expect("padded planes hold a whole tile");
+            for i in 0..TILE {
+                let d = row[i] - v;
+                t[i] += d * d;
+            }
+        }
+        let m = groups.weight[g];
+        for i in 0..TILE {
+            acc[i] += m * t[i];
+        }
+        // After every term: is any lane still within the bound? Written as
+        // an OR of compares, which vectorises (a running minimum does not).
+        let limit = f32::from_bits(bound.load(Ordering::Relaxed)) * PRUNE_SLACK;
+        if !acc.iter().fold(false, |alive, &a| alive | (a <= limit)) {
+            return None;
+        }
+    }
+    let mut best = (acc[0], 0usize);
+    for (i, &a) in acc.iter().enumerate().take(live).skip(1) {
+        if a < best.0 {
+            best = (a, i);
+        }
+    }
+    bound.fetch_min(best.0.to_bits(), Ordering::Relaxed);
+    Some((best.0, (y * width + x0 + best.1) as u32))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::{Image, sample::Wrap};
+    use crate::kernels::graph_match::stack::ImageLevels;
+
+    fn noise(w: u32, h: u32, c: u32, seed: u32) -> Image {
+        let mut s = seed;
+        let data = (0..w * h * c)
+            .map(|_| {
+                s = s.wrapping_mul(1664525).wrapping_add(1013904223);
+                (s >> 8) as f32 / (1u32 << 24) as f32
+            })
+            .collect();
+        Image::from_data(w, h, c, data).unwrap()
+    }
+
+    #[test]
+    fn finds_a_copied_window_with_and_without_averaging_and_pruning() {
+        for wrap in [Wrap::Repeat, Wrap::Clamp] {
+            let img = noise(45, 37, 3, 7);
+            let images = MatchImages::new(&img, ImageLevels::Stack, 1, wrap);
+            let (qx, qy) = (40i32, 3i32);
+            let mut samples = Vec::new();
+            let mut colours = Vec::new();
+            for dy in -2i32..=2 {
+                for dx in -2..=2 {
+                    for _ in 0..(1 + (dx + dy).unsigned_abs() % 3) {
+                        samples.push(Sample {
+                            level: 0,
+                            offset: images.reduce_offset(0, [dx, dy]),
+                        });
+                        colours.extend_from_slice(img.texel(
+                            (qx + dx) as i64,
+                            (qy + dy) as i64,
+                            wrap,
+                        ));
+                    }
+                }
+            }
+            for averaging in [false, true] {
+                let mut g = MatchGroups::new();
+                g.build(&samples, &colours, 3, averaging);
+                assert_eq!(g.len(), if averaging { 25 } else { samples.len() });
+                for (seeds, parallel) in [
+                    (vec![], false),
+                    (vec![[1, 1]], true),
+                    (vec![[40, 3]], false),
+                ] {
+                    let b = best_match(&images, 0, &g, &seeds, parallel).unwrap();
+                    assert_eq!((b.x, b.y), (40, 3), "{wrap:?} averaging {averaging}");
+                    assert!(b.distance < 1e-6);
+                }
+            }
+        }
+    }
+}

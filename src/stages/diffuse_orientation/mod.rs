@@ -1,0 +1,326 @@
+//! Stage `diffuse_orientation`: the orientation field of Bangay & Morkel
+//! 2006 §3.1.1 (after Turk 2001). The user gives the texture's up direction
+//! at key vertices; repeated passes average neighbours' directions,
+//! projected onto each tangent plane and normalised, until every vertex has
+//! one. On a √2 hierarchy this runs coarse to fine: the coarsest level is
+//! diffused fully, each finer level starts from the values carried down
+//! through the √2 parents and is re-diffused for a few passes. The sweep
+//! field (a scalar growing along the field from an anchor, Turk 2001) is
+//! made the same way and orders the vertices of the first synthesis pass.
+//!
+//! Writes `Frames` (t = the diffused up direction, s = t × n) and
+//! `SweepField` on every level (or on the active mesh without a hierarchy).
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::diffuse_orientation::diffuse_orientation;
+use crate::kernels::frames::TangentFrame;
+use crate::kernels::geodesic::nearest_vertex;
+use crate::kernels::sweep::{relax_sweep, sweep_field};
+use crate::mesh::Topology;
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::subdivide_sqrt2::carry_attribute;
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// A point on the mesh: a vertex id of the coarsest level (which √2 keeps
+/// in every level) or the vertex nearest to a position.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VertexSpec {
+    /// Vertex id on the coarsest level (the input mesh's ids).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertex: Option<u32>,
+    /// World position; the nearest vertex of the coarsest level is used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<[f32; 3]>,
+}
+
+/// A key orientation: `{ vertex = 12, up = [0, 1, 0] }` or
+/// `{ at = [x, y, z], up = [0, 1, 0] }`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct KeySpec {
+    /// Vertex id on the coarsest level.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vertex: Option<u32>,
+    /// World position; the nearest vertex of the coarsest level is used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<[f32; 3]>,
+    /// The texture's up direction there (projected onto the tangent plane).
+    pub up: [f32; 3],
+}
+
+/// Settings of `diffuse_orientation`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DiffuseOrientationSettings {
+    /// Key orientations.
+    pub keys: Vec<KeySpec>,
+    /// Extra passes on the coarsest level once every vertex has a direction.
+    pub smoothing_passes: u32,
+    /// Passes on each finer level after carrying the directions down.
+    pub refine_passes: u32,
+    /// Direction for vertices no key reaches (other components).
+    pub fallback_up: [f32; 3],
+    /// Whether to compute the sweep field too.
+    pub sweep: bool,
+    /// Where the sweep is 0; the first key when not given.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sweep_anchor: Option<VertexSpec>,
+    /// Relaxation passes of the sweep on the coarsest level.
+    pub sweep_iterations: u32,
+}
+
+impl Default for DiffuseOrientationSettings {
+    fn default() -> Self {
+        Self {
+            keys: vec![KeySpec {
+                vertex: Some(0),
+                at: None,
+                up: [0.0, 1.0, 0.0],
+            }],
+            smoothing_passes: 20,
+            refine_passes: 4,
+            fallback_up: [0.0, 1.0, 0.0],
+            sweep: true,
+            sweep_anchor: None,
+            sweep_iterations: 30,
+        }
+    }
+}
+
+fn check_point(vertex: Option<u32>, at: Option<[f32; 3]>) -> Result<(), String> {
+    match (vertex, at) {
+        (Some(_), None) | (None, Some(_)) => Ok(()),
+        (Some(_), Some(_)) => Err("give either `vertex` or `at`, not both".into()),
+        (None, None) => Err("give `vertex = N` or `at = [x, y, z]`".into()),
+    }
+}
+
+impl StageSettings for DiffuseOrientationSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "keys",
+            unit: "",
+            range: ParamRange::Any(
+                "list of { vertex = N, up = [x, y, z] } or { at = [x, y, z], up = [x, y, z] }",
+            ),
+            doc: "texture up direction at key vertices (ids of the coarsest level = input mesh ids, or the vertex nearest a position)",
+        },
+        ParamDoc {
+            name: "smoothing_passes",
+            unit: "passes",
+            range: ParamRange::Int(0, 100_000),
+            doc: "averaging passes on the coarsest level after every vertex has a direction",
+        },
+        ParamDoc {
+            name: "refine_passes",
+            unit: "passes",
+            range: ParamRange::Int(0, 100_000),
+            doc: "averaging passes (and sweep relaxation passes) on each finer level after carrying values down",
+        },
+        ParamDoc {
+            name: "fallback_up",
+            unit: "world axes",
+            range: ParamRange::Float(-1e6, 1e6),
+            doc: "up direction of components no key reaches",
+        },
+        ParamDoc {
+            name: "sweep",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "also compute the sweep field (Turk 2001) that orders the first synthesis pass",
+        },
+        ParamDoc {
+            name: "sweep_anchor",
+            unit: "",
+            range: ParamRange::Any("{ vertex = N } or { at = [x, y, z] }"),
+            doc: "where the sweep is 0 (default: the first key)",
+        },
+        ParamDoc {
+            name: "sweep_iterations",
+            unit: "passes",
+            range: ParamRange::Int(0, 100_000),
+            doc: "relaxation passes of the sweep field on the coarsest level",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if self.keys.is_empty() {
+            return Err(("keys".into(), "give at least one key orientation".into()));
+        }
+        for k in &self.keys {
+            check_point(k.vertex, k.at).map_err(|m| ("keys".to_string(), m))?;
+            if Vec3::from(k.up).length_squared() < 1e-12 {
+                return Err(("keys".into(), "a key has a zero `up` vector".into()));
+            }
+        }
+        if let Some(a) = &self.sweep_anchor {
+            check_point(a.vertex, a.at).map_err(|m| ("sweep_anchor".to_string(), m))?;
+        }
+        Ok(())
+    }
+}
+
+fn resolve(positions: &[Vec3], vertex: Option<u32>, at: Option<[f32; 3]>) -> Result<u32, String> {
+    match (vertex, at) {
+        (Some(v), _) if (v as usize) < positions.len() => Ok(v),
+        (Some(v), _) => Err(format!(
+            "key vertex {v} does not exist: the coarsest level has {} vertices (ids 0..={})",
+            positions.len(),
+            positions.len().saturating_sub(1)
+        )),
+        (None, Some(p)) => {
+            nearest_vertex(positions, p.into()).ok_or_else(|| "the mesh has no vertices".into())
+        }
+        (None, None) => Err("a key needs `vertex` or `at`".into()),
+    }
+}
+
+/// The `diffuse_orientation` stage.
+pub struct DiffuseOrientation;
+
+impl Stage for DiffuseOrientation {
+    const KIND: &'static str = "diffuse_orientation";
+    const SUMMARY: &'static str = "orientation diffused from key vertices, coarse to fine over the √2 hierarchy, plus the sweep field";
+    const PAPER: &'static str = "Bangay & Morkel 2006 §3.1.1; Turk 2001";
+    type Settings = DiffuseOrientationSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Frames]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               active: Res<ActiveMesh>,
+               pyramid: Option<Res<Sqrt2Pyramid>>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               meshes: Query<(&Geometry, Option<&LevelParents>)>| {
+            let fail = |failure: &mut StageFailure, message: String| {
+                failure.0 = Some(PipelineError::Stage {
+                    index: ctx.index + 1,
+                    kind: Self::KIND.into(),
+                    message,
+                });
+            };
+            // Coarsest first.
+            let levels: Vec<Entity> = match pyramid.as_deref() {
+                Some(p) if !p.0.is_empty() => p.0.iter().rev().copied().collect(),
+                _ => vec![active.0],
+            };
+            let Ok((coarsest, _)) = meshes.get(levels[0]) else {
+                return;
+            };
+            let positions = &coarsest.0.positions;
+            let mut keys = Vec::with_capacity(settings.keys.len());
+            for k in &settings.keys {
+                match resolve(positions, k.vertex, k.at) {
+                    Ok(v) => keys.push((v, Vec3::from(k.up))),
+                    Err(m) => return fail(&mut failure, m),
+                }
+            }
+            let anchor = match &settings.sweep_anchor {
+                Some(a) => match resolve(positions, a.vertex, a.at) {
+                    Ok(v) => v,
+                    Err(m) => return fail(&mut failure, format!("sweep_anchor: {m}")),
+                },
+                None => keys[0].0,
+            };
+            let fallback = Vec3::from(settings.fallback_up);
+            let mut directions: Vec<Vec3> = Vec::new();
+            let mut sweep: Vec<f32> = Vec::new();
+            for (i, &e) in levels.iter().enumerate() {
+                let Ok((geometry, parents)) = meshes.get(e) else {
+                    return;
+                };
+                let mesh = &geometry.0;
+                let _span =
+                    tracing::info_span!("diffuse_level", vertices = mesh.vertex_count()).entered();
+                let topo = Topology::build(mesh);
+                let normals = mesh.vertex_normals();
+                let carried = match (i, parents) {
+                    (0, _) => None,
+                    (_, Some(p)) if p.0.len() == mesh.vertex_count() => Some((
+                        carry_attribute(&p.0, &directions),
+                        carry_attribute(&p.0, &sweep),
+                    )),
+                    _ => {
+                        return fail(
+                            &mut failure,
+                            "a hierarchy level has no parents in the level above".into(),
+                        );
+                    }
+                };
+                let passes = if i == 0 {
+                    settings.smoothing_passes
+                } else {
+                    settings.refine_passes
+                };
+                let result = diffuse_orientation(
+                    &normals,
+                    &topo,
+                    &keys,
+                    carried.as_ref().map(|c| c.0.as_slice()),
+                    passes,
+                    fallback,
+                );
+                if i == 0 {
+                    metrics.record(ctx.index, "fill_passes", result.fill_passes);
+                    metrics.record(ctx.index, "fallback_vertices", result.fallback_vertices);
+                    metrics.record(
+                        ctx.index,
+                        "key_vertices",
+                        keys.iter().map(|k| k.0).collect::<Vec<_>>(),
+                    );
+                    metrics.record(ctx.index, "sweep_anchor", anchor);
+                }
+                directions = result.directions;
+                if settings.sweep {
+                    sweep = match carried {
+                        None => sweep_field(
+                            &mesh.positions,
+                            &topo,
+                            &directions,
+                            &[anchor],
+                            settings.sweep_iterations,
+                        ),
+                        Some((_, mut s)) => {
+                            let mut fixed = vec![false; s.len()];
+                            fixed[anchor as usize] = true;
+                            relax_sweep(
+                                &mesh.positions,
+                                &topo,
+                                &directions,
+                                &fixed,
+                                &mut s,
+                                settings.refine_passes,
+                            );
+                            s
+                        }
+                    };
+                } else {
+                    sweep = vec![0.0; mesh.vertex_count()];
+                }
+                let frames: Vec<TangentFrame> = normals
+                    .iter()
+                    .zip(&directions)
+                    .map(|(&n, &d)| TangentFrame::from_up(n, d))
+                    .collect();
+                let mut ec = commands.entity(e);
+                ec.insert(Frames(frames));
+                if settings.sweep {
+                    ec.insert(SweepField(sweep.clone()));
+                }
+            }
+            metrics.record(ctx.index, "levels", levels.len());
+        })
+        .into_configs()
+    }
+}

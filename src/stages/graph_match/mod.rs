@@ -1,0 +1,382 @@
+//! Stage `graph_match`: texture synthesis by k-region graph matching over
+//! the √2 hierarchy (Bangay & Morkel 2006 §3.3), optionally transferring
+//! each matched neighbourhood with a graph cut (§3.4).
+//!
+//! Coarse to fine over the levels of `Sqrt2Pyramid` (or just the active
+//! mesh): the coarsest level starts from its colours if it has any,
+//! otherwise uncoloured, and its first pass visits vertices in sweep order
+//! (§3.1.2) so the pattern grows as one front; every other pass visits them
+//! in a seeded random order. A finer level starts from the colours of the
+//! level above carried through the √2 parents. Every vertex keeps the
+//! matched colour (`VertexColours`) and the matched exemplar texel
+//! (`SourceTexels`, level-0 pixels) so other exemplar channels can follow.
+//! Per level the metrics hold the counts of Table 1 (comparisons with and
+//! without oversampling averaging) and of the cuts (vertices coloured per
+//! cut, seam cost).
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::frames::TangentFrame;
+use crate::kernels::graph_match::{
+    BatchRule, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats, SynthesisState,
+    match_pass, mean_edge_lengths,
+};
+use crate::kernels::sweep::{sweep_field, sweep_order};
+use crate::mesh::Topology;
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Order of the first pass on the coarsest level.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CoarseOrder {
+    /// Increasing sweep value: a growing front (§3.1.2).
+    #[default]
+    Sweep,
+    /// A seeded random permutation.
+    Random,
+}
+
+/// Settings of `graph_match`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GraphMatchStageSettings {
+    /// Texels of the exemplar per world unit; 0 = one texel per mean edge
+    /// of the finest level.
+    pub r_scale: f32,
+    /// Edge of the square neighbourhood in texels (`n` of §3.3.2).
+    pub region: f32,
+    /// Smallest k.
+    pub k_min: u32,
+    /// Largest k.
+    pub k_max: u32,
+    /// Gaussian stack or pyramid.
+    pub image_levels: ImageLevels,
+    /// Number of stack/pyramid levels; 0 = until the blur spans the exemplar.
+    pub image_level_count: u32,
+    /// Passes per mesh level, coarsest first; the last entry repeats.
+    pub passes: Vec<u32>,
+    /// Order of the first pass on the coarsest level.
+    pub coarse_order: CoarseOrder,
+    /// Oversampling averaging (§3.3.3).
+    pub averaging: bool,
+    /// Graph-cut transfer of the matched neighbourhood (§3.4).
+    pub graph_cut: bool,
+    /// σ of eq. 1.
+    pub cut_sigma: f32,
+}
+
+impl Default for GraphMatchStageSettings {
+    fn default() -> Self {
+        Self {
+            r_scale: 0.0,
+            region: 5.0,
+            k_min: 1,
+            k_max: 10,
+            image_levels: ImageLevels::Stack,
+            image_level_count: 0,
+            passes: vec![2, 1],
+            coarse_order: CoarseOrder::Sweep,
+            averaging: true,
+            graph_cut: false,
+            cut_sigma: 1.0,
+        }
+    }
+}
+
+impl StageSettings for GraphMatchStageSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "r_scale",
+            unit: "texels per world unit",
+            range: ParamRange::Float(0.0, 1e9),
+            doc: "texture scale r_scale (§3.3.2); 0 = one texel per mean edge length of the finest level",
+        },
+        ParamDoc {
+            name: "region",
+            unit: "texels",
+            range: ParamRange::Float(1.0, 64.0),
+            doc: "edge n of the square texture neighbourhood a k-region stands for; k solves (k+1)² + k² = (aᵐ n / (r_scale ē))²",
+        },
+        ParamDoc {
+            name: "k_min",
+            unit: "edges",
+            range: ParamRange::Int(1, 64),
+            doc: "smallest k-region radius",
+        },
+        ParamDoc {
+            name: "k_max",
+            unit: "edges",
+            range: ParamRange::Int(1, 64),
+            doc: "largest k-region radius (bounds the work where vertices are dense)",
+        },
+        ParamDoc {
+            name: "image_levels",
+            unit: "",
+            range: ParamRange::OneOf(&["stack", "pyramid"]),
+            doc: "Gaussian stack (a = 1; each region vertex reads the level of its own density) or pyramid (a = 2; the centre's level)",
+        },
+        ParamDoc {
+            name: "image_level_count",
+            unit: "levels",
+            range: ParamRange::Int(0, 16),
+            doc: "stack/pyramid levels; 0 = until the blur spans the exemplar",
+        },
+        ParamDoc {
+            name: "passes",
+            unit: "passes",
+            range: ParamRange::Int(0, 64),
+            doc: "matching passes per mesh level, coarsest first; the last entry repeats for finer levels (§4)",
+        },
+        ParamDoc {
+            name: "coarse_order",
+            unit: "",
+            range: ParamRange::OneOf(&["sweep", "random"]),
+            doc: "order of the first pass on the coarsest level (sweep: a growing front, §3.1.2); later passes are random",
+        },
+        ParamDoc {
+            name: "averaging",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "replace region vertices that map to one texel by their mean with multiplicity (§3.3.3); same result, fewer comparisons",
+        },
+        ParamDoc {
+            name: "graph_cut",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "after each match, transfer the matched neighbourhood onto the k-region through a minimum cut (§3.4)",
+        },
+        ParamDoc {
+            name: "cut_sigma",
+            unit: "",
+            range: ParamRange::Float(1e-3, 1e3),
+            doc: "σ of eq. 1: edge weights fall as exp(−(x_A² + x_B²)/(σ r²)) away from the matched vertex",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if self.k_max < self.k_min {
+            return Err((
+                "k_max".into(),
+                format!("{} is below k_min = {}", self.k_max, self.k_min),
+            ));
+        }
+        if self.passes.is_empty() {
+            return Err(("passes".into(), "give at least one entry".into()));
+        }
+        Ok(())
+    }
+}
+
+impl GraphMatchStageSettings {
+    fn passes_for(&self, level_from_coarsest: usize) -> u32 {
+        let i = level_from_coarsest.min(self.passes.len().saturating_sub(1));
+        self.passes.get(i).copied().unwrap_or(1)
+    }
+}
+
+/// The `graph_match` stage.
+pub struct GraphMatch;
+
+type LevelQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static Frames>,
+        Option<&'static VertexColours>,
+        Option<&'static SweepField>,
+        Option<&'static LevelParents>,
+    ),
+>;
+
+/// Frames for a level: its own, or the active mesh's restricted to the
+/// level's vertices (√2 keeps ids) and re-projected onto its normals.
+fn level_frames(
+    mesh: &crate::mesh::PolyMesh,
+    own: Option<&Frames>,
+    finest: Option<&Frames>,
+) -> Option<Vec<TangentFrame>> {
+    let n = mesh.vertex_count();
+    if let Some(f) = own.filter(|f| f.0.len() == n) {
+        return Some(f.0.clone());
+    }
+    let f = finest.filter(|f| f.0.len() >= n)?;
+    let normals = mesh.vertex_normals();
+    Some(
+        normals
+            .iter()
+            .zip(&f.0)
+            .map(|(&nrm, fr)| TangentFrame::from_up(nrm, fr.t))
+            .collect(),
+    )
+}
+
+impl Stage for GraphMatch {
+    const KIND: &'static str = "graph_match";
+    const SUMMARY: &'static str = "k-region graph matching against a Gaussian stack, coarse to fine over the √2 hierarchy, with optional graph-cut transfer";
+    const PAPER: &'static str = "Bangay & Morkel 2006 §3.3, §3.4";
+    type Settings = GraphMatchStageSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh, Datum::Frames]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Colours]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               active: Res<ActiveMesh>,
+               pyramid: Option<Res<Sqrt2Pyramid>>,
+               exemplar: Res<Exemplar>,
+               seed: Res<RunSeed>,
+               mut spacing: ResMut<TexelSpacing>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               meshes: LevelQuery| {
+            let fail = |failure: &mut StageFailure, message: String| {
+                failure.0 = Some(PipelineError::Stage {
+                    index: ctx.index + 1,
+                    kind: Self::KIND.into(),
+                    message,
+                });
+            };
+            let idx = ctx.index;
+            let levels: Vec<Entity> = match pyramid.as_deref() {
+                Some(p) if !p.0.is_empty() => p.0.iter().rev().copied().collect(),
+                _ => vec![active.0],
+            };
+            let Ok((finest_geometry, finest_frames, ..)) = meshes.get(active.0) else {
+                return;
+            };
+            let r_scale = if settings.r_scale > 0.0 {
+                settings.r_scale
+            } else {
+                1.0 / finest_geometry.0.average_edge_length().max(f32::MIN_POSITIVE)
+            };
+            let img = &exemplar.image;
+            let level_count = if settings.image_level_count > 0 {
+                settings.image_level_count as usize
+            } else {
+                MatchImages::default_levels(img)
+            };
+            let images = {
+                let _span = tracing::info_span!("exemplar_levels", levels = level_count).entered();
+                MatchImages::new(img, settings.image_levels, level_count, exemplar.wrap)
+            };
+            let kernel = GraphMatchSettings {
+                r_scale,
+                region_texels: settings.region,
+                k_min: settings.k_min,
+                k_max: settings.k_max,
+                averaging: settings.averaging,
+                graph_cut: settings.graph_cut,
+                cut_sigma: settings.cut_sigma,
+            };
+            metrics.record(idx, "r_scale", r_scale);
+            metrics.record(idx, "image_levels", images.levels());
+            let ch = img.channels as usize;
+            let mut state: Option<SynthesisState> = None;
+            let mut per_level = Vec::new();
+            let mut total = PassStats::default();
+            for (li, &e) in levels.iter().enumerate() {
+                let Ok((geometry, frames, colours, sweep, parents)) = meshes.get(e) else {
+                    return;
+                };
+                let mesh = &geometry.0;
+                let nv = mesh.vertex_count();
+                let started = Instant::now();
+                let _span = tracing::info_span!("match_level", level = levels.len() - 1 - li, vertices = nv).entered();
+                let Some(frames) = level_frames(mesh, frames, finest_frames) else {
+                    return fail(&mut failure, "a level has no tangent frames".into());
+                };
+                let topo = Topology::build(mesh);
+                let mean_edge = mean_edge_lengths(&mesh.positions, &topo);
+                let mut st = match (state.take(), parents) {
+                    // Colours already there (e.g. `init_colours`: exemplar
+                    // texels) stand for level 0.
+                    (None, _) => match colours {
+                        Some(c) if c.channels == ch && c.values.len() == nv * ch => {
+                            SynthesisState::from_colours(c.values.clone(), ch, 0)
+                        }
+                        _ => SynthesisState::uncoloured(nv, ch),
+                    },
+                    (Some(prev), Some(p)) if p.0.len() == nv => prev.carried(&p.0),
+                    _ => {
+                        return fail(
+                            &mut failure,
+                            "a hierarchy level has no parents in the level above".into(),
+                        );
+                    }
+                };
+                let level = LevelMesh {
+                    positions: &mesh.positions,
+                    topo: &topo,
+                    frames: &frames,
+                    mean_edge: &mean_edge,
+                };
+                let passes = settings.passes_for(li);
+                let mut level_stats = PassStats::default();
+                for pass in 0..passes {
+                    let (order, rule) = if li == 0 && pass == 0 && settings.coarse_order == CoarseOrder::Sweep {
+                        let values = match sweep {
+                            Some(s) if s.0.len() == nv => s.0.clone(),
+                            _ => {
+                                let dirs: Vec<glam::Vec3> = frames.iter().map(|f| f.t).collect();
+                                sweep_field(&mesh.positions, &topo, &dirs, &[0], 30)
+                            }
+                        };
+                        (sweep_order(&values), BatchRule::Exact)
+                    } else {
+                        let mut o: Vec<u32> = (0..nv as u32).collect();
+                        o.shuffle(&mut seed.rng(idx, ((li as u64) << 16) | pass as u64));
+                        (o, BatchRule::Relaxed)
+                    };
+                    let s = match_pass(
+                        &level,
+                        &images,
+                        &kernel,
+                        &order,
+                        rule,
+                        seed.derive(idx, (1 << 40) | ((li as u64) << 16) | pass as u64),
+                        &mut st,
+                    );
+                    level_stats += s;
+                }
+                let seconds = started.elapsed().as_secs_f64();
+                tracing::info!(
+                    "level {} ({nv} vertices): {passes} passes, {} matched, {} comparisons ({} without averaging), {seconds:.2} s",
+                    levels.len() - 1 - li,
+                    level_stats.matched,
+                    level_stats.comparisons_averaged,
+                    level_stats.comparisons_plain
+                );
+                per_level.push(serde_json::json!({
+                    "level": levels.len() - 1 - li,
+                    "vertices": nv,
+                    "passes": passes,
+                    "seconds": seconds,
+                    "stats": level_stats,
+                }));
+                total += level_stats;
+                commands.entity(e).insert((
+                    VertexColours {
+                        channels: ch,
+                        values: st.colours.clone(),
+                    },
+                    SourceTexels(st.texels.clone()),
+                ));
+                state = Some(st);
+            }
+            metrics.record(idx, "levels", per_level);
+            metrics.record(idx, "total", total);
+            spacing.0 = 1.0 / r_scale;
+        })
+        .into_configs()
+    }
+}

@@ -1,0 +1,335 @@
+//! Stage `subdivide_sqrt2`: the √2 mesh hierarchy of Bangay & Morkel 2006
+//! §3.2, built from the active (coarse) mesh upward: optional adaptive
+//! passes that even out face areas (§3.2.2), then uniform √2 steps up to a
+//! level count or a vertex budget (§3.2.1).
+//!
+//! Each level becomes an entity with `MeshLevel(l)` (0 = finest, as Wei &
+//! Levoy's pyramid), its `Geometry` and `LevelParents` (parents in the next
+//! coarser level); the `Sqrt2Pyramid` resource lists them and `ActiveMesh`
+//! moves to the finest. Every per-vertex attribute of the active mesh
+//! (`Frames`, `VertexColours`, `SourceTexels`, `SweepField`, `VertexScale`)
+//! carries over to every level: old vertices keep their values bit for bit
+//! (the scheme keeps vertices, §3.2.1 first bullet), face points get their
+//! face's average. Per-corner data (UVs) does not carry over.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::frames::TangentFrame;
+use crate::kernels::sqrt2::{
+    AreaStats, MAX_HIERARCHY_LEVELS, MAX_HIERARCHY_VERTICES, Parents, Sqrt2Settings,
+    adaptive_sqrt2, sqrt2_subdivide_with,
+};
+use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+use std::ops::{Add, Mul};
+
+/// Settings of `subdivide_sqrt2`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SubdivideSqrt2Settings {
+    /// Uniform √2 steps; 0 = as many as `target_vertices` needs.
+    pub levels: u32,
+    /// Stop at the first level with at least this many vertices; 0 = no
+    /// budget (then `levels` decides).
+    pub target_vertices: u64,
+    /// Adaptive passes on the coarse mesh before the uniform steps (§3.2.2).
+    pub adaptive_passes: u32,
+    /// Faces with area above this factor times the mean are refined in an
+    /// adaptive pass (`f` of §3.2.2; the paper finds 1.5 good).
+    pub adaptive_factor: f32,
+    /// Weight of the neighbour average in the vertex rule of a uniform step
+    /// (0 keeps old positions: an interpolating variant).
+    pub vertex_relaxation: f32,
+}
+
+impl Default for SubdivideSqrt2Settings {
+    fn default() -> Self {
+        Self {
+            levels: 0,
+            target_vertices: 50_000,
+            adaptive_passes: 0,
+            adaptive_factor: 1.5,
+            vertex_relaxation: 0.5,
+        }
+    }
+}
+
+impl StageSettings for SubdivideSqrt2Settings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "levels",
+            unit: "steps",
+            range: ParamRange::Int(0, MAX_HIERARCHY_LEVELS as i64),
+            doc: "uniform √2 steps (each about doubles the vertices); 0 = as many as target_vertices needs",
+        },
+        ParamDoc {
+            name: "target_vertices",
+            unit: "vertices",
+            range: ParamRange::Int(0, MAX_HIERARCHY_VERTICES as i64),
+            doc: "stop at the first level with at least this many vertices; 0 = no budget (levels decides)",
+        },
+        ParamDoc {
+            name: "adaptive_passes",
+            unit: "passes",
+            range: ParamRange::Int(0, 64),
+            doc: "adaptive √2 passes on the coarse mesh before the uniform steps, refining faces larger than adaptive_factor × mean area (Bangay & Morkel §3.2.2)",
+        },
+        ParamDoc {
+            name: "adaptive_factor",
+            unit: "× mean face area",
+            range: ParamRange::Float(1.0, 1000.0),
+            doc: "area threshold f of an adaptive pass (≈ 1.5 for most models)",
+        },
+        ParamDoc {
+            name: "vertex_relaxation",
+            unit: "",
+            range: ParamRange::Float(0.0, 1.0),
+            doc: "weight of the neighbour average in the uniform step's vertex rule (0.5 = the box-spline rule; 0 keeps old positions)",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if self.levels == 0 && self.target_vertices == 0 {
+            return Err((
+                "levels".into(),
+                "give `levels` > 0 or `target_vertices` > 0 (both are 0: no stopping rule)".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Carries a per-vertex attribute to a refined level: identity parents copy
+/// the value exactly, others take the weighted sum of their parents.
+pub fn carry_attribute<T>(parents: &Parents, old: &[T]) -> Vec<T>
+where
+    T: Copy + Add<Output = T> + Mul<f32, Output = T>,
+{
+    (0..parents.len())
+        .map(|v| {
+            let (pv, pw) = parents.of(v);
+            match (pv, pw) {
+                ([s], [w]) if *w == 1.0 => old[*s as usize],
+                _ => {
+                    let mut acc = old[pv[0] as usize] * pw[0];
+                    for (&s, &w) in pv.iter().zip(pw).skip(1) {
+                        acc = acc + old[s as usize] * w;
+                    }
+                    acc
+                }
+            }
+        })
+        .collect()
+}
+
+/// [`carry_attribute`] for rows of `channels` values (colours).
+pub fn carry_rows(parents: &Parents, old: &[f32], channels: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; parents.len() * channels];
+    for (v, row) in out.chunks_exact_mut(channels.max(1)).enumerate() {
+        let (pv, pw) = parents.of(v);
+        match (pv, pw) {
+            ([s], [w]) if *w == 1.0 => {
+                let s = *s as usize;
+                row.copy_from_slice(&old[s * channels..(s + 1) * channels]);
+            }
+            _ => {
+                for (&s, &w) in pv.iter().zip(pw) {
+                    let s = s as usize;
+                    for (o, &x) in row.iter_mut().zip(&old[s * channels..(s + 1) * channels]) {
+                        *o += x * w;
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Carries frames: old vertices keep theirs exactly; a new vertex takes its
+/// parents' mean up direction on its own normal.
+pub fn carry_frames(
+    parents: &Parents,
+    old: &[TangentFrame],
+    normals: &[Vec3],
+) -> Vec<TangentFrame> {
+    let ups: Vec<Vec3> = old.iter().map(|f| f.t).collect();
+    let carried = carry_attribute(parents, &ups);
+    (0..parents.len())
+        .map(|v| match parents.of(v) {
+            ([s], [w]) if *w == 1.0 => old[*s as usize],
+            _ => TangentFrame::from_up(normals[v], carried[v]),
+        })
+        .collect()
+}
+
+/// The per-vertex attributes a level carries.
+#[derive(Clone, Debug, Default)]
+struct Attributes {
+    frames: Option<Vec<TangentFrame>>,
+    colours: Option<VertexColours>,
+    texels: Option<Vec<Vec2>>,
+    sweep: Option<Vec<f32>>,
+    scale: Option<Vec<f32>>,
+}
+
+impl Attributes {
+    fn carried(&self, parents: &Parents, mesh: &crate::mesh::PolyMesh) -> Self {
+        Self {
+            frames: self
+                .frames
+                .as_ref()
+                .map(|f| carry_frames(parents, f, &mesh.vertex_normals())),
+            colours: self.colours.as_ref().map(|c| VertexColours {
+                channels: c.channels,
+                values: carry_rows(parents, &c.values, c.channels),
+            }),
+            texels: self.texels.as_ref().map(|t| carry_attribute(parents, t)),
+            sweep: self.sweep.as_ref().map(|s| carry_attribute(parents, s)),
+            scale: self.scale.as_ref().map(|s| carry_attribute(parents, s)),
+        }
+    }
+
+    fn insert(self, e: &mut EntityCommands) {
+        if let Some(f) = self.frames {
+            e.insert(Frames(f));
+        }
+        if let Some(c) = self.colours {
+            e.insert(c);
+        }
+        if let Some(t) = self.texels {
+            e.insert(SourceTexels(t));
+        }
+        if let Some(s) = self.sweep {
+            e.insert(SweepField(s));
+        }
+        if let Some(s) = self.scale {
+            e.insert(VertexScale(s));
+        }
+    }
+}
+
+/// The `subdivide_sqrt2` stage.
+pub struct SubdivideSqrt2;
+
+type SourceQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static Frames>,
+        Option<&'static VertexColours>,
+        Option<&'static SourceTexels>,
+        Option<&'static SweepField>,
+        Option<&'static VertexScale>,
+    ),
+>;
+
+impl Stage for SubdivideSqrt2 {
+    const KIND: &'static str = "subdivide_sqrt2";
+    const SUMMARY: &'static str = "√2-subdivision mesh hierarchy (adaptive passes, then uniform steps); attributes carry over";
+    const PAPER: &'static str = "Bangay & Morkel 2006 §3.2; Li, Ma & Bao 2004";
+    type Settings = SubdivideSqrt2Settings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::MeshPyramid]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               mut active: ResMut<ActiveMesh>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               meshes: SourceQuery| {
+            let Ok((geometry, frames, colours, texels, sweep, scale)) = meshes.get(active.0) else {
+                return;
+            };
+            let input = &geometry.0;
+            if input.face_count() == 0 {
+                failure.0 = Some(crate::pipeline::PipelineError::Stage {
+                    index: ctx.index + 1,
+                    kind: Self::KIND.into(),
+                    message: "the mesh has no faces to subdivide".into(),
+                });
+                return;
+            }
+            let nv = input.vertex_count();
+            let fits = |n: usize| n == nv;
+            let mut attrs = Attributes {
+                frames: frames.map(|f| f.0.clone()).filter(|f| fits(f.len())),
+                colours: colours
+                    .cloned()
+                    .filter(|c| fits(c.values.len() / c.channels.max(1))),
+                texels: texels.map(|t| t.0.clone()).filter(|t| fits(t.len())),
+                sweep: sweep.map(|s| s.0.clone()).filter(|s| fits(s.len())),
+                scale: scale.map(|s| s.0.clone()).filter(|s| fits(s.len())),
+            };
+            let idx = ctx.index;
+            // Adaptive passes make the coarsest level (§3.2.2).
+            let coarse = if settings.adaptive_passes > 0 {
+                let a = adaptive_sqrt2(input, settings.adaptive_factor, settings.adaptive_passes);
+                metrics.record(idx, "area_std_percent_before", a.before.std_percent_of_mean);
+                metrics.record(idx, "area_std_percent_after", a.after.std_percent_of_mean);
+                metrics.record(idx, "adaptive_refined_per_pass", &a.refined_per_pass);
+                attrs = attrs.carried(&a.subdivided.parents, &a.subdivided.mesh);
+                a.subdivided.mesh
+            } else {
+                let stats = AreaStats::of(input);
+                metrics.record(idx, "area_std_percent_before", stats.std_percent_of_mean);
+                input.clone()
+            };
+            // Uniform steps (§3.2.1), coarse to fine.
+            let step_settings = Sqrt2Settings {
+                vertex_relaxation: settings.vertex_relaxation,
+            };
+            let max_steps = if settings.levels > 0 {
+                settings.levels.min(MAX_HIERARCHY_LEVELS)
+            } else {
+                MAX_HIERARCHY_LEVELS
+            };
+            let target = settings.target_vertices as usize;
+            let mut levels: Vec<(crate::mesh::PolyMesh, Option<Parents>, Attributes)> =
+                vec![(coarse, None, attrs)];
+            for _ in 0..max_steps {
+                let (current, _, current_attrs) = levels.last().expect("one level at least");
+                let (nv, nf) = (current.vertex_count(), current.face_count());
+                if (target > 0 && nv >= target) || nf == 0 || nv + nf > MAX_HIERARCHY_VERTICES {
+                    break;
+                }
+                let sub = sqrt2_subdivide_with(current, &step_settings);
+                let next_attrs = current_attrs.carried(&sub.parents, &sub.mesh);
+                levels.push((sub.mesh, Some(sub.parents), next_attrs));
+            }
+            let count = levels.len();
+            let sizes: Vec<usize> = levels.iter().map(|l| l.0.vertex_count()).collect();
+            metrics.record(idx, "uniform_steps", count - 1);
+            metrics.record(idx, "level_vertices_coarse_to_fine", &sizes);
+            if let Some((finest, _, _)) = levels.last() {
+                metrics.record(idx, "finest_faces", finest.face_count());
+                metrics.record(
+                    idx,
+                    "finest_area_std_percent",
+                    AreaStats::of(finest).std_percent_of_mean,
+                );
+            }
+            let mut entities = vec![Entity::PLACEHOLDER; count];
+            for (i, (mesh, parents, attrs)) in levels.into_iter().enumerate() {
+                let level = (count - 1 - i) as u8;
+                let mut e = commands.spawn((MeshLevel(level), Geometry(mesh)));
+                if let Some(p) = parents {
+                    e.insert(LevelParents(p));
+                }
+                attrs.insert(&mut e);
+                entities[level as usize] = e.id();
+            }
+            active.0 = entities[0];
+            commands.insert_resource(Sqrt2Pyramid(entities));
+        })
+        .into_configs()
+    }
+}

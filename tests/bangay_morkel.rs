@@ -1,0 +1,845 @@
+//! Bangay & Morkel 2006: k-regions, region matching with oversampling
+//! averaging, graph-cut transfer, orientation diffusion and the sweep field
+//! (kernel tests on meshes built here), and the `subdivide_sqrt2`,
+//! `diffuse_orientation` and `graph_match` stages in a real pipeline
+//! (system tests).
+
+mod common;
+
+use bevy_ecs::prelude::*;
+use glam::{Vec2, Vec3};
+use rand::{Rng, SeedableRng, seq::SliceRandom};
+use rand_pcg::Pcg64Mcg;
+use surfsynth::config::ConfigSource;
+use surfsynth::image::{Image, sample::Wrap};
+use surfsynth::kernels::diffuse_orientation::diffuse_orientation;
+use surfsynth::kernels::frames::TangentFrame;
+use surfsynth::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
+use surfsynth::kernels::graph_match::*;
+use surfsynth::kernels::metrics::{EnergySettings, SurfaceSignal, surface_texture_energy};
+use surfsynth::kernels::sqrt2::sqrt2_subdivide;
+use surfsynth::kernels::sweep::{sweep_field, sweep_order};
+use surfsynth::mesh::{PolyMesh, Topology};
+use surfsynth::pipeline::{Pipeline, PipelineError, load_input, run_in_world};
+use surfsynth::stages::world::*;
+
+// ----- shared inputs -------------------------------------------------------------
+
+/// A flat `n × n` quad grid with edge `edge`: `(n + 1)²` vertices, row-major
+/// from the origin along +x, rows along +y.
+fn quad_grid(n: usize, edge: f32) -> PolyMesh {
+    let positions = (0..=n)
+        .flat_map(|j| (0..=n).map(move |i| Vec3::new(i as f32, j as f32, 0.0) * edge))
+        .collect();
+    let v = |i: usize, j: usize| (j * (n + 1) + i) as u32;
+    let faces: Vec<[u32; 4]> = (0..n)
+        .flat_map(|j| (0..n).map(move |i| [v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)]))
+        .collect();
+    PolyMesh::from_polygons(positions, faces.iter().map(|f| f.as_slice()))
+}
+
+/// An open cylinder of radius `radius` around +y: `around` quads around,
+/// `rows` quads high, edge about `2π·radius/around` both ways.
+fn cylinder(around: usize, rows: usize, radius: f32) -> PolyMesh {
+    let step = std::f32::consts::TAU * radius / around as f32;
+    let positions = (0..=rows)
+        .flat_map(|j| {
+            (0..around).map(move |i| {
+                let a = i as f32 / around as f32 * std::f32::consts::TAU;
+                Vec3::new(radius * a.cos(), j as f32 * step, -radius * a.sin())
+            })
+        })
+        .collect();
+    let v = |i: usize, j: usize| (j * around + i % around) as u32;
+    let faces: Vec<[u32; 4]> = (0..rows)
+        .flat_map(|j| {
+            (0..around).map(move |i| [v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)])
+        })
+        .collect();
+    PolyMesh::from_polygons(positions, faces.iter().map(|f| f.as_slice()))
+}
+
+fn flat_frames(n: usize) -> Vec<TangentFrame> {
+    vec![TangentFrame::from_up(Vec3::Z, Vec3::Y); n]
+}
+
+/// The shared stochastic exemplar (water caustics, 128×128 RGB).
+fn water() -> Image {
+    surfsynth::image::load_image(&common::shared("textures/water.png"))
+        .expect("../shared/data/textures/water.png loads")
+}
+
+/// A smooth-ish random RGB exemplar (noise blurred once), `w × h`.
+fn noise_exemplar(w: u32, h: u32, seed: u64) -> Image {
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let data = (0..w * h * 3).map(|_| rng.random::<f32>()).collect();
+    let img = Image::from_data(w, h, 3, data).unwrap();
+    surfsynth::image::pyramid::blur_binomial(&img, 1, Wrap::Repeat)
+}
+
+// ----- k-regions (§3.3.1, §3.3.2) ---------------------------------------------------
+
+#[test]
+fn k_region_sizes_on_a_regular_quad_grid_are_diamonds() {
+    let m = quad_grid(30, 1.0);
+    let topo = Topology::build(&m);
+    let frames = flat_frames(m.vertex_count());
+    let centre = 15 * 31 + 15;
+    let mut scratch = RegionScratch::new();
+    let mut region = KRegion::default();
+    for k in 0..=12u32 {
+        k_region(
+            &m.positions,
+            &topo,
+            &frames,
+            centre,
+            k,
+            1.0,
+            true,
+            &mut scratch,
+            &mut region,
+        );
+        let want = ((k + 1) * (k + 1) + k * k) as usize;
+        assert_eq!(region.len(), want, "k = {k}: (k+1)² + k² vertices");
+        assert_eq!(region.vertices[0], centre, "the centre comes first");
+        // Every vertex is at its Manhattan distance, and the region is exactly
+        // the diamond of that radius.
+        for (i, &v) in region.vertices.iter().enumerate() {
+            let (x, y) = ((v % 31) as i32 - 15, (v / 31) as i32 - 15);
+            assert_eq!(region.depth[i], (x.abs() + y.abs()) as u32);
+        }
+        // Edges inside a diamond of radius k: 4k².
+        assert_eq!(region.edges.len(), (4 * k * k) as usize, "k = {k}");
+        // And k follows back from the vertex count (§3.3.2).
+        assert!((k_for_side((want as f32).sqrt()) - k as f32).abs() < 1e-3);
+    }
+    // The size formula with the paper's Table 1 figures: 3×3 texels at
+    // r_scale 30 on a mesh with 1/ē = 110 needs k = 7; at r_scale 200, k = 1.
+    assert_eq!(region_k(3.0, 1.0, 30.0, 1.0 / 110.0, 1, 32), 7);
+    assert_eq!(region_k(3.0, 1.0, 200.0, 1.0 / 110.0, 1, 32), 1);
+    // A pyramid level m covers 2^m texels of level 0 per texel.
+    assert_eq!(
+        region_k(3.0, 4.0, 120.0, 1.0 / 110.0, 1, 32),
+        region_k(3.0, 1.0, 30.0, 1.0 / 110.0, 1, 32)
+    );
+    // Clamped to k_min..=k_max.
+    assert_eq!(region_k(3.0, 1.0, 1e6, 1.0, 2, 5), 2);
+    assert_eq!(region_k(300.0, 1.0, 1.0, 0.01, 2, 5), 5);
+}
+
+#[test]
+fn region_coordinates_unroll_a_cylinder() {
+    // Around a cylinder the tangent-plane projection alone would shrink the
+    // far vertices; accumulating steps vertex by vertex, each at its edge
+    // length, unrolls the surface: x offsets equal arc lengths.
+    let radius = 1.0;
+    let m = cylinder(64, 20, radius);
+    let topo = Topology::build(&m);
+    let normals = m.vertex_normals();
+    let frames: Vec<TangentFrame> = normals
+        .iter()
+        .map(|&n| TangentFrame::from_up(n, Vec3::Y))
+        .collect();
+    let centre = 10 * 64;
+    let step = std::f32::consts::TAU * radius / 64.0;
+    let mut scratch = RegionScratch::new();
+    let mut region = KRegion::default();
+    let px = 10.0;
+    k_region(
+        &m.positions,
+        &topo,
+        &frames,
+        centre,
+        8,
+        px,
+        false,
+        &mut scratch,
+        &mut region,
+    );
+    for (i, &v) in region.vertices.iter().enumerate() {
+        let (col, row) = ((v % 64) as i32, (v / 64) as i32 - 10);
+        let col = if col > 32 { col - 64 } else { col };
+        let want = Vec2::new(col as f32 * step, -(row as f32) * step) * px;
+        // Chord versus arc: the step of one edge is its chord, 0.02 % shorter.
+        assert!(
+            (region.offset[i] - want).length() < 1e-3 * want.length().max(1.0),
+            "vertex {v}: {:?} vs {want:?}",
+            region.offset[i]
+        );
+    }
+}
+
+// ----- matching (§3.3.1, §3.3.3) ------------------------------------------------------
+
+/// A dense flat grid (`texels_per_edge` texels per edge) whose colours are
+/// the exemplar's texels under a placement at `q` (nearest texel), plus a
+/// little noise; returns the level and its state.
+struct Imprint {
+    mesh: PolyMesh,
+    topo: Topology,
+    frames: Vec<TangentFrame>,
+    mean_edge: Vec<f32>,
+}
+
+impl Imprint {
+    fn new(n: usize) -> Self {
+        let mesh = quad_grid(n, 1.0);
+        let topo = Topology::build(&mesh);
+        let frames = flat_frames(mesh.vertex_count());
+        let mean_edge = mean_edge_lengths(&mesh.positions, &topo);
+        Self {
+            mesh,
+            topo,
+            frames,
+            mean_edge,
+        }
+    }
+
+    fn level(&self) -> LevelMesh<'_> {
+        LevelMesh {
+            positions: &self.mesh.positions,
+            topo: &self.topo,
+            frames: &self.frames,
+            mean_edge: &self.mean_edge,
+        }
+    }
+}
+
+#[test]
+fn oversampled_and_plain_matching_pick_the_same_texel() {
+    let ex = noise_exemplar(48, 40, 11);
+    let images = MatchImages::new(&ex, ImageLevels::Stack, 3, Wrap::Repeat);
+    let grid = Imprint::new(40);
+    let nv = grid.mesh.vertex_count();
+    let mut rng = Pcg64Mcg::seed_from_u64(5);
+    let mut plain_total = 0;
+    let mut averaged_total = 0;
+    for trial in 0..12 {
+        // r_scale 0.29 texels per edge: ~12 vertices per texel, a k-region of
+        // radius 8 spans about 5 texels (Table 1's oversampled regime). (No
+        // offset lands on a half texel, where rounding could go either way.)
+        let settings = GraphMatchSettings {
+            r_scale: 0.29,
+            region_texels: 3.6,
+            k_min: 1,
+            k_max: 16,
+            averaging: true,
+            graph_cut: false,
+            cut_sigma: 1.0,
+        };
+        let centre = (20 * 41 + 20) as u32;
+        let q = Vec2::new(
+            rng.random_range(0..48) as f32,
+            rng.random_range(0..40) as f32,
+        );
+        let mut colours = vec![0.0f32; nv * 3];
+        for v in 0..nv {
+            let d = grid.mesh.positions[v] - grid.mesh.positions[centre as usize];
+            let t = q + (Vec2::new(d.x, -d.y) * settings.r_scale).round();
+            let px = ex.texel(t.x as i64, t.y as i64, Wrap::Repeat);
+            for c in 0..3 {
+                colours[v * 3 + c] = px[c] + rng.random_range(-0.02..0.02);
+            }
+        }
+        let start = SynthesisState::from_colours(colours, 3, 0);
+        let mut found = Vec::new();
+        for averaging in [true, false] {
+            let mut st = start.clone();
+            let s = match_pass(
+                &grid.level(),
+                &images,
+                &GraphMatchSettings {
+                    averaging,
+                    ..settings
+                },
+                &[centre],
+                BatchRule::Exact,
+                1,
+                &mut st,
+            );
+            assert_eq!(s.matched, 1);
+            found.push(st.texels[centre as usize]);
+            if averaging {
+                averaged_total += s.comparisons_averaged;
+                plain_total += s.comparisons_plain;
+            } else {
+                assert_eq!(s.comparisons_plain, 145, "k = 8: 145 region vertices");
+            }
+        }
+        assert_eq!(
+            found[0], found[1],
+            "trial {trial}: both metrics pick the same texel"
+        );
+        assert_eq!(
+            found[0],
+            q + 0.5,
+            "trial {trial}: and it is the imprinted one"
+        );
+    }
+    assert!(
+        averaged_total * 4 < plain_total,
+        "oversampling averaging leaves far fewer terms: {averaged_total} vs {plain_total}"
+    );
+}
+
+/// Coarse-to-fine synthesis on a planar grid (kernels only), returning the
+/// finest mesh, its colours and the r_scale.
+fn synthesise_plane(ex: &Image, graph_cut: bool, seed: u64) -> (PolyMesh, SynthesisState, f32) {
+    let mut levels: Vec<(PolyMesh, Option<surfsynth::kernels::sqrt2::Parents>)> =
+        vec![(quad_grid(8, 1.0 / 8.0), None)];
+    for _ in 0..6 {
+        let s = sqrt2_subdivide(&levels.last().unwrap().0);
+        levels.push((s.mesh, Some(s.parents)));
+    }
+    // The finest grid has 64 quads per unit side: about 0.75 texels per edge.
+    let r_scale = 48.0;
+    let images = MatchImages::new(ex, ImageLevels::Stack, 6, Wrap::Repeat);
+    let settings = GraphMatchSettings {
+        r_scale,
+        region_texels: 7.0,
+        k_min: 1,
+        k_max: 8,
+        averaging: true,
+        graph_cut,
+        cut_sigma: 0.15,
+    };
+    let mut state: Option<SynthesisState> = None;
+    for (li, (mesh, parents)) in levels.iter().enumerate() {
+        let topo = Topology::build(mesh);
+        let frames = flat_frames(mesh.vertex_count());
+        let mean_edge = mean_edge_lengths(&mesh.positions, &topo);
+        let level = LevelMesh {
+            positions: &mesh.positions,
+            topo: &topo,
+            frames: &frames,
+            mean_edge: &mean_edge,
+        };
+        let nv = mesh.vertex_count();
+        let mut st = match (state.take(), parents) {
+            (Some(prev), Some(p)) => prev.carried(p),
+            _ => SynthesisState::uncoloured(nv, ex.channels as usize),
+        };
+        let passes = if li == 0 { 2 } else { 1 };
+        for pass in 0..passes {
+            let order = if li == 0 && pass == 0 {
+                let up = vec![Vec3::Y; nv];
+                let s = sweep_order(&sweep_field(&mesh.positions, &topo, &up, &[0], 10));
+                let stats = match_pass(
+                    &level,
+                    &images,
+                    &settings,
+                    &s,
+                    BatchRule::Exact,
+                    seed,
+                    &mut st,
+                );
+                assert_eq!(
+                    stats.random_starts, 1,
+                    "a sweep grows one front from one start"
+                );
+                continue;
+            } else {
+                let mut o: Vec<u32> = (0..nv as u32).collect();
+                o.shuffle(&mut Pcg64Mcg::seed_from_u64(
+                    seed + li as u64 * 7 + pass as u64,
+                ));
+                o
+            };
+            match_pass(
+                &level,
+                &images,
+                &settings,
+                &order,
+                BatchRule::Relaxed,
+                seed,
+                &mut st,
+            );
+        }
+        assert!(
+            st.coloured.iter().all(|&c| c),
+            "level {li}: every vertex coloured"
+        );
+        state = Some(st);
+    }
+    let (mesh, _) = levels.pop().unwrap();
+    (mesh, state.unwrap(), r_scale)
+}
+
+fn plane_energy(mesh: &PolyMesh, colours: &[f32], r_scale: f32, ex: &Image) -> f32 {
+    let topo = Topology::build(mesh);
+    let frames = flat_frames(mesh.vertex_count());
+    let settings = EnergySettings {
+        neighbourhood: 5,
+        samples: 300,
+        seed: 3,
+        min_coverage: 0.9,
+    };
+    let signal = SurfaceSignal::VertexColours {
+        values: colours,
+        channels: 3,
+    };
+    surface_texture_energy(mesh, &topo, &frames, 1.0 / r_scale, &signal, ex, &settings).mean
+}
+
+#[test]
+fn planar_synthesis_has_at_most_half_the_energy_of_a_shuffle() {
+    let ex = water();
+    for graph_cut in [false, true] {
+        let (mesh, st, r_scale) = synthesise_plane(&ex, graph_cut, 4);
+        // The same colours, shuffled over the vertices: same histogram, no
+        // structure.
+        let nv = mesh.vertex_count();
+        let mut perm: Vec<usize> = (0..nv).collect();
+        perm.shuffle(&mut Pcg64Mcg::seed_from_u64(9));
+        let shuffled: Vec<f32> = perm
+            .iter()
+            .flat_map(|&v| st.colours[v * 3..v * 3 + 3].iter().copied())
+            .collect();
+        let e = plane_energy(&mesh, &st.colours, r_scale, &ex);
+        let e_shuffled = plane_energy(&mesh, &shuffled, r_scale, &ex);
+        eprintln!("graph cut {graph_cut}: energy {e:.5}, shuffled {e_shuffled:.5}");
+        assert!(
+            e <= 0.5 * e_shuffled,
+            "graph cut {graph_cut}: energy {e} vs shuffled {e_shuffled}"
+        );
+    }
+}
+
+// ----- graph cut (§3.4) ----------------------------------------------------------------
+
+/// The eq. 1 cost of a partition, recomputed from scratch.
+fn seam_cost(r: &TransferRegion, sigma: f32, take: &[bool]) -> f64 {
+    let ch = r.channels;
+    let mismatch = |v: usize| -> f64 {
+        if !r.coloured[v] {
+            return 0.0;
+        }
+        (0..ch)
+            .map(|c| ((r.surface[v * ch + c] - r.texture[v * ch + c]) as f64).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let mut cost = 0.0;
+    for &[a, b] in r.edges {
+        let (a, b) = (a as usize, b as usize);
+        if take[a] != take[b] {
+            let (xa, xb) = (r.distance[a] as f64, r.distance[b] as f64);
+            cost += (mismatch(a) + mismatch(b))
+                * (-(xa * xa + xb * xb) / (sigma as f64 * (r.diameter as f64).powi(2))).exp();
+        }
+    }
+    cost
+}
+
+#[test]
+fn graph_cut_ties_terminals_and_its_cost_is_the_flow_and_minimal() {
+    let m = quad_grid(10, 1.0);
+    let topo = Topology::build(&m);
+    let frames = flat_frames(m.vertex_count());
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let mut scratch = RegionScratch::new();
+    let mut region = KRegion::default();
+    for trial in 0..40 {
+        let k = if trial < 20 { 2 } else { 4 };
+        k_region(
+            &m.positions,
+            &topo,
+            &frames,
+            5 * 11 + 5,
+            k,
+            1.0,
+            true,
+            &mut scratch,
+            &mut region,
+        );
+        let n = region.len();
+        let surface: Vec<f32> = (0..n * 3).map(|_| rng.random()).collect();
+        // The texture agrees with the surface on a random blob, so the cut
+        // has somewhere cheap to go.
+        let texture: Vec<f32> = surface
+            .iter()
+            .map(|&s| {
+                if rng.random_bool(0.5) {
+                    s
+                } else {
+                    rng.random()
+                }
+            })
+            .collect();
+        let coloured: Vec<bool> = (0..n).map(|i| i == 0 || rng.random_bool(0.8)).collect();
+        let border: Vec<bool> = region.depth.iter().map(|&d| d == k).collect();
+        let distance: Vec<f32> = region.offset.iter().map(|o| o.length()).collect();
+        let r = TransferRegion {
+            channels: 3,
+            edges: &region.edges,
+            surface: &surface,
+            texture: &texture,
+            coloured: &coloured,
+            border: &border,
+            distance: &distance,
+            target: 0,
+            diameter: (2 * k + 1) as f32,
+        };
+        let sigma = if trial % 2 == 0 { 1.0 } else { 0.2 };
+        let cut = graph_cut_transfer(&r, sigma);
+        assert!(cut.take_texture[0], "the target takes the texture");
+        for i in 0..n {
+            if border[i] && coloured[i] {
+                assert!(
+                    !cut.take_texture[i],
+                    "coloured border vertex {i} keeps its colour"
+                );
+            }
+            if !coloured[i] {
+                assert!(
+                    cut.take_texture[i],
+                    "uncoloured vertex {i} takes the texture"
+                );
+            }
+        }
+        assert!(
+            (cut.cost - cut.flow).abs() <= 1e-9 * cut.flow.max(1.0),
+            "cut {} = flow {}",
+            cut.cost,
+            cut.flow
+        );
+        let recomputed = seam_cost(&r, sigma, &cut.take_texture);
+        assert!((recomputed - cut.cost).abs() <= 1e-6 * recomputed.max(1.0));
+        // Minimal: no partition of the free vertices is cheaper (exhaustive
+        // for k = 2, where 4 of the 13 vertices are free).
+        if k == 2 {
+            let free: Vec<usize> = (1..n).filter(|&i| coloured[i] && !border[i]).collect();
+            for mask in 0u32..(1 << free.len()) {
+                let mut take: Vec<bool> = (0..n).map(|i| i == 0 || !coloured[i]).collect();
+                for (b, &i) in free.iter().enumerate() {
+                    take[i] = mask & (1 << b) != 0;
+                }
+                assert!(seam_cost(&r, sigma, &take) >= cut.cost - 1e-9);
+            }
+        }
+    }
+}
+
+// ----- orientation and sweep (§3.1.1) -------------------------------------------------
+
+#[test]
+fn diffused_orientation_is_tangent_unit_and_keeps_keys_on_a_sphere() {
+    let m = surfsynth::mesh::builtin::builtin_mesh("icosphere", &Default::default()).unwrap();
+    let topo = Topology::build(&m);
+    let normals = m.vertex_normals();
+    let keys = [
+        (0u32, Vec3::new(0.3, 1.0, 0.2)),
+        (17, Vec3::new(1.0, 0.0, 0.0)),
+    ];
+    let r = diffuse_orientation(&normals, &topo, &keys, None, 10, Vec3::Y);
+    assert_eq!(r.fallback_vertices, 0);
+    assert!(r.fill_passes > 0);
+    for (v, d) in r.directions.iter().enumerate() {
+        assert!((d.length() - 1.0).abs() < 1e-4, "unit at {v}");
+        assert!(d.dot(normals[v]).abs() < 1e-4, "tangent at {v}");
+    }
+    for (v, up) in keys {
+        let n = normals[v as usize];
+        let want = (up - n * n.dot(up)).normalize();
+        assert!(
+            (r.directions[v as usize] - want).length() < 1e-5,
+            "key {v} kept"
+        );
+    }
+    // Restarting from the result changes nothing at the keys and little elsewhere.
+    let again = diffuse_orientation(&normals, &topo, &keys, Some(&r.directions), 2, Vec3::Y);
+    assert_eq!(again.fill_passes, 0);
+}
+
+#[test]
+fn sweep_increases_along_the_field_on_a_plane() {
+    let m = quad_grid(20, 0.1);
+    let topo = Topology::build(&m);
+    // A rotated constant field: the sweep is the distance along it.
+    let dir = Vec3::new(0.6, 0.8, 0.0);
+    let dirs = vec![dir; m.vertex_count()];
+    let s = sweep_field(&m.positions, &topo, &dirs, &[210], 5);
+    for (v, (&sv, &p)) in s.iter().zip(&m.positions).enumerate() {
+        let want = (p - m.positions[210]).dot(dir);
+        assert!((sv - want).abs() < 1e-4, "{v}: {sv} vs {want}");
+    }
+}
+
+// ----- determinism ---------------------------------------------------------------------
+
+#[test]
+fn matching_is_identical_at_one_and_two_threads() {
+    let ex = noise_exemplar(40, 32, 2);
+    let run = |threads: usize, graph_cut: bool| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| synthesise_plane(&ex, graph_cut, 8).1)
+    };
+    for graph_cut in [false, true] {
+        let a = run(1, graph_cut);
+        let b = run(2, graph_cut);
+        assert!(
+            a.colours
+                .iter()
+                .zip(&b.colours)
+                .all(|(x, y)| x.to_bits() == y.to_bits()),
+            "graph cut {graph_cut}: colours differ between 1 and 2 threads"
+        );
+        assert_eq!(a.texels, b.texels);
+        assert_eq!(a.levels, b.levels);
+    }
+}
+
+// ----- the stages in a pipeline --------------------------------------------------------
+
+fn world_for(config: &str) -> Result<World, PipelineError> {
+    let p =
+        Pipeline::from_source(ConfigSource::from_text("bm.toml", config)).expect("valid config");
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let mut world = World::new();
+    run_in_world(&p, &mut world, input).map(|_| world)
+}
+
+const SUBDIVIDE_CONFIG: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.mesh_options]
+subdivisions = 1
+
+[[stage]]
+kind = "orientation"
+mode = "random"
+
+[[stage]]
+kind = "init_colours"
+
+[[stage]]
+kind = "subdivide_sqrt2"
+target_vertices = 1500
+adaptive_passes = 2
+adaptive_factor = 1.2
+"#;
+
+#[test]
+fn subdivide_stage_keeps_old_vertex_attributes_bit_for_bit() {
+    let mut w = world_for(SUBDIVIDE_CONFIG).expect("runs");
+    let source = w
+        .query_filtered::<Entity, With<SourceMesh>>()
+        .single(&w)
+        .unwrap();
+    let pyramid = w.resource::<Sqrt2Pyramid>().0.clone();
+    assert!(pyramid.len() >= 3, "several levels: {}", pyramid.len());
+    assert_eq!(
+        w.resource::<ActiveMesh>().0,
+        pyramid[0],
+        "the finest level is active"
+    );
+    let get = |w: &World, e: Entity| {
+        (
+            w.get::<Geometry>(e).unwrap().0.vertex_count(),
+            w.get::<Frames>(e).expect("frames carried").0.clone(),
+            w.get::<VertexColours>(e).expect("colours carried").clone(),
+            w.get::<SourceTexels>(e).expect("texels carried").0.clone(),
+        )
+    };
+    let (n0, f0, c0, t0) = get(&w, source);
+    let ch = c0.channels;
+    let mut prev_n = 0;
+    for (l, &e) in pyramid.iter().enumerate().rev() {
+        assert_eq!(w.get::<MeshLevel>(e), Some(&MeshLevel(l as u8)));
+        let (n, f, c, t) = get(&w, e);
+        assert!(n > prev_n, "levels grow toward level 0");
+        prev_n = n;
+        assert_eq!((f.len(), t.len(), c.values.len()), (n, n, n * ch));
+        assert_eq!(&f[..n0], &f0[..], "level {l}: old frames unchanged");
+        assert_eq!(&t[..n0], &t0[..], "level {l}: old source texels unchanged");
+        assert!(
+            c.values[..n0 * ch]
+                .iter()
+                .zip(&c0.values)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "level {l}: old colours unchanged"
+        );
+        let parents = w.get::<LevelParents>(e);
+        assert_eq!(
+            parents.is_some(),
+            l + 1 < pyramid.len(),
+            "parents on all but the coarsest"
+        );
+        if let Some(p) = parents {
+            assert_eq!(p.0.len(), n);
+        }
+        for fr in &f {
+            assert!(
+                (fr.s.length() - 1.0).abs() < 1e-4 && (fr.s.cross(fr.t) - fr.n).length() < 1e-3
+            );
+        }
+    }
+    let metrics = &w.resource::<Metrics>().stages[2];
+    let before = metrics["area_std_percent_before"].as_f64().unwrap();
+    let after = metrics["area_std_percent_after"].as_f64().unwrap();
+    assert!(after.is_finite() && before.is_finite(), "{metrics:?}");
+    assert!(
+        metrics["level_vertices_coarse_to_fine"]
+            .as_array()
+            .unwrap()
+            .len()
+            == pyramid.len()
+    );
+}
+
+const PIPELINE: &str = r#"
+seed = 11
+[input]
+mesh = "builtin:torus"
+exemplar = "builtin:bricks"
+[input.exemplar_options]
+size = 32
+
+[[stage]]
+kind = "subdivide_sqrt2"
+target_vertices = 4000
+
+[[stage]]
+kind = "diffuse_orientation"
+keys = [{ at = [1.0, 0.0, 0.0], up = [0.0, 0.0, 1.0] }, { vertex = 3, up = [0.0, 1.0, 0.0] }]
+
+[[stage]]
+kind = "graph_match"
+region = 5.0
+passes = [2, 1]
+graph_cut = GRAPH_CUT
+
+[[stage]]
+kind = "export"
+formats = ["preview"]
+preview_size = 64
+"#;
+
+#[test]
+fn pipeline_builds_levels_frames_sweep_and_colours() {
+    for graph_cut in [false, true] {
+        let config = PIPELINE.replace("GRAPH_CUT", &graph_cut.to_string());
+        let w = world_for(&config).expect("runs");
+        let pyramid = w.resource::<Sqrt2Pyramid>().0.clone();
+        let ex = w.resource::<Exemplar>().image.clone();
+        assert_eq!(w.resource::<ActiveMesh>().0, pyramid[0]);
+        for (l, &e) in pyramid.iter().enumerate() {
+            let mesh = &w.get::<Geometry>(e).unwrap().0;
+            let n = mesh.vertex_count();
+            let frames = &w.get::<Frames>(e).expect("frames on every level").0;
+            let sweep = &w.get::<SweepField>(e).expect("sweep on every level").0;
+            let colours = w.get::<VertexColours>(e).expect("colours on every level");
+            let texels = &w.get::<SourceTexels>(e).expect("texels on every level").0;
+            assert_eq!(
+                (frames.len(), sweep.len(), texels.len()),
+                (n, n, n),
+                "level {l}"
+            );
+            assert_eq!(colours.values.len(), n * ex.channels as usize);
+            assert!(sweep.iter().all(|s| s.is_finite()));
+            assert!(
+                colours.values.iter().all(|v| (0.0..=1.0).contains(v)),
+                "level {l}"
+            );
+            for t in texels {
+                assert!(
+                    (0.0..=ex.width as f32).contains(&t.x)
+                        && (0.0..=ex.height as f32).contains(&t.y),
+                    "texel {t:?} inside the exemplar"
+                );
+            }
+        }
+        // On the finest level, vertices dense enough for stack level 0 and
+        // matched (not transferred) carry exactly their texel's colour.
+        let e = pyramid[0];
+        let colours = w.get::<VertexColours>(e).unwrap().clone();
+        let texels = w.get::<SourceTexels>(e).unwrap().0.clone();
+        if !graph_cut {
+            let mut exact = 0;
+            for (v, t) in texels.iter().enumerate() {
+                let px = ex.pixel(t.x as u32, t.y as u32);
+                if colours.values[v * 3..v * 3 + 3] == *px {
+                    exact += 1;
+                }
+            }
+            assert!(
+                exact * 10 >= texels.len() * 9,
+                "{exact} of {} exact",
+                texels.len()
+            );
+        }
+        let stage = &w.resource::<Metrics>().stages[2];
+        let total = &stage["total"];
+        let plain = total["comparisons_plain"].as_u64().unwrap();
+        let averaged = total["comparisons_averaged"].as_u64().unwrap();
+        assert!(averaged > 0 && averaged <= plain, "{stage:?}");
+        assert!(
+            total["random_starts"].as_u64().unwrap() >= 1,
+            "growth starts somewhere"
+        );
+        if graph_cut {
+            assert!(total["cuts"].as_u64().unwrap() > 0);
+            assert!(total["cut_vertices"].as_u64().unwrap() >= total["cuts"].as_u64().unwrap());
+            assert!(total["cut_flow_gap"].as_f64().unwrap() < 1e-9);
+        } else {
+            assert_eq!(total["cuts"].as_u64(), Some(0));
+        }
+        let spacing = w.resource::<TexelSpacing>().0;
+        let r_scale = stage["r_scale"].as_f64().unwrap() as f32;
+        assert!(
+            (spacing * r_scale - 1.0).abs() < 1e-5,
+            "texel spacing follows r_scale"
+        );
+        assert_eq!(w.resource::<ExportJob>().previews.len(), 3);
+    }
+}
+
+#[test]
+fn pipeline_is_identical_at_one_and_two_threads() {
+    let config = PIPELINE.replace("GRAPH_CUT", "true");
+    let colours = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let w = world_for(&config).expect("runs");
+                let e = w.resource::<ActiveMesh>().0;
+                w.get::<VertexColours>(e).unwrap().values.clone()
+            })
+    };
+    let (a, b) = (colours(1), colours(2));
+    assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
+}
+
+#[test]
+fn bad_key_vertex_is_a_stage_error_naming_the_range() {
+    let config = r#"
+[input]
+mesh = "builtin:cube"
+exemplar = "builtin:noise"
+[[stage]]
+kind = "diffuse_orientation"
+keys = [{ vertex = 999, up = [0.0, 1.0, 0.0] }]
+"#;
+    let err = world_for(config).expect_err("fails");
+    let text = err.to_string();
+    assert!(text.contains("999") && text.contains("vertices"), "{text}");
+    assert_eq!(err.exit_code(), 2);
+    // Both `vertex` and `at` in one key is refused when the config is read.
+    let both = r#"
+[input]
+mesh = "builtin:cube"
+exemplar = "builtin:noise"
+[[stage]]
+kind = "diffuse_orientation"
+keys = [{ vertex = 1, at = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }]
+"#;
+    let e = Pipeline::from_source(ConfigSource::from_text("bm.toml", both)).unwrap_err();
+    assert!(e.to_string().contains("not both"), "{e}");
+}
