@@ -174,9 +174,12 @@ fn bench_synthesis(c: &mut Criterion) {
     group.finish();
 }
 
+/// Queries per parallel task, as in pass 2.
+const CHUNK: usize = 64;
+
 /// The finest level's pass-2 search alone: 7×7 on level 0 plus 5×5 on level
-/// 1, RGB (222 values), over every pixel of the 64² exemplar, in blocks of 32
-/// queries run in parallel as pass 2 does.
+/// 1, RGB (222 values), over every pixel of the 64² exemplar, in blocks of
+/// [`CHUNK`] queries run in parallel as pass 2 does.
 fn bench_exhaustive_search(c: &mut Criterion) {
     use rayon::prelude::*;
     let ex = exemplar();
@@ -208,8 +211,8 @@ fn bench_exhaustive_search(c: &mut Criterion) {
                 };
                 nq
             ];
-            out.par_chunks_mut(32)
-                .zip(queries.par_chunks(32 * dim))
+            out.par_chunks_mut(CHUNK)
+                .zip(queries.par_chunks(CHUNK * dim))
                 .for_each(|(o, q)| search.search(q, o));
             black_box(out)
         })
@@ -224,3 +227,5 @@ criterion_group!(
     bench_synthesis
 );
 criterion_main!(benches);
+
+

@@ -306,6 +306,10 @@ fn planar_synthesis_of_each_shared_texture_beats_a_random_shuffle_and_back_ends_
         let (shuffle, _) = random_texels(&exemplar, case.meshes[0].vertex_count(), 5);
         let e_random = energy(&case, &shuffle.values, &exemplar);
         let exhaustive = synthesize(&case, &exemplar, SearchKind::Exhaustive, 7);
+        for r in &exhaustive {
+            // Every normal meets the coarser planes, borders included.
+            assert_eq!(r.report.parent_misses, 0, "level {}", r.report.level);
+        }
         let e_exhaustive = energy(&case, &exhaustive[0].colours, &exemplar);
         // The finest level's mean match distance per value (pass 2).
         let d_exhaustive = exhaustive[0].report.mean_distance[1].unwrap();
