@@ -9,6 +9,12 @@
 //! 40 962/10 242/2 562/642 vertices). The paper's timings (450 MHz Pentium II):
 //! relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
 //!
+//! Measured on the shared 2-core machine under a load average of about 7
+//! (other builds running), so wall times are pessimistic: exhaustive search
+//! 45 GFLOP/s (peak ≈ 85); relaxation 0.29 s (10 k) and 1.2 s (41 k);
+//! synthesis 0.94 / 3.6 s exhaustive, 0.96 / 3.6 s PCA + kd-tree,
+//! 0.50 / 2.6 s TSVQ (10 k / 41 k). Flattening, not search, dominates at 64².
+//!
 //! Run with `cargo bench --bench wei_levoy`; keep a baseline with
 //! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
 //! change with `-- --baseline main`. Select a group with a filter, e.g.
