@@ -9,6 +9,12 @@
 //! 40 962/10 242/2 562/642 vertices). The paper's timings (450 MHz Pentium II):
 //! relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
 //!
+//! Measured on the shared 2-core machine under a load average of about 7
+//! (other builds running), so wall times are pessimistic: exhaustive search
+//! 45 GFLOP/s (peak ≈ 85); relaxation 0.29 s (10 k) and 1.2 s (41 k);
+//! synthesis 0.94 / 3.6 s exhaustive, 0.96 / 3.6 s PCA + kd-tree,
+//! 0.50 / 2.6 s TSVQ (10 k / 41 k). Flattening, not search, dominates at 64².
+//!
 //! Run with `cargo bench --bench wei_levoy`; keep a baseline with
 //! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
 //! change with `-- --baseline main`. Select a group with a filter, e.g.
@@ -174,9 +180,12 @@ fn bench_synthesis(c: &mut Criterion) {
     group.finish();
 }
 
+/// Queries per parallel task, as in pass 2.
+const CHUNK: usize = 64;
+
 /// The finest level's pass-2 search alone: 7×7 on level 0 plus 5×5 on level
-/// 1, RGB (222 values), over every pixel of the 64² exemplar, in blocks of 32
-/// queries run in parallel as pass 2 does.
+/// 1, RGB (222 values), over every pixel of the 64² exemplar, in blocks of
+/// [`CHUNK`] queries run in parallel as pass 2 does.
 fn bench_exhaustive_search(c: &mut Criterion) {
     use rayon::prelude::*;
     let ex = exemplar();
@@ -208,8 +217,8 @@ fn bench_exhaustive_search(c: &mut Criterion) {
                 };
                 nq
             ];
-            out.par_chunks_mut(32)
-                .zip(queries.par_chunks(32 * dim))
+            out.par_chunks_mut(CHUNK)
+                .zip(queries.par_chunks(CHUNK * dim))
                 .for_each(|(o, q)| search.search(q, o));
             black_box(out)
         })
@@ -224,3 +233,5 @@ criterion_group!(
     bench_synthesis
 );
 criterion_main!(benches);
+
+

@@ -306,6 +306,10 @@ fn planar_synthesis_of_each_shared_texture_beats_a_random_shuffle_and_back_ends_
         let (shuffle, _) = random_texels(&exemplar, case.meshes[0].vertex_count(), 5);
         let e_random = energy(&case, &shuffle.values, &exemplar);
         let exhaustive = synthesize(&case, &exemplar, SearchKind::Exhaustive, 7);
+        for r in &exhaustive {
+            // Every normal meets the coarser planes, borders included.
+            assert_eq!(r.report.parent_misses, 0, "level {}", r.report.level);
+        }
         let e_exhaustive = energy(&case, &exhaustive[0].colours, &exemplar);
         // The finest level's mean match distance per value (pass 2).
         let d_exhaustive = exhaustive[0].report.mean_distance[1].unwrap();
@@ -537,4 +541,50 @@ fn match_on_a_single_mesh_and_bad_settings() {
         .unwrap_err()
         .to_string();
     assert!(err.contains("symmetry"), "{err}");
+}
+
+#[test]
+fn init_colours_draws_each_pyramid_level_from_the_matching_exemplar_level() {
+    let text = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+[input.exemplar_options]
+size = 32
+
+[[stage]]
+kind = "builtin_pyramid"
+mesh = "icosphere"
+levels = 3
+subdivisions = 3
+
+[[stage]]
+kind = "init_colours"
+"#;
+    let p =
+        Pipeline::from_source(ConfigSource::from_text("init.toml", text)).expect("valid config");
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let exemplar = input.exemplar.clone();
+    let mut world = World::new();
+    run_in_world(&p, &mut world, input).expect("pipeline runs");
+    let pyr = surfsynth::image::pyramid::gaussian_pyramid(&exemplar, 3, Wrap::Repeat);
+    let mut q = world.query::<(&MeshLevel, &Geometry, &VertexColours, &SourceTexels)>();
+    let mut seen = 0;
+    for (level, geometry, colours, texels) in q.iter(&world) {
+        let l = level.0 as usize;
+        assert_eq!(texels.0.len(), geometry.0.vertex_count());
+        let scale = (1u32 << l) as f32;
+        for (v, t) in texels.0.iter().enumerate() {
+            // Texels are in exemplar (level 0) pixels: 2^l · x + ½.
+            let (x, y) = (((t.x - 0.5) / scale) as u32, ((t.y - 0.5) / scale) as u32);
+            assert_eq!(
+                &colours.values[v * 3..v * 3 + 3],
+                pyr[l].pixel(x, y),
+                "level {l} vertex {v}"
+            );
+        }
+        seen += 1;
+    }
+    assert_eq!(seen, 3, "every level is initialised");
 }

@@ -302,7 +302,7 @@ const FLIP_RATIO: f32 = 1e-3;
 /// 2. The patch grows one triangle at a time across the edges of triangles
 ///    already in it, nearest first (3D distance from `o` to the triangle
 ///    centroid; ties by triangle id), and only across edges whose flattened
-///    bounding box reaches the template square widened by one spacing. A
+///    bounding box reaches the template square. A
 ///    triangle with one unplaced vertex places it by the heuristic of Maillot
 ///    et al. as Praun et al. §3.3 state it: every triangle around that vertex
 ///    with its other two vertices placed predicts it by unfolding a triangle
@@ -341,8 +341,11 @@ pub fn flatten_stencil(
         PatchSeed::Point { at, .. } => at,
     };
     let half = (template.size / 2) as f32;
-    let lo = -(half + 1.0) * template.spacing;
-    let hi = ((n as f32 - 1.0 - half) + 1.0) * template.spacing;
+    // The template square, widened a little for rounding. Triangles that
+    // meet a convex region are connected through edges that meet it, so
+    // growing only across such edges still reaches every template point.
+    let lo = -(half + 0.01) * template.spacing;
+    let hi = ((n as f32 - 1.0 - half) + 0.01) * template.spacing;
     let project = |x: Vec3| -> Vec2 {
         let d = x - origin;
         Vec2::new(d.dot(frame.s), -d.dot(frame.t))
@@ -505,15 +508,18 @@ fn add_triangle(
     let [a, b, c] = p;
     let mn = a.min(b).min(c);
     let mx = a.max(b).max(c);
-    // One point of slack on each side for the inside tolerance.
-    let i0 = (to_index(mn.x).ceil() - 1.0).max(0.0);
-    let i1 = (to_index(mx.x).floor() + 1.0).min(n as f32 - 1.0);
-    let j0 = (to_index(mn.y).ceil() - 1.0).max(0.0);
-    let j1 = (to_index(mx.y).floor() + 1.0).min(n as f32 - 1.0);
+    // Points a hair outside the bounding box may still pass the inside
+    // tolerance; farther ones cannot.
+    const SLACK: f32 = 1e-3;
+    let last = n as i32 - 1;
+    let i0 = ceil_i(to_index(mn.x) - SLACK).max(0);
+    let i1 = floor_i(to_index(mx.x) + SLACK).min(last);
+    let j0 = ceil_i(to_index(mn.y) - SLACK).max(0);
+    let j1 = floor_i(to_index(mx.y) + SLACK).min(last);
     if i0 > i1 || j0 > j1 {
         return false;
     }
-    let den = (b - a).perp_dot(c - a);
+    let inv = 1.0 / (b - a).perp_dot(c - a);
     let verts = adjacency.tris[t as usize];
     for j in j0 as usize..=j1 as usize {
         for i in i0 as usize..=i1 as usize {
@@ -522,8 +528,8 @@ fn add_triangle(
                 continue;
             }
             let q = template.point(i, j);
-            let w1 = (q - a).perp_dot(c - a) / den;
-            let w2 = (b - a).perp_dot(q - a) / den;
+            let w1 = (q - a).perp_dot(c - a) * inv;
+            let w2 = (b - a).perp_dot(q - a) * inv;
             let w0 = 1.0 - w1 - w2;
             if w0.min(w1).min(w2) < -INSIDE_EPS {
                 continue;
@@ -538,8 +544,23 @@ fn add_triangle(
     report.covered == n * n
 }
 
+/// `⌊x⌋` by a truncating cast, saturating far outside the template (library
+/// calls for `floor`/`ceil` cost more than the rest of a small triangle).
+#[inline]
+fn floor_i(x: f32) -> i32 {
+    let t = x as i32;
+    if (t as f32) > x { t - 1 } else { t }
+}
+
+/// `⌈x⌉`, like [`floor_i`].
+#[inline]
+fn ceil_i(x: f32) -> i32 {
+    let t = x as i32;
+    if (t as f32) < x { t + 1 } else { t }
+}
+
 /// Queues the unvisited triangles across the edges of `t` whose flattened
-/// bounding box reaches the widened template square `[lo, hi]²`.
+/// bounding box reaches the template square `[lo, hi]²`.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 fn push_neighbours(

@@ -138,10 +138,15 @@ pub fn relax_orientation(levels: &[OrientationLevel], settings: &RelaxSettings) 
         let mut energy = vec![state.total_energy()];
         if settings.mode == OrientationMode::Relax {
             let classes = colour_classes(level.topology);
+            let mut dirty = vec![true; state.frames.len()];
             for it in 0..settings.iterations {
                 let _span = tracing::debug_span!("relax_iteration", it).entered();
-                state.sweep(&classes);
-                energy.push(state.total_energy());
+                let e = if state.sweep(&classes, &mut dirty) {
+                    state.total_energy()
+                } else {
+                    *energy.last().unwrap_or(&0.0)
+                };
+                energy.push(e);
             }
         }
         result.frames[l] = state.frames;
@@ -285,8 +290,16 @@ fn colour_classes(topology: &Topology) -> Vec<Vec<u32>> {
 #[inline]
 fn residual_degrees(phi: f32, n: u32) -> f32 {
     let period = std::f32::consts::TAU / n as f32;
-    let r = phi - (phi / period).round() * period;
+    let r = phi - round(phi / period) * period;
     r.to_degrees()
+}
+
+/// Rounds half away from zero like `f32::round`, by a truncating cast (one
+/// instruction; `round` is a library call on baseline x86-64). Exact for
+/// `|x| < 2²³`, far beyond any angle ratio here.
+#[inline]
+fn round(x: f32) -> f32 {
+    (x + 0.5f32.copysign(x)) as i32 as f32
 }
 
 struct Relaxation<'a> {
@@ -364,19 +377,40 @@ impl Relaxation<'_> {
         best.1
     }
 
-    fn sweep(&mut self, classes: &[Vec<u32>]) {
+    /// One Gauss–Seidel sweep, class by class. Only vertices marked `dirty`
+    /// are evaluated: a vertex whose direction and neighbours' directions did
+    /// not change since it last found no better rotation would find none
+    /// again, so skipping it changes nothing. Returns whether any direction
+    /// rotated.
+    fn sweep(&mut self, classes: &[Vec<u32>], dirty: &mut [bool]) -> bool {
+        let mut any = false;
         for class in classes {
             let rotations: Vec<f32> = class
                 .par_iter()
-                .map_init(Vec::new, |own, &p| self.best_rotation(p, own))
+                .map_init(Vec::new, |own, &p| {
+                    if dirty[p as usize] {
+                        self.best_rotation(p, own)
+                    } else {
+                        0.0
+                    }
+                })
                 .collect();
+            for &p in class {
+                dirty[p as usize] = false;
+            }
             for (&p, &theta) in class.iter().zip(&rotations) {
                 if theta != 0.0 {
+                    any = true;
                     let f = &mut self.frames[p as usize];
                     *f = f.rotated(theta);
+                    dirty[p as usize] = true;
+                    for &q in self.topology.neighbours(p) {
+                        dirty[q as usize] = true;
+                    }
                 }
             }
         }
+        any
     }
 }
 
@@ -409,7 +443,7 @@ fn circular_minimiser(angles: &[f32], n: u32) -> f32 {
     }
     // Express as the smallest rotation.
     let m = best.1;
-    m - (m / period).round() * period
+    m - round(m / period) * period
 }
 
 #[cfg(test)]

@@ -221,7 +221,7 @@ struct LevelGeometry {
 /// the thread count.
 const PASS1_CHUNK: usize = 64;
 /// Queries per parallel task within a pass-2 batch.
-const PASS2_CHUNK: usize = 32;
+const PASS2_CHUNK: usize = 64;
 
 /// The parts of a level's neighbourhood: the level itself, then each coarser level.
 pub fn neighbourhood_parts(spec: NeighbourhoodSpec, available_levels: usize) -> Vec<Part> {

@@ -211,16 +211,24 @@ fn build(
     index
 }
 
-/// Whether the line segment `origin + s·dir`, `|s| <= limit`, meets the box.
+/// Whether the line segment `origin + s·dir`, `|s| <= limit`, meets the box
+/// (slab test; an axis the line runs parallel to only needs the origin
+/// inside the slab, boundary included).
 #[inline]
 fn slab_overlaps(min: Vec3, max: Vec3, origin: Vec3, inv: Vec3, limit: f32) -> bool {
-    let t0 = (min - origin) * inv;
-    let t1 = (max - origin) * inv;
-    let lo = t0.min(t1);
-    let hi = t0.max(t1);
-    // NaN (0·∞ on a face of the box) is ignored by max/min.
-    let enter = lo.max_element().max(-limit);
-    let exit = hi.min_element().min(limit);
+    let (mut enter, mut exit) = (-limit, limit);
+    for k in 0..3 {
+        if inv[k].is_infinite() {
+            if origin[k] < min[k] || origin[k] > max[k] {
+                return false;
+            }
+            continue;
+        }
+        let t0 = (min[k] - origin[k]) * inv[k];
+        let t1 = (max[k] - origin[k]) * inv[k];
+        enter = enter.max(t0.min(t1));
+        exit = exit.min(t0.max(t1));
+    }
     enter <= exit
 }
 
@@ -345,6 +353,13 @@ mod tests {
                 })
                 .fold(f32::INFINITY, f32::min);
             assert!(((near.at - *p).length() - brute).abs() < 1e-6);
+        }
+        // A line on the border of a flat mesh still finds it.
+        let plane = builtin_mesh("plane", &BuiltinOptions::default()).unwrap();
+        let adj = TriangleAdjacency::new(&plane);
+        let bvh = TriangleBvh::new(&adj, &plane.positions);
+        for p in &plane.positions {
+            assert!(bvh.cast_line(*p, Vec3::Z, 0.1).is_some(), "{p}");
         }
         // Too short a reach finds nothing.
         assert!(

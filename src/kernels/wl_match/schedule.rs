@@ -21,28 +21,31 @@ pub fn random_order(count: usize, seed: u64) -> Vec<u32> {
 }
 
 /// The batches of `order` given which vertices each vertex reads
-/// (`reads(v)`, any order, may contain `v` itself). Each batch lists its
-/// vertices in their order of `order`.
+/// (`reads(v)`, any order, may contain `v` itself or repeats). Each batch
+/// lists its vertices in their order of `order`. O(total reads).
 pub fn dependency_batches<'a>(order: &[u32], reads: impl Fn(u32) -> &'a [u32]) -> Vec<Vec<u32>> {
     let n = order.len();
-    // Symmetric conflict lists in CSR form.
-    let mut pairs: Vec<(u32, u32)> = Vec::new();
+    // Who reads each vertex: the transpose of `reads`, by counting.
+    let mut start = vec![0u32; n + 1];
     for v in 0..n as u32 {
         for &u in reads(v) {
-            if u != v && (u as usize) < n {
-                pairs.push((v, u));
-                pairs.push((u, v));
+            if (u as usize) < n {
+                start[u as usize + 1] += 1;
             }
         }
     }
-    pairs.sort_unstable();
-    pairs.dedup();
-    let mut start = vec![0u32; n + 1];
-    for &(a, _) in &pairs {
-        start[a as usize + 1] += 1;
-    }
     for i in 0..n {
         start[i + 1] += start[i];
+    }
+    let mut fill = start.clone();
+    let mut readers = vec![0u32; start[n] as usize];
+    for v in 0..n as u32 {
+        for &u in reads(v) {
+            if (u as usize) < n {
+                readers[fill[u as usize] as usize] = v;
+                fill[u as usize] += 1;
+            }
+        }
     }
     let mut position = vec![0u32; n];
     for (i, &v) in order.iter().enumerate() {
@@ -53,8 +56,9 @@ pub fn dependency_batches<'a>(order: &[u32], reads: impl Fn(u32) -> &'a [u32]) -
     for &v in order {
         let pv = position[v as usize];
         let mut b = 0u32;
-        for &(_, u) in &pairs[start[v as usize] as usize..start[v as usize + 1] as usize] {
-            if position[u as usize] < pv {
+        let read_by = &readers[start[v as usize] as usize..start[v as usize + 1] as usize];
+        for &u in reads(v).iter().chain(read_by) {
+            if (u as usize) < n && position[u as usize] < pv {
                 b = b.max(batch[u as usize] + 1);
             }
         }

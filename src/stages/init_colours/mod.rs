@@ -100,7 +100,7 @@ impl Stage for InitColours {
                     seed.derive(ctx.index, l as u64),
                 );
                 // Texels in pixels of the exemplar itself (level 0).
-                let scale = (1u32 << l) as f32;
+                let scale = 2f32.powi(l as i32);
                 for t in &mut texels.0 {
                     *t = (*t - Vec2::splat(0.5)) * scale + Vec2::splat(0.5);
                 }

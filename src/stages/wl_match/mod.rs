@@ -245,7 +245,7 @@ impl Stage for Match {
             let count = entities.len();
             // The coarsest level starts from init_colours' pixels when it has them.
             let coarsest = entities[count - 1];
-            let scale = (1u32 << (count - 1)) as f32;
+            let scale = 2f32.powi(count as i32 - 1);
             let init = data.get(coarsest).ok().and_then(|(g, _, c, t)| {
                 let (c, t) = (c?, t?);
                 let nv = g.0.vertex_count();
@@ -307,7 +307,7 @@ impl Stage for Match {
             }
             let ch = exemplar.image.channels as usize;
             for (l, (e, r)) in entities.iter().zip(results).enumerate() {
-                let s = (1u32 << l) as f32;
+                let s = 2f32.powi(l as i32);
                 let texels: Vec<Vec2> = r
                     .texels
                     .iter()

@@ -10,8 +10,8 @@
 //!   accelerate the search: a binary tree of 2-means clusters, descended
 //!   greedily (or best-first over a few leaves). Approximate.
 //!
-//! Every back-end answers each query on its own, in a fixed order, so results
-//! never depend on the thread count. Ties go to the lower exemplar index.
+//! Every back-end answers a block of queries sequentially, so results never
+//! depend on the thread count. Ties go to the lower exemplar index.
 
 mod exhaustive;
 mod pca_kdtree;
@@ -35,8 +35,12 @@ pub struct Match {
 /// A nearest-neighbourhood search over a fixed set of exemplar vectors.
 pub trait NeighbourhoodSearch: Send + Sync {
     /// The best match of each query of `queries` (rows of [`Self::dim`]
-    /// values, row-major) into `out` (one per query). Answers depend only on
-    /// each query, not on which others share the block.
+    /// values, row-major) into `out` (one per query). Each call runs
+    /// sequentially, so answers never depend on the thread count. The
+    /// approximate back-ends answer each query on its own; the exhaustive one
+    /// preselects candidates with a matrix product whose rounding may depend
+    /// on the block's size, which can only matter between near-equal
+    /// candidates (the final ranking uses exact distances).
     fn search(&self, queries: &[f32], out: &mut [Match]);
 
     /// Values per vector.
