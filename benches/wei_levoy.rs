@@ -233,5 +233,3 @@ criterion_group!(
     bench_synthesis
 );
 criterion_main!(benches);
-
-
