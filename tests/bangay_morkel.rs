@@ -843,3 +843,73 @@ keys = [{ vertex = 1, at = [0.0, 0.0, 0.0], up = [0.0, 1.0, 0.0] }]
     let e = Pipeline::from_source(ConfigSource::from_text("bm.toml", both)).unwrap_err();
     assert!(e.to_string().contains("not both"), "{e}");
 }
+
+// ----- the shipped configs ---------------------------------------------------------------
+
+fn bm_configs() -> Vec<std::path::PathBuf> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut v: Vec<_> = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| {
+            p.file_name()
+                .and_then(|n| n.to_str())
+                .is_some_and(|n| n.starts_with("2") && n.contains("_bm_") && n.ends_with(".toml"))
+        })
+        .collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn shipped_configs_validate() {
+    let configs = bm_configs();
+    assert!(configs.len() >= 4, "{configs:?}");
+    for path in configs {
+        let source = ConfigSource::from_file(&path).unwrap();
+        let p = Pipeline::from_source(source).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        let kinds: Vec<&str> = p.stages.iter().map(|s| s.kind()).collect();
+        assert!(
+            kinds.contains(&"subdivide_sqrt2") && kinds.contains(&"graph_match"),
+            "{}: {kinds:?}",
+            path.display()
+        );
+    }
+}
+
+#[test]
+fn graph_cut_config_runs_end_to_end_at_small_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs/21_bm_eight_water_graphcut.toml");
+    let (code, _, stderr) = common::run_cli(&[
+        "run",
+        cfg.to_str().unwrap(),
+        "--out",
+        dir.path().to_str().unwrap(),
+        "--set",
+        "stage.1.target_vertices=4000",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    for name in ["result.ply", "result.obj", "preview_0.png", "metrics.json"] {
+        assert!(dir.path().join(name).is_file(), "{name} written");
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("metrics.json")).unwrap())
+            .unwrap();
+    let sub = &m["stages"][0]["metrics"];
+    assert!(
+        sub["area_std_percent_after"].as_f64().unwrap()
+            < sub["area_std_percent_before"].as_f64().unwrap()
+    );
+    let gm = &m["stages"][2]["metrics"];
+    assert!(gm["total"]["cuts"].as_u64().unwrap() > 0);
+    assert!(gm["levels"].as_array().unwrap().len() >= 3);
+    assert!(
+        m["result"]["quality"]["texture_energy"]["mean"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+}

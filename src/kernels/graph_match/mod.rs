@@ -144,7 +144,13 @@ impl SynthesisState {
     /// The state carried to a refined mesh level through its √2 `parents`:
     /// an old vertex keeps everything bit for bit; a new one gets the
     /// weighted mean colour and texel of its parents, is coloured when all
-    /// of them are, and stands for the coarsest level among them.
+    /// of them are, and stands for one level above the coarsest among them
+    /// (a mean of neighbouring samples is blurrier than each of them). Until
+    /// it is matched again, its colour is thus compared with a blurrier
+    /// level than the freshly matched colours around it, which keeps the
+    /// interpolated guidance from pulling matches toward flat exemplar
+    /// areas (measured: sharper results and a lower energy relative to a
+    /// shuffle on the planar test).
     pub fn carried(&self, parents: &Parents) -> Self {
         let ch = self.channels;
         let n = parents.len();
@@ -175,7 +181,7 @@ impl SynthesisState {
             }
             out.texels[v] = texel;
             out.coloured[v] = coloured;
-            out.levels[v] = level;
+            out.levels[v] = level.saturating_add(1);
         }
         out
     }
@@ -567,18 +573,21 @@ fn match_vertex(
         let mut border = vec![false; n];
         let mut distance = vec![0.0f32; n];
         let wrap = images.wrap();
+        // Each region vertex reads the texel under it (nearest, as in
+        // matching; bilinear samples would blur the copy) on the level of
+        // its own density.
+        let texel_of = |i: usize| {
+            let o = region.offset[i].round();
+            [q[0] as i64 + o.x as i64, q[1] as i64 + o.y as i64]
+        };
         for (i, &w) in region.vertices.iter().enumerate() {
             let wi = w as usize;
-            let at = qc + region.offset[i];
             if i == 0 {
                 texture[..ch].copy_from_slice(&out_colours);
             } else {
-                images.image(levels[i]).sample_bilinear(
-                    at.x,
-                    at.y,
-                    wrap,
-                    &mut texture[i * ch..(i + 1) * ch],
-                );
+                let [x, y] = texel_of(i);
+                texture[i * ch..(i + 1) * ch]
+                    .copy_from_slice(images.image(levels[i]).texel(x, y, wrap));
             }
             surface[i * ch..(i + 1) * ch].copy_from_slice(&state.colours[wi * ch..(wi + 1) * ch]);
             coloured[i] = state.coloured[wi];
@@ -607,7 +616,8 @@ fn match_vertex(
         stats.cut_flow_gap = (cut.cost - cut.flow).abs();
         for i in 1..n {
             if cut.take_texture[i] {
-                let at = qc + region.offset[i];
+                let [x, y] = texel_of(i);
+                let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 writes.push((
                     region.vertices[i],
                     wrap_texel(images, at * factor),

@@ -180,6 +180,15 @@ impl GraphMatchStageSettings {
     }
 }
 
+/// Mean number of vertices a cut coloured (0 without cuts).
+fn per_cut(s: &PassStats) -> f64 {
+    if s.cuts == 0 {
+        0.0
+    } else {
+        s.cut_vertices as f64 / s.cuts as f64
+    }
+}
+
 /// The `graph_match` stage.
 pub struct GraphMatch;
 
@@ -362,6 +371,7 @@ impl Stage for GraphMatch {
                     "passes": passes,
                     "seconds": seconds,
                     "stats": level_stats,
+                    "cut_vertices_per_cut": per_cut(&level_stats),
                 }));
                 total += level_stats;
                 commands.entity(e).insert((
@@ -375,6 +385,7 @@ impl Stage for GraphMatch {
             }
             metrics.record(idx, "levels", per_level);
             metrics.record(idx, "total", total);
+            metrics.record(idx, "cut_vertices_per_cut", per_cut(&total));
             spacing.0 = 1.0 / r_scale;
         })
         .into_configs()
