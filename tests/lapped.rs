@@ -19,7 +19,7 @@ use surfsynth::kernels::lapped::atlas::{AtlasSettings, pack_charts, segment_char
 use surfsynth::kernels::lapped::coverage::lattice_samples;
 use surfsynth::kernels::lapped::grow::{GrowSettings, Grower};
 use surfsynth::kernels::lapped::mask::{TexturePatch, circle_mask, splotch_mask};
-use surfsynth::kernels::lapped::param::{CgSettings, optimise_parametrisation};
+use surfsynth::kernels::lapped::param::{SolveSettings, optimise_parametrisation};
 use surfsynth::kernels::lapped::paste::{PasteSettings, paste_until_covered};
 use surfsynth::kernels::lapped::tangent_field::{FieldConstraint, global_up_field, rbf_field};
 use surfsynth::kernels::lapped::{FaceField, TriMesh};
@@ -78,28 +78,33 @@ fn flat_grid_with_constant_field_is_the_exact_similarity() {
     let mut grower = Grower::new(&m, field, GrowSettings::default());
     let seed = 2 * (9 * 19 + 9);
     let bary = [0.6, 0.3, 0.1];
-    let mut patch = grower.start(seed, bary, 0.0);
-    grower.grow(&mut patch, &texture(false).hull);
-    assert!(patch.faces.len() > 40, "{} faces", patch.faces.len());
-    let report = optimise_parametrisation(
-        &m,
-        &mut patch,
-        &CgSettings {
-            tolerance: 1e-12,
-            max_iterations: 5000,
-        },
-    );
-    assert!(report.energy < 1e-9, "residual {report:?}");
-    let centre = m.point(seed as usize, bary);
-    let right = up.cross(Vec3::Z);
-    for (l, &v) in patch.vertices.iter().enumerate() {
-        let d = m.positions[v as usize] - centre;
-        let expected = Vec2::new(d.dot(right), d.dot(up)) / 0.9;
-        assert!(
-            (patch.st[l] - expected).length() < 1e-5,
-            "vertex {v}: {:?} vs the similarity {expected:?}",
-            patch.st[l]
+    // Both solvers: CG (the paper's) and the sparse Cholesky of large patches.
+    for direct_from in [usize::MAX, 0] {
+        let mut patch = grower.start(seed, bary, 0.0);
+        grower.grow(&mut patch, &texture(false).hull);
+        assert!(patch.faces.len() > 40, "{} faces", patch.faces.len());
+        let report = optimise_parametrisation(
+            &m,
+            &mut patch,
+            &SolveSettings {
+                tolerance: 1e-12,
+                max_iterations: 5000,
+                direct_from,
+            },
         );
+        assert_eq!(report.direct, direct_from == 0);
+        assert!(report.energy < 1e-9, "residual {report:?}");
+        let centre = m.point(seed as usize, bary);
+        let right = up.cross(Vec3::Z);
+        for (l, &v) in patch.vertices.iter().enumerate() {
+            let d = m.positions[v as usize] - centre;
+            let expected = Vec2::new(d.dot(right), d.dot(up)) / 0.9;
+            assert!(
+                (patch.st[l] - expected).length() < 1e-5,
+                "vertex {v}: {:?} vs the similarity {expected:?}",
+                patch.st[l]
+            );
+        }
     }
 }
 
@@ -131,7 +136,7 @@ fn grown_patches_are_discs_inside_the_hull() {
                     assert!(reaches, "{what}: face {lf} is outside the hull");
                 }
                 // The grown patch still a disc after regrowing.
-                optimise_parametrisation(&m, &mut patch, &CgSettings::default());
+                optimise_parametrisation(&m, &mut patch, &SolveSettings::default());
                 grower.grow(&mut patch, &tex.hull);
                 assert_eq!(patch.euler_characteristic(), 1, "{what}, regrown");
                 assert_eq!(patch.boundary_loop_count(), 1, "{what}, regrown");
