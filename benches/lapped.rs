@@ -38,7 +38,7 @@ fn bunny() -> PolyMesh {
 
 fn torus_knot_75k() -> PolyMesh {
     let opts = surfsynth::mesh::builtin::BuiltinOptions {
-        resolution: [500, 75],
+        resolution: [100, 75], // 100 · (p + q) = 500 segments along the knot, 75 around: 75 000 triangles
         ..Default::default()
     };
     surfsynth::mesh::builtin::builtin_mesh("torus_knot", &opts).expect("builtin torus_knot")
