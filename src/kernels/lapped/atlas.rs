@@ -611,8 +611,8 @@ pub fn composite_atlas(
                 }
                 if n > 0.0 {
                     let o = 3 * (y * s + x);
-                    for k in 0..3 {
-                        image.data[o + k] = sum[k] / n;
+                    for (out, v) in image.data[o..o + 3].iter_mut().zip(sum) {
+                        *out = v / n;
                     }
                     filled[y * s + x] = true;
                 }

@@ -146,7 +146,7 @@ pub fn alignment_system(mesh: &TriMesh, patch: &SurfacePatch) -> (Csr, Vec<f64>,
             }
         }
     }
-    triplets.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    triplets.sort_unstable_by_key(|&(r, c, _)| (r, c));
     let mut m = Csr {
         start: vec![0; n + 1],
         col: Vec::with_capacity(triplets.len() / 2),

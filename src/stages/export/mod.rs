@@ -90,12 +90,7 @@ impl Stage for Export {
         (move |active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
                mut job: ResMut<ExportJob>,
-               meshes: Query<(
-            &Geometry,
-            Option<&VertexColours>,
-            Option<&CornerUvs>,
-            Option<&AtlasTexture>,
-        )>,
+               meshes: Query<MeshQuery>,
                pastes: Query<PasteQuery>,
                patch_textures: Option<Res<TexturePatches>>| {
             let Ok((geometry, colours, uvs, atlas)) = meshes.get(active.0) else {
@@ -186,6 +181,14 @@ impl Stage for Export {
         .into_configs()
     }
 }
+
+/// What the export reads of the active mesh entity.
+type MeshQuery = (
+    &'static Geometry,
+    Option<&'static VertexColours>,
+    Option<&'static CornerUvs>,
+    Option<&'static AtlasTexture>,
+);
 
 /// What the export reads of a paste entity.
 type PasteQuery = (
