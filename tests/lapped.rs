@@ -19,7 +19,7 @@ use surfsynth::kernels::lapped::atlas::{AtlasSettings, pack_charts, segment_char
 use surfsynth::kernels::lapped::coverage::lattice_samples;
 use surfsynth::kernels::lapped::grow::{GrowSettings, Grower};
 use surfsynth::kernels::lapped::mask::{TexturePatch, circle_mask, splotch_mask};
-use surfsynth::kernels::lapped::param::{CgSettings, optimise_parametrisation};
+use surfsynth::kernels::lapped::param::{SolveSettings, optimise_parametrisation};
 use surfsynth::kernels::lapped::paste::{PasteSettings, paste_until_covered};
 use surfsynth::kernels::lapped::tangent_field::{FieldConstraint, global_up_field, rbf_field};
 use surfsynth::kernels::lapped::{FaceField, TriMesh};
@@ -78,28 +78,33 @@ fn flat_grid_with_constant_field_is_the_exact_similarity() {
     let mut grower = Grower::new(&m, field, GrowSettings::default());
     let seed = 2 * (9 * 19 + 9);
     let bary = [0.6, 0.3, 0.1];
-    let mut patch = grower.start(seed, bary, 0.0);
-    grower.grow(&mut patch, &texture(false).hull);
-    assert!(patch.faces.len() > 40, "{} faces", patch.faces.len());
-    let report = optimise_parametrisation(
-        &m,
-        &mut patch,
-        &CgSettings {
-            tolerance: 1e-12,
-            max_iterations: 5000,
-        },
-    );
-    assert!(report.energy < 1e-9, "residual {report:?}");
-    let centre = m.point(seed as usize, bary);
-    let right = up.cross(Vec3::Z);
-    for (l, &v) in patch.vertices.iter().enumerate() {
-        let d = m.positions[v as usize] - centre;
-        let expected = Vec2::new(d.dot(right), d.dot(up)) / 0.9;
-        assert!(
-            (patch.st[l] - expected).length() < 1e-5,
-            "vertex {v}: {:?} vs the similarity {expected:?}",
-            patch.st[l]
+    // Both solvers: CG (the paper's) and the sparse Cholesky of large patches.
+    for direct_from in [usize::MAX, 0] {
+        let mut patch = grower.start(seed, bary, 0.0);
+        grower.grow(&mut patch, &texture(false).hull);
+        assert!(patch.faces.len() > 40, "{} faces", patch.faces.len());
+        let report = optimise_parametrisation(
+            &m,
+            &mut patch,
+            &SolveSettings {
+                tolerance: 1e-12,
+                max_iterations: 5000,
+                direct_from,
+            },
         );
+        assert_eq!(report.direct, direct_from == 0);
+        assert!(report.energy < 1e-9, "residual {report:?}");
+        let centre = m.point(seed as usize, bary);
+        let right = up.cross(Vec3::Z);
+        for (l, &v) in patch.vertices.iter().enumerate() {
+            let d = m.positions[v as usize] - centre;
+            let expected = Vec2::new(d.dot(right), d.dot(up)) / 0.9;
+            assert!(
+                (patch.st[l] - expected).length() < 1e-5,
+                "vertex {v}: {:?} vs the similarity {expected:?}",
+                patch.st[l]
+            );
+        }
     }
 }
 
@@ -131,7 +136,7 @@ fn grown_patches_are_discs_inside_the_hull() {
                     assert!(reaches, "{what}: face {lf} is outside the hull");
                 }
                 // The grown patch still a disc after regrowing.
-                optimise_parametrisation(&m, &mut patch, &CgSettings::default());
+                optimise_parametrisation(&m, &mut patch, &SolveSettings::default());
                 grower.grow(&mut patch, &tex.hull);
                 assert_eq!(patch.euler_characteristic(), 1, "{what}, regrown");
                 assert_eq!(patch.boundary_loop_count(), 1, "{what}, regrown");
@@ -420,4 +425,136 @@ fn lapped_configs_are_valid() {
         }
     }
     assert!(found >= 3);
+}
+
+/// Runs a config text (relative paths from the package root) in a world.
+fn world_of(text: &str) -> World {
+    let mut source = ConfigSource::from_text("lapped.toml", text);
+    source.base_dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let p = Pipeline::from_source(source).expect("valid config");
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let mut world = World::new();
+    run_in_world(&p, &mut world, input).expect("pipeline runs");
+    world
+}
+
+fn stage_metrics(world: &World, index: usize) -> serde_json::Map<String, serde_json::Value> {
+    world.resource::<Metrics>().stages[index].clone()
+}
+
+#[test]
+fn quads_are_triangulated_and_frames_drive_the_field() {
+    let world = world_of(
+        r#"
+seed = 2
+[input]
+mesh = "builtin:cube"
+exemplar = "builtin:stripes"
+[input.mesh_options]
+subdivisions = 3
+
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+
+[[stage]]
+kind = "tangent_field"
+mode = "frames"
+patch_size = 0.3
+
+[[stage]]
+kind = "lapped_paste"
+"#,
+    );
+    let active = world.resource::<ActiveMesh>().0;
+    let mesh = &world.get::<Geometry>(active).unwrap().0;
+    assert!(mesh.is_triangle_mesh());
+    assert_eq!(
+        mesh.face_count(),
+        2 * 6 * 64,
+        "6 sides of 8 × 8 quads, split"
+    );
+    let field = world
+        .get::<surfsynth::stages::tangent_field::FaceField>(active)
+        .unwrap();
+    // On the cube's sides the frames' up is +Y, projected (vertex frames
+    // at the cube's edges lean a little: their normals are averaged).
+    let normals = mesh.face_normals();
+    for (t, n) in field.t.iter().zip(&normals) {
+        if n.y.abs() < 0.5 {
+            assert!(t.normalize().y > 0.95, "{t:?} on a side with normal {n:?}");
+        }
+    }
+    let m = stage_metrics(&world, 2);
+    assert_eq!(m["uncovered_faces"], 0, "{m:?}");
+    assert_eq!(stage_metrics(&world, 1)["triangulated"], true);
+}
+
+#[test]
+fn a_user_mask_cuts_the_patch_along_it() {
+    let world = world_of(
+        r#"
+seed = 5
+[input]
+mesh = "../shared/data/meshes/eight.off"
+exemplar = "../shared/data/textures/brick.png"
+
+[[stage]]
+kind = "tangent_field"
+patch_size = 0.3
+
+[[stage]]
+kind = "lapped_paste"
+mask = "image"
+mask_image = "configs/masks/brick_patch.png"
+"#,
+    );
+    let m = stage_metrics(&world, 1);
+    assert_eq!(m["uncovered_faces"], 0, "{m:?}");
+    // The texture patch is the mask's bounding box plus a clear border, and
+    // its alpha is zero exactly outside the mask.
+    let textures = &world.resource::<TexturePatches>().0;
+    assert_eq!(textures.len(), 1);
+    let patch = &textures[0];
+    let mask = surfsynth::image::load_image(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/masks/brick_patch.png"),
+    )
+    .unwrap();
+    let inside = mask.data.iter().filter(|&&v| v >= 0.5).count();
+    let visible = patch.data.chunks_exact(4).filter(|p| p[3] > 0.0).count();
+    assert_eq!(visible, inside);
+    assert!(patch.width < mask.width && patch.height < mask.height);
+}
+
+#[test]
+fn mask_errors_are_caught_when_the_config_loads() {
+    let text = r#"
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+
+[[stage]]
+kind = "tangent_field"
+
+[[stage]]
+kind = "lapped_paste"
+mask = "image"
+"#;
+    let e = Pipeline::from_source(ConfigSource::from_text("bad.toml", text)).unwrap_err();
+    let msg = e.to_string();
+    assert!(
+        msg.contains("mask_image") && msg.contains("bad.toml"),
+        "{msg}"
+    );
+    let text = text.replace(
+        "mask = \"image\"",
+        "mask = \"image\"\nmask_image = \"no/such/mask.png\"",
+    );
+    let e = Pipeline::from_source(ConfigSource::from_text("bad.toml", &text)).unwrap_err();
+    assert!(e.to_string().contains("no/such/mask.png"), "{e}");
+    // lapped_paste needs the field first.
+    let text = "[input]\nmesh = \"builtin:icosphere\"\nexemplar = \"builtin:noise\"\n[[stage]]\nkind = \"lapped_paste\"\n";
+    let e = Pipeline::from_source(ConfigSource::from_text("bad.toml", text)).unwrap_err();
+    assert!(e.to_string().contains("tangent_field"), "{e}");
 }

@@ -23,7 +23,7 @@
 use super::coverage::Coverage;
 use super::grow::{GrowSettings, Grower};
 use super::mask::TexturePatch;
-use super::param::{CgSettings, optimise_parametrisation};
+use super::param::{SolveSettings, optimise_parametrisation};
 use super::{FaceField, TriMesh};
 use crate::image::Image;
 use crate::image::sample::Wrap;
@@ -218,6 +218,7 @@ pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
         field,
         GrowSettings {
             max_distortion: settings.max_distortion,
+            max_reach: f32::INFINITY,
             max_faces: usize::MAX,
         },
     );
@@ -237,7 +238,7 @@ pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
         let n0 = mesh.normals[seed as usize];
         let mut hash = TriangleHash::new(cell);
         hash.insert(patch.tris[0].map(|v| patch.st[v as usize]));
-        grower.grow_with(&mut patch, &|_, _| true, &mut |g, st| {
+        grower.grow_with(&mut patch, f32::INFINITY, &|_, _| true, &mut |g, st| {
             let ok = chart_of_face[g as usize] == u32::MAX
                 && mesh.normals[g as usize].dot(n0) >= cos_cone
                 && signed_area2(&st) > 0.0
@@ -249,7 +250,7 @@ pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
         });
         // Relax (§3.4); keep the unfolding when relaxing breaks the chart.
         let unfolded = patch.st.clone();
-        optimise_parametrisation(mesh, &mut patch, &CgSettings::default());
+        optimise_parametrisation(mesh, &mut patch, &SolveSettings::default());
         let relaxed: Vec<[Vec2; 3]> = patch
             .tris
             .iter()
@@ -610,8 +611,8 @@ pub fn composite_atlas(
                 }
                 if n > 0.0 {
                     let o = 3 * (y * s + x);
-                    for k in 0..3 {
-                        image.data[o + k] = sum[k] / n;
+                    for (out, v) in image.data[o..o + 3].iter_mut().zip(sum) {
+                        *out = v / n;
                     }
                     filled[y * s + x] = true;
                 }

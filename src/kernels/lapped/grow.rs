@@ -37,6 +37,13 @@ pub struct GrowSettings {
     /// `2 − 2 cos θ`, a scale error by a factor k gives `(k − 1)²`).
     /// Default 0.6 (about 47°).
     pub max_distortion: f32,
+    /// Largest growth distance from the seed (patch units, along face
+    /// centroids), as a multiple of the hull's largest radius. Where the
+    /// field cannot be integrated (it turns around a thin tube, say) the
+    /// optimised parametrisation shrinks, the hull then reaches ever
+    /// farther over the surface, and regrowing would run away; this bounds
+    /// it. Default 2.
+    pub max_reach: f32,
     /// Safety bound on the faces of one patch. Default 100 000.
     pub max_faces: usize,
 }
@@ -45,6 +52,7 @@ impl Default for GrowSettings {
     fn default() -> Self {
         Self {
             max_distortion: 0.6,
+            max_reach: 2.0,
             max_faces: 100_000,
         }
     }
@@ -244,15 +252,22 @@ impl<'a> Grower<'a> {
     /// faces added. Call again after the parametrisation changed (§3.4: the
     /// optimisation may uncover parts of the texture patch).
     pub fn grow(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
+        let radius = hull
+            .vertices
+            .iter()
+            .map(|v| v.length())
+            .fold(0.0f32, f32::max);
         self.grow_with(
             patch,
+            self.settings.max_reach * radius,
             &|a: Vec2, b: Vec2| hull.segment_intersects(a, b),
             &mut |_: u32, _: [Vec2; 3]| true,
         )
     }
 
-    /// [`Grower::grow`] with the hull test replaced by `reaches(a, b)` (does
-    /// the edge with images `a b` still need covering?) and a last veto:
+    /// [`Grower::grow`] with the growth distance bounded by `max_dist`
+    /// (patch units), the hull test replaced by `reaches(a, b)` (does the
+    /// edge with images `a b` still need covering?) and a last veto:
     /// `admit(face, st)` is asked once every other rule accepted the face
     /// with corner coordinates `st`; the face is added exactly when it
     /// returns true. The texture atlas (§4) uses this for its normal-cone and
@@ -260,6 +275,7 @@ impl<'a> Grower<'a> {
     pub fn grow_with(
         &mut self,
         patch: &mut SurfacePatch,
+        max_dist: f32,
         reaches: &dyn Fn(Vec2, Vec2) -> bool,
         admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
     ) -> usize {
@@ -275,7 +291,7 @@ impl<'a> Grower<'a> {
         }
         let mut added = 0;
         while let Some(Candidate(dist, g)) = self.heap.pop() {
-            if self.in_patch(g) {
+            if self.in_patch(g) || dist > max_dist {
                 continue;
             }
             if patch.faces.len() >= self.settings.max_faces {

@@ -122,22 +122,25 @@ impl TriMesh {
                 [v[0], v[1], v[2]]
             })
             .collect();
-        let mut neighbours = vec![[NO_FACE; 3]; fc];
-        for f in 0..fc {
-            for (i, c) in mesh.face_corners(f).enumerate() {
-                let faces = topo.edge_faces(topo.corner_edge[c]);
-                if faces.len() == 2 {
-                    let other = if faces[0] as usize == f {
-                        faces[1]
-                    } else {
-                        faces[0]
-                    };
-                    if other as usize != f {
-                        neighbours[f][i] = other;
+        let neighbours: Vec<[u32; 3]> = (0..fc)
+            .map(|f| {
+                let mut across = [NO_FACE; 3];
+                for (i, c) in mesh.face_corners(f).enumerate() {
+                    let faces = topo.edge_faces(topo.corner_edge[c]);
+                    if faces.len() == 2 {
+                        let other = if faces[0] as usize == f {
+                            faces[1]
+                        } else {
+                            faces[0]
+                        };
+                        if other as usize != f {
+                            across[i] = other;
+                        }
                     }
                 }
-            }
-        }
+                across
+            })
+            .collect();
         let p = &mesh.positions;
         let normals: Vec<Vec3> = (0..fc).map(|f| mesh.face_normal(f)).collect();
         let areas: Vec<f32> = (0..fc).map(|f| mesh.face_area(f)).collect();

@@ -15,27 +15,38 @@
 //! matrix whose null space is the constants), with right-hand sides
 //! `Σ_f β` for `s` and `Σ_f α` for `t`. The minimum is unique up to a
 //! translation, fixed by mapping the seed point to the patch centre.
-//! The systems are solved by Jacobi-preconditioned conjugate gradients,
-//! warm-started from the initial parametrisation of §3.3, in `f64`.
+//!
+//! As in the paper, small systems are solved by (Jacobi-preconditioned)
+//! conjugate gradients warm-started from the initial parametrisation of
+//! §3.3. Large patches (thousands of vertices, where CG needs hundreds of
+//! iterations) are factored instead: one vertex is pinned, which makes `M`
+//! positive definite, and faer's sparse Cholesky solves both coordinates;
+//! should the factorisation fail (a vertex held only by degenerate faces),
+//! CG takes over. Everything is in `f64`.
 
 use super::TriMesh;
 use super::grow::SurfacePatch;
 use glam::{DVec2, DVec3, Vec2, Vec3};
 
-/// Settings of the conjugate-gradient solve.
+/// Settings of the least-squares solve.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct CgSettings {
-    /// Stop when `‖r‖ ≤ tolerance · ‖b‖`. Default 1e-6.
+pub struct SolveSettings {
+    /// CG: stop when `‖r‖ ≤ tolerance · ‖b‖`. Default 1e-6.
     pub tolerance: f64,
-    /// Iteration cap per coordinate. Default 1000.
+    /// CG: iteration cap per coordinate. Default 1000.
     pub max_iterations: usize,
+    /// Patches with at least this many vertices are factored (sparse
+    /// Cholesky) instead of iterated. Default 400; `usize::MAX` always
+    /// uses CG, 0 always factors.
+    pub direct_from: usize,
 }
 
-impl Default for CgSettings {
+impl Default for SolveSettings {
     fn default() -> Self {
         Self {
             tolerance: 1e-6,
             max_iterations: 1000,
+            direct_from: 400,
         }
     }
 }
@@ -43,8 +54,10 @@ impl Default for CgSettings {
 /// What one optimisation did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct ParamReport {
-    /// CG iterations, both coordinates together.
+    /// CG iterations, both coordinates together (0 for a direct solve).
     pub iterations: usize,
+    /// Whether the system was factored rather than iterated.
+    pub direct: bool,
     /// Whether both solves reached the tolerance.
     pub converged: bool,
     /// The functional after the solve.
@@ -133,7 +146,7 @@ pub fn alignment_system(mesh: &TriMesh, patch: &SurfacePatch) -> (Csr, Vec<f64>,
             }
         }
     }
-    triplets.sort_unstable_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)));
+    triplets.sort_unstable_by_key(|&(r, c, _)| (r, c));
     let mut m = Csr {
         start: vec![0; n + 1],
         col: Vec::with_capacity(triplets.len() / 2),
@@ -165,7 +178,7 @@ pub fn conjugate_gradient(
     a: &Csr,
     b: &[f64],
     x: &mut [f64],
-    settings: &CgSettings,
+    settings: &SolveSettings,
 ) -> (usize, bool) {
     let n = b.len();
     let inv_diag: Vec<f64> = a
@@ -235,21 +248,74 @@ pub fn alignment_energy(mesh: &TriMesh, patch: &SurfacePatch) -> f64 {
         .sum()
 }
 
+/// Solves `M s = b_s` and `M t = b_t` directly: pins vertex 0 at 0 (the
+/// solution is unique up to a translation) and factors the rest with
+/// faer's sparse Cholesky. `None` when the pinned matrix is not positive
+/// definite.
+pub fn solve_direct(m: &Csr, bs: &[f64], bt: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
+    use faer::linalg::solvers::Solve;
+    use faer::sparse::{SparseColMat, Triplet};
+    let n = m.rows();
+    if n == 0 {
+        return Some((Vec::new(), Vec::new()));
+    }
+    let mut triplets: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(m.val.len());
+    for r in 0..n {
+        for k in m.start[r] as usize..m.start[r + 1] as usize {
+            let c = m.col[k] as usize;
+            if r != 0 && c != 0 {
+                triplets.push(Triplet::new(r, c, m.val[k]));
+            }
+        }
+    }
+    triplets.push(Triplet::new(0, 0, 1.0));
+    let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).ok()?;
+    let llt = a.sp_cholesky(faer::Side::Lower).ok()?;
+    let mut rhs = faer::Mat::<f64>::zeros(n, 2);
+    for i in 1..n {
+        rhs[(i, 0)] = bs[i];
+        rhs[(i, 1)] = bt[i];
+    }
+    llt.solve_in_place(&mut rhs);
+    let s: Vec<f64> = (0..n).map(|i| rhs[(i, 0)]).collect();
+    let t: Vec<f64> = (0..n).map(|i| rhs[(i, 1)]).collect();
+    (s.iter().chain(&t).all(|v| v.is_finite())).then_some((s, t))
+}
+
 /// Optimises the patch's parametrisation in place (§3.4): solves both
-/// coordinates by CG from the current values, then translates so that the
-/// seed point maps to the origin (the patch centre).
+/// coordinates (directly for large patches, else by CG from the current
+/// values), then translates so that the seed point maps to the origin (the
+/// patch centre).
 pub fn optimise_parametrisation(
     mesh: &TriMesh,
     patch: &mut SurfacePatch,
-    settings: &CgSettings,
+    settings: &SolveSettings,
 ) -> ParamReport {
     let _span =
         tracing::trace_span!("optimise_parametrisation", faces = patch.faces.len()).entered();
     let (m, bs, bt) = alignment_system(mesh, patch);
-    let mut s: Vec<f64> = patch.st.iter().map(|p| p.x as f64).collect();
-    let mut t: Vec<f64> = patch.st.iter().map(|p| p.y as f64).collect();
-    let (is, cs) = conjugate_gradient(&m, &bs, &mut s, settings);
-    let (it, ct) = conjugate_gradient(&m, &bt, &mut t, settings);
+    let direct = if patch.vertices.len() >= settings.direct_from {
+        solve_direct(&m, &bs, &bt)
+    } else {
+        None
+    };
+    let mut report = ParamReport {
+        direct: direct.is_some(),
+        converged: true,
+        ..Default::default()
+    };
+    let (s, t) = match direct {
+        Some(st) => st,
+        None => {
+            let mut s: Vec<f64> = patch.st.iter().map(|p| p.x as f64).collect();
+            let mut t: Vec<f64> = patch.st.iter().map(|p| p.y as f64).collect();
+            let (is, cs) = conjugate_gradient(&m, &bs, &mut s, settings);
+            let (it, ct) = conjugate_gradient(&m, &bt, &mut t, settings);
+            report.iterations = is + it;
+            report.converged = cs && ct;
+            (s, t)
+        }
+    };
     let seed = patch.tris[0];
     let b = patch.seed_bary;
     let centre = DVec2::new(
@@ -259,11 +325,8 @@ pub fn optimise_parametrisation(
     for (i, st) in patch.st.iter_mut().enumerate() {
         *st = Vec2::new((s[i] - centre.x) as f32, (t[i] - centre.y) as f32);
     }
-    ParamReport {
-        iterations: is + it,
-        converged: cs && ct,
-        energy: alignment_energy(mesh, patch),
-    }
+    report.energy = alignment_energy(mesh, patch);
+    report
 }
 
 #[cfg(test)]
@@ -314,9 +377,10 @@ mod tests {
         let report = optimise_parametrisation(
             &m,
             &mut p,
-            &CgSettings {
+            &SolveSettings {
                 tolerance: 1e-12,
                 max_iterations: 10_000,
+                ..Default::default()
             },
         );
         assert!(report.converged && report.energy < 1e-8, "{report:?}");
@@ -334,11 +398,16 @@ mod tests {
     }
 
     #[test]
-    fn cg_matches_a_dense_least_squares_solve() {
+    fn cg_and_cholesky_match_a_dense_least_squares_solve() {
         let mesh = sphere(2);
         let m = TriMesh::new(&mesh).unwrap();
         let t = global_up_field(&m, Vec3::new(0.3, 1.0, 0.2), 0.8);
-        for isotropic in [false, true] {
+        for (isotropic, direct_from) in [
+            (false, usize::MAX),
+            (true, usize::MAX),
+            (false, 0),
+            (true, 0),
+        ] {
             let field = FaceField { t: &t, isotropic };
             let mut g = Grower::new(
                 &m,
@@ -352,14 +421,16 @@ mod tests {
             g.grow(&mut p, &square_hull(0.6));
             let nv = p.vertices.len();
             assert!(nv > 10 && nv < 200, "{nv}");
-            optimise_parametrisation(
+            let report = optimise_parametrisation(
                 &m,
                 &mut p,
-                &CgSettings {
+                &SolveSettings {
                     tolerance: 1e-13,
                     max_iterations: 10_000,
+                    direct_from,
                 },
             );
+            assert_eq!(report.direct, direct_from == 0);
             // Dense least squares: rows (per face) β·s − 1, α·s, β·t, α·t − 1,
             // plus one row pinning the seed point at the origin.
             let rows = 2 * p.faces.len() + 1;
@@ -387,7 +458,8 @@ mod tests {
                 let dense = Vec2::new(xs[(l, 0)] as f32, xt[(l, 0)] as f32);
                 assert!(
                     (p.st[l] - dense).length() < 1e-4,
-                    "isotropic {isotropic}, vertex {l}: CG {:?} vs dense {dense:?}",
+                    "isotropic {isotropic}, direct {}, vertex {l}: {:?} vs dense {dense:?}",
+                    report.direct,
                     p.st[l]
                 );
             }

@@ -20,7 +20,7 @@
 use super::coverage::{Coverage, CoverageSettings, sample_levels};
 use super::grow::{GrowSettings, Grower};
 use super::mask::TexturePatch;
-use super::param::{CgSettings, optimise_parametrisation};
+use super::param::{SolveSettings, optimise_parametrisation};
 use super::tangent_field::field_discontinuity;
 use super::{FaceField, NO_FACE, TriMesh};
 use crate::progress::Progress;
@@ -33,7 +33,7 @@ pub struct PasteSettings {
     /// Patch growth.
     pub grow: GrowSettings,
     /// The parametrisation solve.
-    pub cg: CgSettings,
+    pub solve: SolveSettings,
     /// How often a patch may grow again after an optimisation uncovered
     /// part of the texture patch (§3.3, last paragraph). Default 2.
     pub regrow_rounds: u32,
@@ -57,7 +57,7 @@ impl Default for PasteSettings {
     fn default() -> Self {
         Self {
             grow: GrowSettings::default(),
-            cg: CgSettings::default(),
+            solve: SolveSettings::default(),
             regrow_rounds: 2,
             coverage: CoverageSettings::default(),
             difficult_first: 4.0,
@@ -99,6 +99,8 @@ pub struct PasteReport {
     pub cg_iterations: usize,
     /// Solves that stopped at the iteration cap.
     pub unconverged_solves: usize,
+    /// Solves done by sparse Cholesky (large patches).
+    pub direct_solves: usize,
 }
 
 /// A lapped texture: the pastes in order and the final coverage.
@@ -217,9 +219,10 @@ pub fn paste_until_covered(
         let mut patch = grower.start(face, bary, angle);
         grower.grow(&mut patch, &patch_tex.hull);
         for round in 0..=settings.regrow_rounds {
-            let r = optimise_parametrisation(mesh, &mut patch, &settings.cg);
+            let r = optimise_parametrisation(mesh, &mut patch, &settings.solve);
             report.cg_iterations += r.iterations;
             report.unconverged_solves += usize::from(!r.converged);
+            report.direct_solves += usize::from(r.direct);
             if round == settings.regrow_rounds {
                 break;
             }

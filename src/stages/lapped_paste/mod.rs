@@ -23,7 +23,7 @@ use crate::kernels::lapped::grow::GrowSettings;
 use crate::kernels::lapped::mask::{
     Mask, TexturePatch, circle_mask, mask_from_image, splotch_mask,
 };
-use crate::kernels::lapped::param::CgSettings;
+use crate::kernels::lapped::param::SolveSettings;
 use crate::kernels::lapped::paste::{LappedTexture, PasteSettings, paste_until_covered};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
@@ -67,6 +67,8 @@ pub struct LappedPasteSettings {
     pub hull_vertices: u32,
     /// Largest distortion of a face joining a surface patch.
     pub max_distortion: f32,
+    /// Largest growth distance, in hull radii.
+    pub max_reach: f32,
     /// Growth rounds after optimisations.
     pub regrow_rounds: u32,
     /// Fraction of a face's samples that must be covered.
@@ -99,6 +101,7 @@ impl Default for LappedPasteSettings {
             falloff: 3.0,
             hull_vertices: 16,
             max_distortion: paste.grow.max_distortion,
+            max_reach: paste.grow.max_reach,
             regrow_rounds: paste.regrow_rounds,
             coverage_threshold: paste.coverage.threshold,
             difficult_first: paste.difficult_first,
@@ -155,6 +158,12 @@ impl StageSettings for LappedPasteSettings {
             unit: "",
             range: ParamRange::Float(0.0, 1e6),
             doc: "largest (|d_S|² + |d_T|²)/2 of a face joining a patch under its initial parametrisation (0.6 ≈ 47° of rotation)",
+        },
+        ParamDoc {
+            name: "max_reach",
+            unit: "hull radii",
+            range: ParamRange::Float(0.5, 1e6),
+            doc: "patches grow at most this far from their seed (keeps regrowing bounded where the field cannot be integrated and the parametrisation shrinks)",
         },
         ParamDoc {
             name: "regrow_rounds",
@@ -238,9 +247,10 @@ impl LappedPasteSettings {
         PasteSettings {
             grow: GrowSettings {
                 max_distortion: self.max_distortion,
+                max_reach: self.max_reach,
                 ..Default::default()
             },
-            cg: CgSettings::default(),
+            solve: SolveSettings::default(),
             regrow_rounds: self.regrow_rounds,
             coverage: CoverageSettings {
                 threshold: self.coverage_threshold,
@@ -379,6 +389,7 @@ fn record_metrics(
     metrics.record(index, "regrown_faces", r.regrown_faces);
     metrics.record(index, "cg_iterations", r.cg_iterations);
     metrics.record(index, "unconverged_solves", r.unconverged_solves);
+    metrics.record(index, "direct_solves", r.direct_solves);
     metrics.record(index, "texture_patches", textures.len());
     metrics.record(
         index,

@@ -174,7 +174,7 @@ impl StageSettings for TangentFieldSettings {
         if Vec3::from(self.up).length_squared() < 1e-12 {
             return Err(("up".into(), "must not be the zero vector".into()));
         }
-        if !(self.patch_size > 0.0) {
+        if self.patch_size.is_nan() || self.patch_size <= 0.0 {
             return Err(("patch_size".into(), "must be positive".into()));
         }
         if self.mode == FieldMode::Constraints && self.constraints.is_empty() {
