@@ -185,7 +185,7 @@ impl Stage for Export {
                 let shading = match (uvs, colours, atlas) {
                     _ if lapped_ok => Shading::Layers(&layers),
                     _ if blend_ok => Shading::BlendedUvs {
-                        layers: &blend.map(|b| b.0.as_slice()).unwrap_or(&[]),
+                        layers: blend.map(|b| b.0.as_slice()).unwrap_or(&[]),
                         texture: &exemplar.image,
                         wrap: exemplar.wrap,
                     },
