@@ -201,7 +201,7 @@ fn flat_and_disjoint(tris: &[[Vec2; 3]], cell: f32) -> bool {
 }
 
 /// Segments the mesh into flattened charts (step 1 of the module docs).
-/// Seeds are taken in face order.
+/// Seeds are taken flattest first (least bent to their neighbours).
 pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
     let _span = tracing::debug_span!("segment_charts").entered();
     let fc = mesh.face_count();
@@ -230,7 +230,20 @@ pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
     let mut chart_of_face = vec![u32::MAX; fc];
     let mut corner_st = vec![[Vec2::ZERO; 3]; fc];
     let mut count = 0u32;
-    for seed in 0..fc as u32 {
+    // Flattest faces seed first: their charts spread widest before the
+    // normal cone stops them, leaving fewer small charts at creases.
+    let bend: Vec<f32> = (0..fc)
+        .map(|f| {
+            mesh.neighbours[f]
+                .iter()
+                .filter(|&&g| g != super::NO_FACE)
+                .map(|&g| 1.0 - mesh.normals[f].dot(mesh.normals[g as usize]))
+                .sum()
+        })
+        .collect();
+    let mut seeds: Vec<u32> = (0..fc as u32).collect();
+    seeds.sort_by(|&a, &b| bend[a as usize].total_cmp(&bend[b as usize]).then(a.cmp(&b)));
+    for seed in seeds {
         if chart_of_face[seed as usize] != u32::MAX {
             continue;
         }

@@ -53,17 +53,6 @@ pub enum LappedError {
     /// A mask with no inside pixel.
     #[error("the texture patch mask {what} has no inside pixel (white = inside)")]
     EmptyMask { what: String },
-    /// A mask whose size does not fit.
-    #[error(
-        "mask {what} is {width}x{height}, expected {expected_width}x{expected_height} (the exemplar's size)"
-    )]
-    MaskSize {
-        what: String,
-        width: u32,
-        height: u32,
-        expected_width: u32,
-        expected_height: u32,
-    },
     /// A field constraint that names a face the mesh does not have.
     #[error("field constraint {index} names face {face}, but the mesh has {face_count} faces")]
     ConstraintFace {

@@ -65,8 +65,9 @@ pub struct LappedPasteSettings {
     pub falloff: f32,
     /// Vertex budget of each patch's polygonal hull.
     pub hull_vertices: u32,
-    /// Largest distortion of a face joining a surface patch.
-    pub max_distortion: f32,
+    /// Largest distortion of a face joining a surface patch (f64 so that
+    /// the default prints as written).
+    pub max_distortion: f64,
     /// Largest growth distance, in hull radii.
     pub max_reach: f32,
     /// Growth rounds after optimisations.
@@ -100,7 +101,7 @@ impl Default for LappedPasteSettings {
             patch_pixels: 0,
             falloff: 3.0,
             hull_vertices: 16,
-            max_distortion: paste.grow.max_distortion,
+            max_distortion: 0.6,
             max_reach: paste.grow.max_reach,
             regrow_rounds: paste.regrow_rounds,
             coverage_threshold: paste.coverage.threshold,
@@ -246,7 +247,7 @@ impl LappedPasteSettings {
     pub fn paste_settings(&self, seed: u64) -> PasteSettings {
         PasteSettings {
             grow: GrowSettings {
-                max_distortion: self.max_distortion,
+                max_distortion: self.max_distortion as f32,
                 max_reach: self.max_reach,
                 ..Default::default()
             },

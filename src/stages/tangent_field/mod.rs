@@ -99,13 +99,13 @@ pub struct TangentFieldSettings {
     /// Isotropic texture (orientation propagated per paste).
     pub isotropic: bool,
     /// World size of one texture patch, in `units`.
-    pub patch_size: f32,
+    pub patch_size: f64,
     /// Unit of `patch_size` and of constraint radii.
     pub units: LengthUnit,
     /// Constraints mode: the constraints.
     pub constraints: Vec<ConstraintSpec>,
     /// Constraints mode: weight of the global field against the Gaussians.
-    pub background_weight: f32,
+    pub background_weight: f64,
 }
 
 impl Default for TangentFieldSettings {
@@ -227,7 +227,7 @@ pub fn face_field(
         LengthUnit::Diagonal => diagonal,
         LengthUnit::World => 1.0,
     };
-    let scale = settings.patch_size * unit;
+    let scale = settings.patch_size as f32 * unit;
     let up = Vec3::from(settings.up);
     let t = match settings.mode {
         FieldMode::Global => global_up_field(tri, up, scale),
@@ -263,7 +263,7 @@ pub fn face_field(
                 &topo,
                 &constraints,
                 &background,
-                settings.background_weight,
+                settings.background_weight as f32,
                 scale,
             )
             .map_err(|e| e.to_string())?;
