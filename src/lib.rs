@@ -20,4 +20,5 @@ pub mod output;
 pub mod pipeline;
 pub mod progress;
 pub mod stages;
+pub mod sweep;
 pub mod telemetry;

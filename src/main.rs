@@ -51,11 +51,59 @@ enum Command {
         #[arg(long)]
         merge_duplicates: bool,
     },
+    /// Runs a config over the cartesian product of --grid overrides, each run
+    /// in its own folder, then writes summary.csv, summary.json and index.html.
+    Sweep(SweepArgs),
+}
+
+/// `surfsynth sweep`: see README "Sweeps".
+#[derive(clap::Args, Debug)]
+struct SweepArgs {
+    /// The base TOML config.
+    #[arg(required_unless_present = "summarise")]
+    config: Option<PathBuf>,
+    /// A swept value list: dotted path as for --set, values split at commas
+    /// outside [..], {..} and quotes; `\,` is a literal comma
+    /// (e.g. --grid seed=1,2,3 --grid 'stage.2.neighbourhoods=[9,5,3],[7,3]').
+    #[arg(long = "grid", value_name = "PATH=V1,V2,...")]
+    grid: Vec<String>,
+    /// A fixed override shared by every run.
+    #[arg(long = "set", value_name = "PATH=VALUE")]
+    set: Vec<String>,
+    /// The sweep folder (one sub-folder per run).
+    #[arg(long, required_unless_present = "summarise")]
+    out: Option<PathBuf>,
+    /// Runs at a time.
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
+    /// Worker threads per run (default: cores / jobs, at least 1).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Runs only every N-th run, starting at the I-th (1-based), e.g. 2/4.
+    #[arg(long, value_name = "I/N")]
+    shard: Option<String>,
+    /// Re-runs runs that already hold a complete result.
+    #[arg(long)]
+    force: bool,
+    /// Validates every combination and lists the runs without running them.
+    #[arg(long)]
+    dry_run: bool,
+    /// Kills a run after this many seconds (it is reported as failed).
+    #[arg(long, value_name = "SECONDS")]
+    timeout: Option<f64>,
+    /// Only rebuilds summary.csv, summary.json and index.html of DIR from
+    /// the run folders present (e.g. after merging shards).
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["config", "grid", "set", "out", "shard", "force", "dry_run"])]
+    summarise: Option<PathBuf>,
+    /// No progress lines.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Sweep(args) => return sweep(args),
         Command::Run {
             config,
             set,
@@ -145,4 +193,54 @@ fn mesh_info(file: &str, merge_duplicates: bool) -> Result<(), PipelineError> {
     println!("{file}\nrepairs: {report}");
     println!("{}", surfsynth::mesh::MeshInfo::compute(&mesh));
     Ok(())
+}
+
+fn sweep(args: SweepArgs) -> ExitCode {
+    match sweep_inner(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::from(e.exit_code() as u8)
+        }
+    }
+}
+
+fn sweep_inner(args: SweepArgs) -> Result<(), surfsynth::sweep::SweepError> {
+    use surfsynth::sweep::{SweepError, SweepOptions};
+    let _guard = surfsynth::telemetry::init(None, true);
+    if let Some(dir) = args.summarise {
+        for f in surfsynth::sweep::summarise(&dir)? {
+            println!("{}", f.display());
+        }
+        return Ok(());
+    }
+    let (Some(config), Some(out)) = (args.config, args.out) else {
+        return Err(SweepError::Option {
+            flag: "sweep".into(),
+            message: "give CONFIG and --out DIR (or --summarise DIR)".into(),
+        });
+    };
+    let exe = std::env::current_exe().map_err(|e| SweepError::Io {
+        path: "current executable".into(),
+        message: e.to_string(),
+    })?;
+    let opts = SweepOptions {
+        config,
+        grid: args.grid,
+        fixed: args.set,
+        out,
+        jobs: args.jobs,
+        threads: args.threads,
+        shard: args.shard,
+        force: args.force,
+        dry_run: args.dry_run,
+        timeout: args.timeout,
+        exe,
+        progress: !args.quiet,
+    };
+    let report = surfsynth::sweep::run_sweep(&opts);
+    if let Ok(r) = &report {
+        print!("{}", surfsynth::sweep::format_report(&opts, r));
+    }
+    report.map(|_| ())
 }
