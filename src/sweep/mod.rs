@@ -185,7 +185,8 @@ pub struct InvocationStats {
     pub wall_seconds: f64,
     /// Validating every combination, seconds.
     pub validate_seconds: f64,
-    /// Sum of the runs' own `total_seconds` (from their `metrics.json`).
+    /// Sum of the runs' own `total_seconds` (from their `metrics.json`; a
+    /// failed run counts its child wall time).
     pub sum_run_seconds: f64,
     /// Sum of the child processes' wall times as the sweep measured them.
     pub sum_child_seconds: f64,
@@ -343,7 +344,11 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         .filter(|o| o.status != RunStatus::Skipped)
         .collect();
     let failed = outcomes.iter().filter(|o| o.status.is_failure()).count();
-    let sum_run_seconds: f64 = ran.iter().filter_map(|o| o.run_seconds).sum();
+    // A failed run has no metrics.json: its child wall time counts as its own.
+    let sum_run_seconds: f64 = ran
+        .iter()
+        .map(|o| o.run_seconds.unwrap_or(o.wall_seconds))
+        .sum();
     let sum_child_seconds: f64 = ran.iter().map(|o| o.wall_seconds).sum();
     let summary_rows = summary::collect(&opts.out)?;
     let files = summary::write_all(&opts.out, &summary_rows, Some(&record))?;

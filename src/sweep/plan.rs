@@ -120,7 +120,7 @@ fn split_values(list: &str) -> Result<Vec<String>, String> {
     let mut depth: Vec<char> = Vec::new();
     let mut quote: Option<char> = None;
     let mut chars = list.chars().peekable();
-    let mut push = |cur: &mut String, values: &mut Vec<String>| -> Result<(), String> {
+    let push = |cur: &mut String, values: &mut Vec<String>| -> Result<(), String> {
         let v = cur.trim().to_string();
         if v.is_empty() {
             return Err(format!(
