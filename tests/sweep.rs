@@ -87,15 +87,33 @@ impl Sweep {
 
     fn csv(&self) -> Vec<Vec<String>> {
         let text = std::fs::read_to_string(self.out.join("summary.csv")).unwrap();
-        text.lines()
-            .map(|l| l.split(',').map(str::to_string).collect())
-            .collect()
+        text.lines().map(csv_fields).collect()
     }
 
     fn summary_json(&self) -> serde_json::Value {
         serde_json::from_str(&std::fs::read_to_string(self.out.join("summary.json")).unwrap())
             .unwrap()
     }
+}
+
+/// The fields of one CSV line (quoted fields may hold commas and `""`).
+fn csv_fields(line: &str) -> Vec<String> {
+    let mut fields = vec![String::new()];
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        let cur = fields.last_mut().unwrap();
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            ('"', _) => quoted = !quoted,
+            (',', false) => fields.push(String::new()),
+            _ => cur.push(c),
+        }
+    }
+    fields
 }
 
 fn column(csv: &[Vec<String>], name: &str) -> Vec<String> {
