@@ -195,7 +195,12 @@ fn grid_2x2_gives_four_folders_a_csv_of_four_rows_and_a_page_with_their_previews
     for energy in column(&csv, "quality.texture_energy.mean") {
         assert!(energy.parse::<f64>().unwrap() > 0.0);
     }
-    for c in ["run_seconds", "peak_rss_mib", "time.s2.jump_map", "input.vertices"] {
+    for c in [
+        "run_seconds",
+        "peak_rss_mib",
+        "time.s2.jump_map",
+        "input.vertices",
+    ] {
         assert!(
             column(&csv, c).iter().all(|v| v.parse::<f64>().is_ok()),
             "{c}"
@@ -222,7 +227,10 @@ fn grid_2x2_gives_four_folders_a_csv_of_four_rows_and_a_page_with_their_previews
             assert!(s.out.join(p).is_file(), "{p} referenced but missing");
         }
     }
-    let exemplars: Vec<&String> = sources.iter().filter(|p| p.starts_with("exemplar")).collect();
+    let exemplars: Vec<&String> = sources
+        .iter()
+        .filter(|p| p.starts_with("exemplar"))
+        .collect();
     assert_eq!(exemplars.len(), 1, "{sources:?}");
     assert!(s.out.join(exemplars[0]).is_file());
     assert_eq!(html.matches("<tr class=\"ok\"").count(), 4);
@@ -266,7 +274,10 @@ fn shards_one_and_two_of_two_cover_the_grid_exactly_once_and_merge_their_summary
     std::fs::remove_file(s.out.join("index.html")).unwrap();
     let (code, _, stderr) = run_cli(&["sweep", "--summarise", s.out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
-    assert_eq!(std::fs::read_to_string(s.out.join("summary.csv")).unwrap(), before);
+    assert_eq!(
+        std::fs::read_to_string(s.out.join("summary.csv")).unwrap(),
+        before
+    );
     assert!(s.out.join("index.html").is_file());
 }
 
@@ -285,7 +296,10 @@ fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
     ]);
     assert_eq!(code, 1, "{stderr}");
     assert!(stderr.contains("2 of 4 runs failed"), "{stderr}");
-    assert!(stderr.contains("FAILED") && stderr.contains("resolution[0]"), "{stderr}");
+    assert!(
+        stderr.contains("FAILED") && stderr.contains("resolution[0]"),
+        "{stderr}"
+    );
     let folders = s.run_folders();
     assert_eq!(folders.len(), 4);
     for name in &folders {
@@ -297,7 +311,10 @@ fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
                     .unwrap();
             assert_eq!(failed["exit_code"], 2, "{failed}");
             let log = std::fs::read_to_string(dir.join("log.txt")).unwrap();
-            assert!(log.contains("resolution[0]") && log.contains("exit 2"), "{log}");
+            assert!(
+                log.contains("resolution[0]") && log.contains("exit 2"),
+                "{log}"
+            );
         } else {
             assert!(dir.join("done.json").is_file(), "{name}");
             assert!(dir.join("preview_0.png").is_file(), "{name}");
@@ -346,7 +363,10 @@ fn rerun_skips_complete_runs_redoes_incomplete_ones_and_force_redoes_all() {
     assert!(stderr.contains("skip    seed=1"), "{stderr}");
     assert_eq!(mtime(&done1), t1, "a complete run was redone");
     assert!(s.out.join("seed=2/done.json").is_file());
-    assert!(!s.out.join("seed=2/stale.txt").exists(), "stale contents kept");
+    assert!(
+        !s.out.join("seed=2/stale.txt").exists(),
+        "stale contents kept"
+    );
 
     // A changed config is not "complete": its runs are redone.
     let (code, stdout, _) = s.run(&["--grid", "seed=1,2", "--set", "stage.3.scale=35"]);
@@ -367,10 +387,22 @@ fn bad_arguments_exit_2_naming_the_problem_before_any_run() {
     let cases: &[(&[&str], &[&str])] = &[
         (&["--grid", "seed"], &["--grid seed", "PATH=V1,V2"]),
         (&["--grid", "seed=1,,2"], &["value 2 is empty"]),
-        (&["--grid", "stage.2.neighbourhoods=[9,5"], &["unclosed '['"]),
-        (&["--grid", "seed=1,2", "--shard", "3/2"], &["--shard 3/2", "1..=2"]),
-        (&["--grid", "seed=1,2", "--shard", "x"], &["--shard x", "I/N"]),
-        (&["--grid", "seed=1,2", "--jobs", "0"], &["--jobs", "at least 1"]),
+        (
+            &["--grid", "stage.2.neighbourhoods=[9,5"],
+            &["unclosed '['"],
+        ),
+        (
+            &["--grid", "seed=1,2", "--shard", "3/2"],
+            &["--shard 3/2", "1..=2"],
+        ),
+        (
+            &["--grid", "seed=1,2", "--shard", "x"],
+            &["--shard x", "I/N"],
+        ),
+        (
+            &["--grid", "seed=1,2", "--jobs", "0"],
+            &["--jobs", "at least 1"],
+        ),
         (&[], &["at least one --grid"]),
         // Valid syntax, but one combination is an invalid config.
         (
@@ -407,7 +439,10 @@ fn dry_run_lists_the_shard_and_writes_nothing() {
         "--dry-run",
     ]);
     assert_eq!(code, 0, "{stderr}");
-    assert!(stdout.contains("6 runs in the grid, 3 in this shard"), "{stdout}");
+    assert!(
+        stdout.contains("6 runs in the grid, 3 in this shard"),
+        "{stdout}"
+    );
     assert!(
         stdout.contains("--set seed=1 --set stage.2.neighbourhoods=[5,3]"),
         "{stdout}"

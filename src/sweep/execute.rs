@@ -213,7 +213,12 @@ fn progress_line(o: &Outcome, finished: usize, total: usize) -> String {
     }
 }
 
-fn failed_outcome(r: &ValidRun, reason: String, wall_seconds: f64, log_tail: Vec<String>) -> Outcome {
+fn failed_outcome(
+    r: &ValidRun,
+    reason: String,
+    wall_seconds: f64,
+    log_tail: Vec<String>,
+) -> Outcome {
     Outcome {
         name: r.run.name.clone(),
         index: r.run.index,
@@ -231,7 +236,12 @@ fn failed_outcome(r: &ValidRun, reason: String, wall_seconds: f64, log_tail: Vec
 fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     let dir = spec.sweep_dir.join(&r.run.name);
     if let Err(e) = prepare_dir(&dir) {
-        return failed_outcome(r, format!("cannot prepare the folder: {e}"), 0.0, Vec::new());
+        return failed_outcome(
+            r,
+            format!("cannot prepare the folder: {e}"),
+            0.0,
+            Vec::new(),
+        );
     }
     let mut args: Vec<String> = vec!["run".into(), spec.config.display().to_string()];
     for a in spec.fixed.iter().cloned().chain(r.run.assignments()) {
@@ -257,7 +267,12 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
         command: command.clone(),
     };
     if let Err(e) = write_json(&dir.join(RUN_RECORD), &record) {
-        return failed_outcome(r, format!("cannot write {RUN_RECORD}: {e}"), 0.0, Vec::new());
+        return failed_outcome(
+            r,
+            format!("cannot write {RUN_RECORD}: {e}"),
+            0.0,
+            Vec::new(),
+        );
     }
 
     let started = Instant::now();
@@ -265,7 +280,12 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     let wall_seconds = started.elapsed().as_secs_f64();
     let (exit_code, status, stdout, stderr) = match result {
         Ok(c) => (c.exit_code, c.status, c.stdout, c.stderr),
-        Err(e) => (None, format!("could not start {}: {e}", spec.exe.display()), Vec::new(), Vec::new()),
+        Err(e) => (
+            None,
+            format!("could not start {}: {e}", spec.exe.display()),
+            Vec::new(),
+            Vec::new(),
+        ),
     };
     let mut log = String::new();
     log.push_str("$ ");
@@ -275,7 +295,10 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     log.push_str("\n--- stderr ---\n");
     log.push_str(&String::from_utf8_lossy(&stderr));
     log.push_str(&format!("\n--- {status} after {wall_seconds:.3} s ---\n"));
-    let log_tail = tail(&String::from_utf8_lossy(&stderr), &String::from_utf8_lossy(&stdout));
+    let log_tail = tail(
+        &String::from_utf8_lossy(&stderr),
+        &String::from_utf8_lossy(&stdout),
+    );
     let log_written = crate::output::write_bytes_atomic(&dir.join(LOG), log.as_bytes());
 
     let ok = exit_code == Some(0);
@@ -290,11 +313,21 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     };
     if ok {
         if let Err(e) = log_written {
-            return failed_outcome(r, format!("cannot write {LOG}: {e}"), wall_seconds, Vec::new());
+            return failed_outcome(
+                r,
+                format!("cannot write {LOG}: {e}"),
+                wall_seconds,
+                Vec::new(),
+            );
         }
         // The marker goes last: a folder without it is re-run.
         if let Err(e) = write_json(&dir.join(DONE), &completion) {
-            return failed_outcome(r, format!("cannot write {DONE}: {e}"), wall_seconds, Vec::new());
+            return failed_outcome(
+                r,
+                format!("cannot write {DONE}: {e}"),
+                wall_seconds,
+                Vec::new(),
+            );
         }
         return Outcome {
             name: r.run.name.clone(),
@@ -311,7 +344,10 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     Outcome {
         name: r.run.name.clone(),
         index: r.run.index,
-        status: RunStatus::Failed { exit_code, reason: status },
+        status: RunStatus::Failed {
+            exit_code,
+            reason: status,
+        },
         wall_seconds,
         run_seconds: None,
         log_tail,
@@ -340,7 +376,11 @@ fn read_run_seconds(dir: &Path) -> Option<f64> {
 
 /// The last non-empty lines of stderr (else stdout).
 fn tail(stderr: &str, stdout: &str) -> Vec<String> {
-    let text = if stderr.trim().is_empty() { stdout } else { stderr };
+    let text = if stderr.trim().is_empty() {
+        stdout
+    } else {
+        stderr
+    };
     let lines: Vec<&str> = text.lines().filter(|l| !l.trim().is_empty()).collect();
     lines[lines.len().saturating_sub(TAIL_LINES)..]
         .iter()
@@ -393,8 +433,18 @@ fn run_child(
             buf
         })
     };
-    let out = reader(child.stdout.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
-    let err = reader(child.stderr.take().map(|p| Box::new(p) as Box<dyn Read + Send>));
+    let out = reader(
+        child
+            .stdout
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
+    let err = reader(
+        child
+            .stderr
+            .take()
+            .map(|p| Box::new(p) as Box<dyn Read + Send>),
+    );
     let mut timed_out = None;
     let status = match timeout {
         None => child.wait()?,
@@ -415,7 +465,11 @@ fn run_child(
     };
     let stdout = out.join().unwrap_or_default();
     let stderr = err.join().unwrap_or_default();
-    let exit_code = if timed_out.is_some() { None } else { status.code() };
+    let exit_code = if timed_out.is_some() {
+        None
+    } else {
+        status.code()
+    };
     let text = match (timed_out, status.code()) {
         (Some(limit), _) => format!("timed out after {} s", limit.as_secs_f64()),
         (None, Some(0)) => "ok".to_string(),

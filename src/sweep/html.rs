@@ -67,12 +67,7 @@ fn cell(out: &mut String, v: Option<&Value>) {
         }
         Some(v) => {
             let t = cell_text(v);
-            let _ = write!(
-                out,
-                "<td data-v=\"{}\">{}</td>",
-                escape(&t),
-                escape(&t)
-            );
+            let _ = write!(out, "<td data-v=\"{}\">{}</td>", escape(&t), escape(&t));
         }
         None => out.push_str("<td data-v=\"\"></td>"),
     }
@@ -212,11 +207,7 @@ pub fn render(
     }
     s.push_str("</tr></thead>\n<tbody>\n");
     for (i, r) in rows.iter().enumerate() {
-        let _ = write!(
-            s,
-            "<tr class=\"{}\" data-i=\"{i}\">",
-            escape(&r.status)
-        );
+        let _ = write!(s, "<tr class=\"{}\" data-i=\"{i}\">", escape(&r.status));
         let _ = write!(
             s,
             "<td data-v=\"{n}\"><a href=\"{u}/\">{n}</a></td>",
@@ -253,7 +244,7 @@ pub fn render(
         for p in &t.override_columns {
             cell(
                 &mut s,
-                r.override_value(p).map(|v| override_cell(v)).as_ref(),
+                r.override_value(p).map(override_cell).as_ref(),
             );
         }
         for c in &t.metric_columns {
@@ -307,12 +298,22 @@ mod tests {
         };
         let rows = [row("a", "failed"), row("b", "ok")];
         let t = super::super::summary::table(&rows);
-        let page = render(&rows, &t, None, &[("exemplar_1.png".into(), "builtin:bricks".into())]);
+        let page = render(
+            &rows,
+            &t,
+            None,
+            &[("exemplar_1.png".into(), "builtin:bricks".into())],
+        );
         assert!(!page.contains("<script>alert"), "unescaped override");
         assert!(page.contains("&lt;script&gt;alert(1)&lt;/script&gt;"));
         assert!(page.contains("error: &lt;bad&gt; &amp; worse"));
         assert_eq!(page.matches("<tr class=").count(), 2);
-        assert!(page.contains("src=\"a/preview_0.png\"") && page.contains("src=\"exemplar_1.png\""));
-        assert!(!page.contains("http://") && !page.contains("https://"), "no network");
+        assert!(
+            page.contains("src=\"a/preview_0.png\"") && page.contains("src=\"exemplar_1.png\"")
+        );
+        assert!(
+            !page.contains("http://") && !page.contains("https://"),
+            "no network"
+        );
     }
 }

@@ -59,7 +59,7 @@ pub enum SweepError {
         run: String,
         assignments: String,
         #[source]
-        source: ConfigError,
+        source: Box<ConfigError>,
     },
     /// A sweep file could not be read or written (exit 1).
     #[error(transparent)]
@@ -266,7 +266,7 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         let invalid = |source: ConfigError| SweepError::InvalidRun {
             run: run.name.clone(),
             assignments: run.assignments().join(" --set "),
-            source,
+            source: Box::new(source),
         };
         source.apply_overrides(&assignments).map_err(invalid)?;
         let pipeline = Pipeline::from_source(source).map_err(invalid)?;
@@ -365,9 +365,8 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         validate_seconds,
         sum_run_seconds,
         sum_child_seconds,
-        overhead_per_run_seconds: (n > 0).then(|| {
-            (wall_seconds * opts.jobs.min(n) as f64 - sum_run_seconds) / n as f64
-        }),
+        overhead_per_run_seconds: (n > 0)
+            .then(|| (wall_seconds * opts.jobs.min(n) as f64 - sum_run_seconds) / n as f64),
         process_overhead_per_run_seconds: (n > 0)
             .then(|| (sum_child_seconds - sum_run_seconds) / n as f64),
     };
@@ -478,7 +477,11 @@ pub fn format_report(opts: &SweepOptions, report: &SweepReport) -> String {
     let _ = writeln!(
         s,
         "wall {:.2} s ({} jobs x {} threads); runs' own time {:.2} s; validation {:.3} s",
-        stats.wall_seconds, stats.jobs, stats.threads, stats.sum_run_seconds, stats.validate_seconds
+        stats.wall_seconds,
+        stats.jobs,
+        stats.threads,
+        stats.sum_run_seconds,
+        stats.validate_seconds
     );
     if let (Some(o), Some(p)) = (
         stats.overhead_per_run_seconds,

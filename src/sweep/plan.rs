@@ -92,11 +92,17 @@ pub fn parse_grid(arg: &str) -> Result<GridAxis, SweepError> {
         message,
     };
     let (path, list) = arg.split_once('=').ok_or_else(|| {
-        err("expected PATH=V1,V2,..., e.g. --grid seed=1,2,3 or --grid stage.2.iterations=10,30".into())
+        err(
+            "expected PATH=V1,V2,..., e.g. --grid seed=1,2,3 or --grid stage.2.iterations=10,30"
+                .into(),
+        )
     })?;
     let path = path.trim();
     if path.is_empty() {
-        return Err(err("PATH is empty; expected a dotted config path such as seed or stage.2.iterations".into()));
+        return Err(err(
+            "PATH is empty; expected a dotted config path such as seed or stage.2.iterations"
+                .into(),
+        ));
     }
     if path.split('.').any(|s| s.trim().is_empty()) {
         return Err(err(format!("PATH {path:?} has an empty segment")));
@@ -173,13 +179,13 @@ fn split_values(list: &str) -> Result<Vec<String>, String> {
         }
     }
     if let Some(q) = quote {
-        return Err(format!("unclosed quote {q:?} in value {}", values.len() + 1));
-    }
-    if let Some(open) = depth.last() {
         return Err(format!(
-            "unclosed {open:?} in value {}",
+            "unclosed quote {q:?} in value {}",
             values.len() + 1
         ));
+    }
+    if let Some(open) = depth.last() {
+        return Err(format!("unclosed {open:?} in value {}", values.len() + 1));
     }
     push(&mut cur, &mut values)?;
     Ok(values)
@@ -251,7 +257,10 @@ pub fn plan(axes: &[GridAxis], fixed: &[String]) -> Result<Vec<PlannedRun>, Swee
         if axes[..i].iter().any(|b| b.path == a.path) {
             return Err(SweepError::Grid {
                 arg: format!("{}=...", a.path),
-                message: format!("PATH {} is given by two --grid options; merge their values", a.path),
+                message: format!(
+                    "PATH {} is given by two --grid options; merge their values",
+                    a.path
+                ),
             });
         }
         let fixed_here = fixed
@@ -260,7 +269,10 @@ pub fn plan(axes: &[GridAxis], fixed: &[String]) -> Result<Vec<PlannedRun>, Swee
         if fixed_here {
             return Err(SweepError::Grid {
                 arg: format!("{}=...", a.path),
-                message: format!("PATH {} is also fixed by --set; give it in one place", a.path),
+                message: format!(
+                    "PATH {} is also fixed by --set; give it in one place",
+                    a.path
+                ),
             });
         }
     }
@@ -327,7 +339,11 @@ mod tests {
         assert!(msg("seed").contains("PATH=V1,V2"), "{}", msg("seed"));
         assert!(msg("=1,2").contains("PATH is empty"));
         assert!(msg("stage..x=1").contains("empty segment"));
-        assert!(msg("seed=1,,2").contains("value 2 is empty"), "{}", msg("seed=1,,2"));
+        assert!(
+            msg("seed=1,,2").contains("value 2 is empty"),
+            "{}",
+            msg("seed=1,,2")
+        );
         assert!(msg("seed=1,").contains("empty"));
         assert!(msg("x=[1,2").contains("unclosed '['"));
         assert!(msg("x=1],2").contains("unbalanced"));
@@ -337,7 +353,11 @@ mod tests {
 
     #[test]
     fn product_runs_first_axis_slowest_with_readable_names() {
-        let runs = plan(&[axis("seed=1,2"), axis("stage.2.iterations=10,30,50")], &[]).unwrap();
+        let runs = plan(
+            &[axis("seed=1,2"), axis("stage.2.iterations=10,30,50")],
+            &[],
+        )
+        .unwrap();
         let names: Vec<_> = runs.iter().map(|r| r.name.as_str()).collect();
         assert_eq!(
             names,
@@ -371,8 +391,10 @@ mod tests {
             );
             assert!(!r.name.starts_with('.'));
         }
-        assert_eq!(runs[1].name, "input.mesh=a_b.obj-"
-            .to_string() + &short_hash("\"a_b.obj\""));
+        assert_eq!(
+            runs[1].name,
+            "input.mesh=a_b.obj-".to_string() + &short_hash("\"a_b.obj\"")
+        );
         assert_ne!(runs[0].name, runs[1].name);
         let long = "x".repeat(300);
         let name = run_name(&[("p".into(), long.clone()), ("q".into(), long)]);
@@ -399,7 +421,9 @@ mod tests {
             assert_eq!(shards.iter().filter(|s| s.contains(idx)).count(), 1);
         }
         assert_eq!(
-            (0..n).filter(|&i| shards[1].contains(i)).collect::<Vec<_>>(),
+            (0..n)
+                .filter(|&i| shards[1].contains(i))
+                .collect::<Vec<_>>(),
             [1, 4]
         );
         for bad in ["0/2", "3/2", "1/0", "a/2", "2", "1/-1"] {

@@ -66,7 +66,10 @@ pub fn collect(dir: &Path) -> Result<Vec<RunRow>, SweepError> {
             continue;
         };
         let Ok(record) = serde_json::from_str::<RunRecord>(&text) else {
-            tracing::warn!("{}: unreadable {RUN_RECORD}, not summarised", path.display());
+            tracing::warn!(
+                "{}: unreadable {RUN_RECORD}, not summarised",
+                path.display()
+            );
             continue;
         };
         rows.push(read_row(&path, record));
@@ -140,7 +143,10 @@ pub fn flatten_metrics(m: &Value) -> Vec<(MetricKey, Value)> {
             &serde_json::json!((b / 1048576.0 * 10.0).round() / 10.0),
         );
     }
-    push(MetricKey::new(0, 2, "input.vertices"), &m["input"]["vertices"]);
+    push(
+        MetricKey::new(0, 2, "input.vertices"),
+        &m["input"]["vertices"],
+    );
     push(MetricKey::new(0, 3, "input.faces"), &m["input"]["faces"]);
     push(
         MetricKey::new(0, 4, "result.vertices"),
@@ -245,7 +251,10 @@ fn csv_field(s: &str) -> String {
 impl RunRow {
     /// The value of a metric column.
     pub fn metric(&self, name: &str) -> Option<&Value> {
-        self.metrics.iter().find(|(k, _)| k.name == name).map(|(_, v)| v)
+        self.metrics
+            .iter()
+            .find(|(k, _)| k.name == name)
+            .map(|(_, v)| v)
     }
 
     /// The value of an override column.
@@ -353,12 +362,11 @@ pub fn write_all(
     let csv = dir.join("summary.csv");
     crate::output::write_bytes_atomic(&csv, to_csv(rows, &t).as_bytes())?;
     let json = dir.join("summary.json");
-    let text = serde_json::to_string_pretty(&to_json(rows, &t, record)).map_err(|e| {
-        SweepError::Io {
+    let text =
+        serde_json::to_string_pretty(&to_json(rows, &t, record)).map_err(|e| SweepError::Io {
             path: json.clone(),
             message: e.to_string(),
-        }
-    })?;
+        })?;
     crate::output::write_bytes_atomic(&json, text.as_bytes())?;
     let html = dir.join("index.html");
     let exemplars = exemplar_files(dir, record);
@@ -452,7 +460,12 @@ mod tests {
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines.len(), 2);
         assert!(lines[0].starts_with("run,status,exit_code,reason,wall_seconds,seed,run_seconds"));
-        assert!(lines[1].starts_with("a,ok,0,ok,2.000,1,1.5,10.0,10,16,12,20,0.1,0.25,1.0,0.5,toroidal,7"), "{}", lines[1]);
+        assert!(
+            lines[1]
+                .starts_with("a,ok,0,ok,2.000,1,1.5,10.0,10,16,12,20,0.1,0.25,1.0,0.5,toroidal,7"),
+            "{}",
+            lines[1]
+        );
     }
 
     #[test]
