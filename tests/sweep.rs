@@ -234,6 +234,11 @@ fn grid_2x2_gives_four_folders_a_csv_of_four_rows_and_a_page_with_their_previews
     assert_eq!(exemplars.len(), 1, "{sources:?}");
     assert!(s.out.join(exemplars[0]).is_file());
     assert_eq!(html.matches("<tr class=\"ok\"").count(), 4);
+    assert!(
+        html.contains("sweep overhead"),
+        "timing of the invocation shown"
+    );
+    assert_eq!(json["sweep"]["last_invocation"]["ran"], 4);
     assert!(!html.contains("http://") && !html.contains("https://"));
 }
 
@@ -449,4 +454,24 @@ fn dry_run_lists_the_shard_and_writes_nothing() {
     );
     assert_eq!(stdout.matches("[would run]").count(), 3, "{stdout}");
     assert!(!s.out.exists());
+}
+
+#[test]
+fn a_run_over_the_timeout_is_killed_and_reported() {
+    let s = Sweep::new();
+    // No run of this binary (process start included) finishes in 1 ms.
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2", "--timeout", "0.001"]);
+    assert_eq!(code, 1, "{stderr}");
+    assert_eq!(
+        stderr.matches("timed out after 0.001 s").count(),
+        2,
+        "{stderr}"
+    );
+    let csv = s.csv();
+    assert_eq!(column(&csv, "status"), ["failed"; 2]);
+    assert_eq!(column(&csv, "exit_code"), ["", ""]);
+    assert!(!s.out.join("seed=1/done.json").exists());
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2", "--timeout", "0"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("--timeout: 0 is not allowed"), "{stderr}");
 }

@@ -242,10 +242,7 @@ pub fn render(
         cell(&mut s, Some(&Value::String(r.reason.clone())));
         cell(&mut s, r.wall_seconds.map(Value::from).as_ref());
         for p in &t.override_columns {
-            cell(
-                &mut s,
-                r.override_value(p).map(override_cell).as_ref(),
-            );
+            cell(&mut s, r.override_value(p).map(override_cell).as_ref());
         }
         for c in &t.metric_columns {
             cell(&mut s, r.metric(c));
