@@ -330,10 +330,17 @@ fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
     let status = column(&csv, "status");
     let codes = column(&csv, "exit_code");
     let res = column(&csv, "input.mesh_options.resolution");
+    let errors = column(&csv, "error");
     for i in 0..4 {
         let bad = res[i].contains("[2,12]");
         assert_eq!(status[i], if bad { "failed" } else { "ok" });
         assert_eq!(codes[i], if bad { "2" } else { "0" });
+        assert_eq!(
+            errors[i].contains("resolution[0] = 2 is out of range"),
+            bad,
+            "{}",
+            errors[i]
+        );
     }
     let html = std::fs::read_to_string(s.out.join("index.html")).unwrap();
     assert_eq!(html.matches("<tr class=\"failed\"").count(), 2);

@@ -240,6 +240,7 @@ pub fn render(
         s.push_str("</td>");
         cell(&mut s, r.exit_code.map(Value::from).as_ref());
         cell(&mut s, Some(&Value::String(r.reason.clone())));
+        cell(&mut s, Some(&Value::String(r.error().to_string())));
         cell(&mut s, r.wall_seconds.map(Value::from).as_ref());
         for p in &t.override_columns {
             cell(&mut s, r.override_value(p).map(override_cell).as_ref());

@@ -229,7 +229,14 @@ pub fn table(rows: &[RunRow]) -> Table {
 }
 
 /// The leading fixed columns of the CSV.
-pub const FIXED_COLUMNS: [&str; 5] = ["run", "status", "exit_code", "reason", "wall_seconds"];
+pub const FIXED_COLUMNS: [&str; 6] = [
+    "run",
+    "status",
+    "exit_code",
+    "reason",
+    "error",
+    "wall_seconds",
+];
 
 /// A cell's text: numbers as Rust prints them, strings as they are.
 pub fn cell_text(v: &Value) -> String {
@@ -265,12 +272,22 @@ impl RunRow {
             .map(|(_, v)| v.as_str())
     }
 
-    fn fixed_values(&self) -> [String; 5] {
+    /// The last line of a failed run's log (its error message), else empty.
+    pub fn error(&self) -> &str {
+        if self.status == "ok" {
+            ""
+        } else {
+            self.log_tail.last().map_or("", |s| s.as_str())
+        }
+    }
+
+    fn fixed_values(&self) -> [String; 6] {
         [
             self.name.clone(),
             self.status.clone(),
             self.exit_code.map(|c| c.to_string()).unwrap_or_default(),
             self.reason.clone(),
+            self.error().to_string(),
             self.wall_seconds
                 .map(|s| format!("{s:.3}"))
                 .unwrap_or_default(),
@@ -335,6 +352,7 @@ pub fn to_json(rows: &[RunRow], t: &Table, record: Option<&SweepRecord>) -> Valu
                 "status": r.status,
                 "exit_code": r.exit_code,
                 "reason": r.reason,
+                "error": r.error(),
                 "wall_seconds": r.wall_seconds,
                 "overrides": overrides,
                 "metrics": metrics,
@@ -459,10 +477,12 @@ mod tests {
         let csv = to_csv(&[row], &t);
         let lines: Vec<&str> = csv.lines().collect();
         assert_eq!(lines.len(), 2);
-        assert!(lines[0].starts_with("run,status,exit_code,reason,wall_seconds,seed,run_seconds"));
+        assert!(
+            lines[0].starts_with("run,status,exit_code,reason,error,wall_seconds,seed,run_seconds")
+        );
         assert!(
             lines[1]
-                .starts_with("a,ok,0,ok,2.000,1,1.5,10.0,10,16,12,20,0.1,0.25,1.0,0.5,toroidal,7"),
+                .starts_with("a,ok,0,ok,,2.000,1,1.5,10.0,10,16,12,20,0.1,0.25,1.0,0.5,toroidal,7"),
             "{}",
             lines[1]
         );
