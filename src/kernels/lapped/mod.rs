@@ -15,6 +15,8 @@
 //! - [`param`] — the least-squares parametrisation aligned to the field (§3.4).
 //! - [`coverage`] — face coverage by rasterisation (§3.6) and the culling of
 //!   occluded faces for runtime pasting (§4).
+//! - [`composite`] — the pastes composited in order at any surface point
+//!   (for quality metrics).
 //! - [`paste`] — the paste loop of §3 (until every face is covered).
 //! - [`atlas`] — the texture atlas representation (§4).
 //!
@@ -28,6 +30,7 @@
 
 pub mod atlas;
 pub mod coverage;
+pub mod composite;
 pub mod grow;
 pub mod hull;
 pub mod mask;
