@@ -29,7 +29,13 @@ use surfsynth::progress::Progress;
 use surfsynth::stages::lapped_paste::components::*;
 use surfsynth::stages::world::*;
 
-const SHARED_CLOSED: [&str; 4] = ["bunny_1k8.obj", "knot.off", "eight.off", "nut.ply"];
+const SHARED_CLOSED: [&str; 5] = [
+    "bunny_1k8.obj",
+    "knot.off",
+    "eight.off",
+    "nut.ply",
+    "fandisk.off",
+];
 
 fn load(name: &str) -> PolyMesh {
     load_mesh(&shared(&format!("meshes/{name}")), &LoadOptions::default())
