@@ -127,9 +127,12 @@ fn segmentation_grid(side: u32, seed: u64) -> FlowGraph {
             let v = y * side + x;
             let i = image[v as usize];
             g.add_terminal_weights(v, 10.0 * (i - 0.3).powi(2), 10.0 * (i - 0.7).powi(2));
-            for u in [(x + 1 < side).then_some(v + 1), (y + 1 < side).then_some(v + side)]
-                .into_iter()
-                .flatten()
+            for u in [
+                (x + 1 < side).then_some(v + 1),
+                (y + 1 < side).then_some(v + side),
+            ]
+            .into_iter()
+            .flatten()
             {
                 let d = i - image[u as usize];
                 let c = 2.0 * (-d * d / 0.02).exp();

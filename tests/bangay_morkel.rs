@@ -960,6 +960,10 @@ fn region_size_reproduces_table_1_and_level_is_log2_of_texels_per_edge() {
         (1000.0, 3),
         (f32::NAN, 0),
     ] {
-        assert_eq!(images.level_for(texels_per_edge), level, "{texels_per_edge}");
+        assert_eq!(
+            images.level_for(texels_per_edge),
+            level,
+            "{texels_per_edge}"
+        );
     }
 }

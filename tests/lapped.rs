@@ -579,7 +579,16 @@ fn noisy_texture(seed: u64) -> TexturePatch {
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
     let data: Vec<f32> = (0..64 * 64 * 3).map(|_| rng.random::<f32>()).collect();
     let ex = Image::from_data(64, 64, 3, data).unwrap();
-    TexturePatch::cut(&ex, Wrap::Repeat, [0, 0], &splotch_mask(64, 3), 3.0, 16, "noisy").unwrap()
+    TexturePatch::cut(
+        &ex,
+        Wrap::Repeat,
+        [0, 0],
+        &splotch_mask(64, 3),
+        3.0,
+        16,
+        "noisy",
+    )
+    .unwrap()
 }
 
 #[test]
@@ -634,7 +643,10 @@ metric_samples = 200
         .iter()
         .map(|v| v.as_f64().unwrap())
         .fold(0.0f64, f64::max);
-    assert!(wasserstein.is_finite() && wasserstein < 0.1, "{wasserstein}");
+    assert!(
+        wasserstein.is_finite() && wasserstein < 0.1,
+        "{wasserstein}"
+    );
 
     // The same measure, recomputed here, against the same pastes with the
     // pixels of each texture patch shuffled (same colours and alpha, no
@@ -680,13 +692,20 @@ metric_samples = 200
             channels: c.channels(),
             eval: CornerFn(&eval),
         };
-        surface_texture_energy(&mesh, &topo, &frames, spacing, &signal, &exemplar, &settings).mean
-            as f64
+        surface_texture_energy(
+            &mesh, &topo, &frames, spacing, &signal, &exemplar, &settings,
+        )
+        .mean as f64
     };
     let e = energy(&textures);
     let e_shuffled = energy(&shuffled);
-    eprintln!("lapped energy {e:.5} (reported {reported:.5}), shuffled {e_shuffled:.5}, wasserstein {wasserstein:.4}");
-    assert!((e - reported).abs() <= 1e-6 * e.max(1e-3), "{e} vs {reported}");
+    eprintln!(
+        "lapped energy {e:.5} (reported {reported:.5}), shuffled {e_shuffled:.5}, wasserstein {wasserstein:.4}"
+    );
+    assert!(
+        (e - reported).abs() <= 1e-6 * e.max(1e-3),
+        "{e} vs {reported}"
+    );
     assert!(e <= 0.5 * e_shuffled, "lapped {e} vs shuffled {e_shuffled}");
 }
 
@@ -729,7 +748,9 @@ fn difficult_faces_are_seeded_first_early_on() {
     };
     let uniform = seeds_mean(0.0);
     let boosted = seeds_mean(50.0);
-    eprintln!("mesh mean difficulty {mesh_mean:.3}, seeds: uniform {uniform:.3}, boosted {boosted:.3}");
+    eprintln!(
+        "mesh mean difficulty {mesh_mean:.3}, seeds: uniform {uniform:.3}, boosted {boosted:.3}"
+    );
     assert!(
         boosted >= 1.5 * uniform && boosted >= 1.5 * mesh_mean,
         "boosted {boosted} vs uniform {uniform} (mesh mean {mesh_mean})"
@@ -749,11 +770,18 @@ fn hull_points(hull: &surfsynth::kernels::lapped::hull::Hull, n: usize) -> Vec<V
 }
 
 /// Fraction of `points` inside some triangle of the patch in `(s, t)`.
-fn covered_fraction(patch: &surfsynth::kernels::lapped::grow::SurfacePatch, points: &[Vec2]) -> f64 {
+fn covered_fraction(
+    patch: &surfsynth::kernels::lapped::grow::SurfacePatch,
+    points: &[Vec2],
+) -> f64 {
     let inside = |p: Vec2, t: &[u32; 3]| {
         let [a, b, c] = t.map(|v| patch.st[v as usize]);
         let cross = |u: Vec2, v: Vec2| u.perp_dot(v);
-        let (d1, d2, d3) = (cross(b - a, p - a), cross(c - b, p - b), cross(a - c, p - c));
+        let (d1, d2, d3) = (
+            cross(b - a, p - a),
+            cross(c - b, p - b),
+            cross(a - c, p - c),
+        );
         (d1 >= 0.0 && d2 >= 0.0 && d3 >= 0.0) || (d1 <= 0.0 && d2 <= 0.0 && d3 <= 0.0)
     };
     let hit = points
@@ -800,8 +828,14 @@ fn regrowing_covers_hull_area_the_solve_uncovered() {
     }
     let (before, after) = (before_sum / seeds as f64, after_sum / seeds as f64);
     assert!(regrown > 0, "the solve never uncovered hull area");
-    assert!(after > before, "regrowing did not cover more: {before} -> {after}");
-    assert!(after >= 0.97, "hull covered {after} on average after regrowing");
+    assert!(
+        after > before,
+        "regrowing did not cover more: {before} -> {after}"
+    );
+    assert!(
+        after >= 0.97,
+        "hull covered {after} on average after regrowing"
+    );
 
     // The paste loop does the same and reports it; with no regrow rounds
     // it never regrows.
@@ -814,7 +848,12 @@ fn regrowing_covers_hull_area_the_solve_uncovered() {
             ..Default::default()
         };
         let out = paste_until_covered(&m, field, &textures, &settings, &Progress::hidden());
-        assert_eq!(out.report.regrown_faces > 0, expect_regrown, "{:?}", out.report);
+        assert_eq!(
+            out.report.regrown_faces > 0,
+            expect_regrown,
+            "{:?}",
+            out.report
+        );
     }
 }
 
@@ -838,21 +877,22 @@ fn culled_faces_leave_the_composite_unchanged() {
     assert!(out.report.uncovered_faces.is_empty());
     let sizes: Vec<usize> = out.pastes.iter().map(|p| p.faces.len()).collect();
     let drawn = drawn_faces(&out.coverage, &sizes, &textures, &settings.coverage);
-    let composite = |layers: &mut dyn Iterator<Item = &surfsynth::kernels::lapped::coverage::FaceLayer>,
-                     b: [f32; 3]| {
-        let mut c = [0.5f32; 3];
-        let mut px = [0.0f32; 4];
-        for l in layers {
-            let uv = l.uv[0] * b[0] + l.uv[1] * b[1] + l.uv[2] * b[2];
-            let tex = &textures[l.texture as usize];
-            tex.image.sample_uv(uv.x, uv.y, Wrap::Clamp, &mut px);
-            let a = tex.alpha_at(uv);
-            for i in 0..3 {
-                c[i] += (px[i] - c[i]) * a;
+    let composite =
+        |layers: &mut dyn Iterator<Item = &surfsynth::kernels::lapped::coverage::FaceLayer>,
+         b: [f32; 3]| {
+            let mut c = [0.5f32; 3];
+            let mut px = [0.0f32; 4];
+            for l in layers {
+                let uv = l.uv[0] * b[0] + l.uv[1] * b[1] + l.uv[2] * b[2];
+                let tex = &textures[l.texture as usize];
+                tex.image.sample_uv(uv.x, uv.y, Wrap::Clamp, &mut px);
+                let a = tex.alpha_at(uv);
+                for i in 0..3 {
+                    c[i] += (px[i] - c[i]) * a;
+                }
             }
-        }
-        c
-    };
+            c
+        };
     let (mut layers_total, mut drawn_total, mut worst) = (0usize, 0usize, 0.0f32);
     for f in 0..m.face_count() {
         let layers = &out.coverage.layers[f];
@@ -876,6 +916,9 @@ fn culled_faces_leave_the_composite_unchanged() {
     let per_face = layers_total as f64 / m.face_count() as f64;
     eprintln!("pastes per face {per_face:.2}, draws per face {draws:.2}, worst change {worst}");
     assert!(worst <= 2.0 / 255.0, "culling changed a colour by {worst}");
-    assert!(draws < per_face, "nothing was culled: {draws} draws vs {per_face} layers");
+    assert!(
+        draws < per_face,
+        "nothing was culled: {draws} draws vs {per_face} layers"
+    );
     assert!(draws >= 1.0);
 }

@@ -458,7 +458,11 @@ fn grids_with_the_bench_weights_match_dinics() {
         let (flow, seg) = check(&spec, &format!("segmentation grid {w}x{h}"));
         // Both labels occur: the blobs are segmented out.
         let fg = seg.iter().filter(|&&s| s).count();
-        assert!(fg > 0 && fg < seg.len(), "{fg} of {} in the source segment", seg.len());
+        assert!(
+            fg > 0 && fg < seg.len(),
+            "{fg} of {} in the source segment",
+            seg.len()
+        );
         assert!(flow > 0.0);
     }
 }

@@ -119,8 +119,10 @@ impl<'a> LappedComposite<'a> {
         for (k, p) in pastes.iter().enumerate() {
             for (i, &f) in p.faces.iter().enumerate() {
                 let slot = &mut fill[f as usize];
-                layers[*slot as usize] =
-                    (p.texture, [p.uvs[3 * i], p.uvs[3 * i + 1], p.uvs[3 * i + 2]]);
+                layers[*slot as usize] = (
+                    p.texture,
+                    [p.uvs[3 * i], p.uvs[3 * i + 1], p.uvs[3 * i + 2]],
+                );
                 paste_of[*slot as usize] = k as u32;
                 *slot += 1;
             }
@@ -343,13 +345,14 @@ mod tests {
     #[test]
     fn frames_follow_the_image_x_axis() {
         // One face whose texture x runs along world +y.
-        let mesh = PolyMesh::from_triangles(
-            vec![Vec3::ZERO, Vec3::X, Vec3::Y],
-            &[[0, 1, 2]],
-        );
+        let mesh = PolyMesh::from_triangles(vec![Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
         let textures = [rgba(2, 2, |_, _| [0.5; 4])];
         // u grows with world y, v with world x (mirror-free: v down = −t).
-        let uvs = [Vec2::new(0.0, 0.0), Vec2::new(0.0, 1.0), Vec2::new(1.0, 0.0)];
+        let uvs = [
+            Vec2::new(0.0, 0.0),
+            Vec2::new(0.0, 1.0),
+            Vec2::new(1.0, 0.0),
+        ];
         let pastes = [PasteRecord {
             texture: 0,
             faces: &[0],

@@ -30,13 +30,15 @@
 
 pub mod atlas;
 pub mod coverage;
-pub mod composite;
 pub mod grow;
 pub mod hull;
 pub mod mask;
 pub mod param;
 pub mod paste;
 pub mod tangent_field;
+
+// For the quality metrics of `result_metrics`.
+pub mod composite;
 
 use crate::mesh::{PolyMesh, Topology};
 use glam::Vec3;
