@@ -64,7 +64,10 @@ pub enum SurfaceSignal<'a> {
 /// with `corners` the mesh corner indices of a fan triangle
 /// `[c0, c, c + 1]` of one face ([`PolyMesh::triangulate_corners`]).
 #[derive(Clone, Copy)]
-pub struct CornerFn<'a>(pub &'a (dyn Fn([u32; 3], [f32; 3], &mut [f32]) + Sync));
+pub struct CornerFn<'a>(pub &'a CornerEval<'a>);
+
+/// The signature of a [`CornerFn`].
+pub type CornerEval<'a> = dyn Fn([u32; 3], [f32; 3], &mut [f32]) + Sync + 'a;
 
 impl std::fmt::Debug for CornerFn<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
