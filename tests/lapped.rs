@@ -800,7 +800,7 @@ fn regrowing_covers_hull_area_the_solve_uncovered() {
     let t = global_up_field(&m, Vec3::Y, 0.2 * diagonal(&mesh));
     let field = FaceField {
         t: &t,
-        isotropic: true,
+        isotropic: false,
     };
     let mut grower = Grower::new(&m, field, GrowSettings::default());
     let (mut before_sum, mut after_sum, mut regrown) = (0.0, 0.0, 0usize);
@@ -828,12 +828,16 @@ fn regrowing_covers_hull_area_the_solve_uncovered() {
     }
     let (before, after) = (before_sum / seeds as f64, after_sum / seeds as f64);
     assert!(regrown > 0, "the solve never uncovered hull area");
+    // The anisotropic field does not integrate on the knot: solving bends
+    // the parametrisation away from the grown faces and leaves a fifth of
+    // the hull uncovered; regrowing covers nearly all of it again (what
+    // remains is refused for distortion or reach).
     assert!(
-        after > before,
+        after >= before + 0.1,
         "regrowing did not cover more: {before} -> {after}"
     );
     assert!(
-        after >= 0.97,
+        after >= 0.95,
         "hull covered {after} on average after regrowing"
     );
 
