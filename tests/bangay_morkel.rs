@@ -913,3 +913,57 @@ fn graph_cut_config_runs_end_to_end_at_small_size() {
             > 0.0
     );
 }
+
+// ----- §3.3.2 region size and §3.3.4 anti-aliasing level ----------------------------
+
+#[test]
+fn region_size_reproduces_table_1_and_level_is_log2_of_texels_per_edge() {
+    // §3.3.2 read as (k+1)² + k² = (aᵐ n / (r_scale ē))²: with Table 1's
+    // settings (3×3 texel regions, stack) the k-regions hold more vertices
+    // than the table's comparisons per vertex (only coloured vertices are
+    // compared) but of the same order; the literal aᵐ n / r_scale (world
+    // units) would give k = 0 everywhere.
+    let table = [
+        // (r_scale, 1/ē, vertices, comparisons without averaging)
+        (30.0f32, 110.0f32, 65858.0f64, 5.7e6f64),
+        (100.0, 110.0, 65858.0, 4.3e5),
+        (200.0, 110.0, 65858.0, 2.04e5),
+        (40.0, 154.0, 240384.0, 1.75e7),
+        (50.0, 89.0, 120193.0, 2.5e6),
+    ];
+    let expected_k = [7u32, 2, 1, 8, 3];
+    for ((r_scale, inv_e, verts, comparisons), want) in table.into_iter().zip(expected_k) {
+        let k = region_k(3.0, 1.0, r_scale, 1.0 / inv_e, 0, 64);
+        assert_eq!(k, want, "r_scale {r_scale}, 1/ē {inv_e}");
+        let region = f64::from((k + 1) * (k + 1) + k * k);
+        let per_vertex = comparisons / verts;
+        assert!(
+            per_vertex <= region && per_vertex >= 0.4 * region,
+            "r_scale {r_scale}: {per_vertex} comparisons per vertex vs a {region}-vertex region"
+        );
+    }
+    // A pyramid level m multiplies the region's world size by 2ᵐ.
+    assert!(region_k(3.0, 4.0, 30.0, 1.0 / 110.0, 0, 64) > 7);
+
+    // §3.3.4: level ⌊log2(r_scale · ē)⌋, clamped to the stack.
+    let ex = Image::new(32, 32, 3);
+    let images = MatchImages::new(&ex, ImageLevels::Stack, 4, Wrap::Repeat);
+    assert_eq!(images.levels(), 4);
+    for (texels_per_edge, level) in [
+        (0.1f32, 0usize),
+        (1.0, 0),
+        (1.9, 0),
+        (2.0, 1),
+        (3.99, 1),
+        (4.0, 2),
+        (8.5, 3),
+        (1000.0, 3),
+        (f32::NAN, 0),
+    ] {
+        assert_eq!(
+            images.level_for(texels_per_edge),
+            level,
+            "{texels_per_edge}"
+        );
+    }
+}

@@ -382,3 +382,87 @@ fn nan_capacity_panics() {
     let mut g = FlowGraph::new(2);
     g.add_terminal_weights(1, f64::NAN, 0.0);
 }
+
+/// The seam weights of `benches/max_flow.rs`: per-pixel mismatch of a smooth
+/// low-frequency term plus the noise of random RGB differences, an n-link
+/// weighing the mismatch at both ends; left column tied to the source and
+/// right column to the sink.
+fn bench_seam_spec(w: u32, h: u32, seed: u64) -> Spec {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let mismatch: Vec<f64> = (0..w * h)
+        .map(|p| {
+            let (x, y) = (f64::from(p % w), f64::from(p / w));
+            let smooth = 0.5 + 0.5 * (x * 0.05).sin() * (y * 0.07).cos();
+            let noise: f64 = (0..3)
+                .map(|_| (rng.random::<f64>() - rng.random::<f64>()).abs())
+                .sum();
+            smooth + noise
+        })
+        .collect();
+    grid_spec(w, h, |x, y, horizontal| {
+        let v = (y * w + x) as usize;
+        let u = if horizontal { v + 1 } else { v + w as usize };
+        mismatch[v] + mismatch[u]
+    })
+}
+
+/// The segmentation grid of `benches/max_flow.rs`: t-links on every node
+/// (data term of a noisy two-level image), contrast-weighted n-links.
+fn bench_segmentation_spec(w: u32, h: u32, seed: u64) -> Spec {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let image: Vec<f64> = (0..w * h)
+        .map(|p| {
+            let (x, y) = (f64::from(p % w), f64::from(p / w));
+            let blob = (0.5 + 0.5 * (x * 0.11).sin() * (y * 0.13).cos() > 0.5) as u8;
+            (0.3 + 0.4 * f64::from(blob) + rng.random_range(-0.25..0.25)).clamp(0.0, 1.0)
+        })
+        .collect();
+    let mut spec = Spec {
+        nodes: (w * h) as usize,
+        ..Spec::default()
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let v = y * w + x;
+            let i = image[v as usize];
+            spec.tlinks
+                .push((v, 10.0 * (i - 0.3).powi(2), 10.0 * (i - 0.7).powi(2)));
+            let mut link = |u: u32| {
+                let d = i - image[u as usize];
+                let c = 2.0 * (-d * d / 0.02).exp();
+                spec.edges.push((v, u, c, c));
+            };
+            if x + 1 < w {
+                link(v + 1);
+            }
+            if y + 1 < h {
+                link(v + w);
+            }
+        }
+    }
+    spec
+}
+
+#[test]
+fn grids_with_the_bench_weights_match_dinics() {
+    // The bench's square and band seam shapes, scaled down so Dinic is quick.
+    for (w, h, seed) in [(60u32, 60u32, 42u64), (32, 200, 43), (25, 25, 44)] {
+        let spec = bench_seam_spec(w, h, seed);
+        let (flow, seg) = check(&spec, &format!("seam grid {w}x{h}"));
+        assert!(flow > 0.0 && flow.is_finite());
+        // The cut separates the tied columns: left is source, right sink.
+        assert!((0..h).all(|y| seg[(y * w) as usize] && !seg[(y * w + w - 1) as usize]));
+    }
+    for (w, h, seed) in [(80u32, 80u32, 5u64), (50, 30, 6)] {
+        let spec = bench_segmentation_spec(w, h, seed);
+        let (flow, seg) = check(&spec, &format!("segmentation grid {w}x{h}"));
+        // Both labels occur: the blobs are segmented out.
+        let fg = seg.iter().filter(|&&s| s).count();
+        assert!(
+            fg > 0 && fg < seg.len(),
+            "{fg} of {} in the source segment",
+            seg.len()
+        );
+        assert!(flow > 0.0);
+    }
+}

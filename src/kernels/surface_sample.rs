@@ -49,6 +49,30 @@ pub enum SurfaceSignal<'a> {
         /// Addressing of coordinates outside `[0, 1]`.
         wrap: Wrap,
     },
+    /// Any signal evaluated by a function of a fan triangle's mesh corner
+    /// indices and barycentric weights (e.g. lapped-texture pastes
+    /// composited in order with alpha).
+    Corners {
+        /// Values per sample.
+        channels: usize,
+        /// Writes the signal at the point into the `channels`-value buffer.
+        eval: CornerFn<'a>,
+    },
+}
+
+/// The function of [`SurfaceSignal::Corners`]: `(corners, weights, out)`,
+/// with `corners` the mesh corner indices of a fan triangle
+/// `[c0, c, c + 1]` of one face ([`PolyMesh::triangulate_corners`]).
+#[derive(Clone, Copy)]
+pub struct CornerFn<'a>(pub &'a CornerEval<'a>);
+
+/// The signature of a [`CornerFn`].
+pub type CornerEval<'a> = dyn Fn([u32; 3], [f32; 3], &mut [f32]) + Sync + 'a;
+
+impl std::fmt::Debug for CornerFn<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CornerFn")
+    }
 }
 
 impl SurfaceSignal<'_> {
@@ -57,6 +81,7 @@ impl SurfaceSignal<'_> {
         match self {
             Self::VertexColours { channels, .. } => *channels,
             Self::CornerUvs { texture, .. } => texture.channels as usize,
+            Self::Corners { channels, .. } => *channels,
         }
     }
 
@@ -81,6 +106,7 @@ impl SurfaceSignal<'_> {
                     + uvs[corners[2] as usize] * w[2];
                 texture.sample_uv(uv.x, uv.y, wrap, out);
             }
+            Self::Corners { eval, .. } => (eval.0)(corners, w, out),
         }
     }
 }

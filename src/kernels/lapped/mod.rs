@@ -15,6 +15,8 @@
 //! - [`param`] — the least-squares parametrisation aligned to the field (§3.4).
 //! - [`coverage`] — face coverage by rasterisation (§3.6) and the culling of
 //!   occluded faces for runtime pasting (§4).
+//! - [`composite`] — the pastes composited in order at any surface point
+//!   (for quality metrics).
 //! - [`paste`] — the paste loop of §3 (until every face is covered).
 //! - [`atlas`] — the texture atlas representation (§4).
 //!
@@ -34,6 +36,9 @@ pub mod mask;
 pub mod param;
 pub mod paste;
 pub mod tangent_field;
+
+// For the quality metrics of `result_metrics`.
+pub mod composite;
 
 use crate::mesh::{PolyMesh, Topology};
 use glam::Vec3;

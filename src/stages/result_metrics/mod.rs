@@ -1,13 +1,24 @@
 //! The system that follows every pipeline: texture energy (Kwatra et al.
 //! 2005) and histogram distance of the result against the exemplar, written
 //! to `metrics.json` under `result.quality`.
+//!
+//! The result is whichever signal the active mesh carries: per-corner UVs
+//! (jump maps), vertex colours (Wei–Levoy, Bangay–Morkel), or lapped-texture
+//! pastes (Praun et al.), which are composited in paste order with alpha at
+//! every template point (the renderer's compositing) and measured in the
+//! frames of the topmost paste at each vertex.
 
 use crate::image::Image;
 use crate::kernels::frames::frames_from_global_direction;
+use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
 use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
 };
+use crate::kernels::surface_sample::CornerFn;
 use crate::mesh::Topology;
+use crate::stages::lapped_paste::components::{
+    PasteOf, PasteOrder, PatchFaces, PatchUvs, TexturePatchIndex, TexturePatches,
+};
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -24,13 +35,27 @@ type ResultQuery<'w, 's> = Query<
     ),
 >;
 
+type PasteQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static PasteOf,
+        &'static PasteOrder,
+        &'static TexturePatchIndex,
+        &'static PatchFaces,
+        &'static PatchUvs,
+    ),
+>;
+
 /// The result-metrics system with its settings.
 pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
     (move |active: Res<ActiveMesh>,
            exemplar: Res<Exemplar>,
            spacing: Res<TexelSpacing>,
            mut metrics: ResMut<Metrics>,
-           meshes: ResultQuery| {
+           meshes: ResultQuery,
+           pastes: PasteQuery,
+           patch_textures: Option<Res<TexturePatches>>| {
         let _span = tracing::info_span!("result_metrics").entered();
         let Ok((geometry, frames, colours, uvs)) = meshes.get(active.0) else {
             return;
@@ -46,21 +71,67 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             );
             return;
         }
-        let signal = match (uvs, colours) {
-            (Some(uv), _) => SurfaceSignal::CornerUvs {
+        // Lapped pastes on the active mesh, in paste order.
+        let mut records: Vec<(u32, PasteRecord)> = pastes
+            .iter()
+            .filter(|(of, ..)| of.0 == active.0)
+            .map(|(_, order, tex, faces, puv)| {
+                (
+                    order.0,
+                    PasteRecord {
+                        texture: tex.0,
+                        faces: &faces.0,
+                        uvs: &puv.0,
+                    },
+                )
+            })
+            .collect();
+        records.sort_by_key(|r| r.0);
+        let records: Vec<PasteRecord> = records.into_iter().map(|r| r.1).collect();
+        let background = exemplar.image.mean();
+        let composite = match (uvs, colours, patch_textures.as_deref()) {
+            (None, None, Some(textures)) if !records.is_empty() => {
+                match LappedComposite::new(mesh, &records, &textures.0, &background) {
+                    Ok(c) => Some(c),
+                    Err(e) => {
+                        metrics.result.insert(
+                            "texture_energy".into(),
+                            serde_json::Value::String(format!("skipped: {e}")),
+                        );
+                        return;
+                    }
+                }
+            }
+            _ => None,
+        };
+        let eval = |corners: [u32; 3], w: [f32; 3], out: &mut [f32]| {
+            if let Some(c) = &composite {
+                c.eval_corners(corners, w, out);
+            }
+        };
+        let signal = match (uvs, colours, &composite) {
+            (Some(uv), _, _) => SurfaceSignal::CornerUvs {
                 uvs: &uv.0,
                 texture: &exemplar.image,
                 wrap: exemplar.wrap,
             },
-            (None, Some(c)) => SurfaceSignal::VertexColours {
+            (None, Some(c), _) => SurfaceSignal::VertexColours {
                 values: &c.values,
                 channels: c.channels,
             },
-            (None, None) => return,
+            (None, None, Some(c)) => SurfaceSignal::Corners {
+                channels: c.channels(),
+                eval: CornerFn(&eval),
+            },
+            (None, None, None) => return,
         };
         let owned_frames;
-        let frames = match frames {
-            Some(f) if f.0.len() == mesh.vertex_count() => &f.0,
+        let frames = match (&composite, frames) {
+            (Some(c), _) => {
+                owned_frames = c.frames(mesh, glam::Vec3::X);
+                &owned_frames
+            }
+            (None, Some(f)) if f.0.len() == mesh.vertex_count() => &f.0,
             _ => {
                 owned_frames = frames_from_global_direction(&mesh.vertex_normals(), glam::Vec3::X);
                 &owned_frames
@@ -83,14 +154,24 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                 "neighbourhood": n, "spacing_world_units": spacing.0,
             }),
         );
-        if let Some(c) = colours {
+        let values = match (colours, &composite) {
+            (Some(c), _) => Some((c.values.clone(), c.channels)),
+            (None, Some(c)) => {
+                // About 20 000 composite samples spread by area.
+                let area: f32 = mesh.face_areas().iter().sum();
+                let per_area = 20_000.0 / area.max(f32::MIN_POSITIVE);
+                Some((c.sample_colours(mesh, per_area), c.channels()))
+            }
+            _ => None,
+        };
+        if let Some((values, channels)) = values {
             let as_image = Image::from_data(
-                (c.values.len() / c.channels.max(1)) as u32,
+                (values.len() / channels.max(1)) as u32,
                 1,
-                c.channels as u32,
-                c.values.clone(),
+                channels as u32,
+                values,
             );
-            if let Some(img) = as_image {
+            if let Some(img) = as_image.filter(|i| i.width > 0) {
                 let w = histogram_wasserstein(&img, &exemplar.image);
                 metrics
                     .result
