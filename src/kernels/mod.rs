@@ -20,3 +20,4 @@ pub mod surface_sample;
 pub mod sweep;
 pub mod vertex_order;
 pub mod wl_match;
+pub mod channels;
