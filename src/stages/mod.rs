@@ -18,3 +18,4 @@ pub mod subdivide_sqrt2;
 pub mod tangent_field;
 pub mod wl_match;
 pub mod world;
+pub mod displace;
