@@ -494,6 +494,8 @@ fn displaced_config_runs_end_to_end_at_small_size() {
         dir.path().to_str().unwrap(),
         "--set",
         "stage.1.target_vertices=3000",
+        "--set",
+        "stage.4.amplitude=0.05",
     ]);
     assert_eq!(code, 0, "{stderr}");
     for name in ["result.ply", "result.obj", "preview_0.png", "metrics.json"] {
@@ -564,5 +566,45 @@ patches = 3
             }
         }
         assert!(opaque > 0, "patch {k} has opaque pixels");
+    }
+}
+
+#[test]
+fn graph_match_keeps_the_texels_of_colours_it_starts_from() {
+    // With no pass on the level, the colours of init_colours stay: their
+    // source texels must stay with them (they used to be reset to 0, 0).
+    let text = r#"
+seed = 3
+[input]
+mesh = "builtin:plane"
+exemplar = "builtin:noise"
+[input.mesh_options]
+resolution = [10, 10]
+[input.exemplar_options]
+size = 32
+
+[[stage]]
+kind = "orientation"
+mode = "global"
+
+[[stage]]
+kind = "init_colours"
+
+[[stage]]
+kind = "graph_match"
+r_scale = 10.0
+passes = [0]
+"#;
+    let w = world_for(text).expect("runs");
+    let ex = w.resource::<Exemplar>().image.clone();
+    let active = w.resource::<ActiveMesh>().0;
+    let colours = w.get::<VertexColours>(active).unwrap();
+    let texels = &w.get::<SourceTexels>(active).unwrap().0;
+    for (v, t) in texels.iter().enumerate() {
+        assert_eq!(
+            &colours.values[v * 3..v * 3 + 3],
+            ex.pixel(t.x as u32, t.y as u32),
+            "vertex {v} at {t}"
+        );
     }
 }

@@ -234,6 +234,45 @@ pub fn displace_along_normals(
         .collect()
 }
 
+/// Smooths per-vertex heights over the mesh: `passes` Jacobi steps, each
+/// setting a vertex to the mean of itself and the mean of its neighbours
+/// (weights ½, ½). Vertices with `moved[v] == false` neither change nor
+/// contribute. The heights are point samples of the map at unrelated texels
+/// across patch seams, and of texel-scale speckle; a few passes remove that
+/// jitter while keeping features several edges wide.
+pub fn smooth_vertex_heights(
+    topo: &crate::mesh::Topology,
+    heights: &mut Vec<f32>,
+    moved: &[bool],
+    passes: u32,
+) {
+    use rayon::prelude::*;
+    for _ in 0..passes {
+        let h: &[f32] = heights;
+        let next: Vec<f32> = (0..h.len())
+            .into_par_iter()
+            .map(|v| {
+                if !moved.get(v).copied().unwrap_or(false) {
+                    return h[v];
+                }
+                let (mut sum, mut n) = (0.0f32, 0u32);
+                for &w in topo.neighbours(v as u32) {
+                    if moved.get(w as usize).copied().unwrap_or(false) {
+                        sum += h[w as usize];
+                        n += 1;
+                    }
+                }
+                if n == 0 {
+                    h[v]
+                } else {
+                    0.5 * h[v] + 0.5 * sum / n as f32
+                }
+            })
+            .collect();
+        *heights = next;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -349,6 +388,35 @@ mod tests {
             Vec3::Z,
             1e-6
         ));
+    }
+
+    #[test]
+    fn smoothing_lowers_height_variance_and_keeps_fixed_vertices() {
+        let mesh = crate::mesh::builtin::builtin_mesh(
+            "plane",
+            &crate::mesh::builtin::BuiltinOptions {
+                resolution: [10, 10],
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let topo = crate::mesh::Topology::build(&mesh);
+        let n = mesh.vertex_count();
+        // A checkerboard of heights: the worst aliasing.
+        let h0: Vec<f32> = (0..n).map(|v| ((v % 10 + v / 10) % 2) as f32).collect();
+        let mut moved = vec![true; n];
+        moved[0] = false;
+        let var = |h: &[f32]| {
+            let m = h.iter().sum::<f32>() / h.len() as f32;
+            h.iter().map(|x| (x - m).powi(2)).sum::<f32>() / h.len() as f32
+        };
+        let mut h = h0.clone();
+        smooth_vertex_heights(&topo, &mut h, &moved, 3);
+        assert!(var(&h) < 0.25 * var(&h0), "{} vs {}", var(&h), var(&h0));
+        assert_eq!(h[0], h0[0], "a fixed vertex keeps its height");
+        let mut same = h0.clone();
+        smooth_vertex_heights(&topo, &mut same, &moved, 0);
+        assert_eq!(same, h0);
     }
 
     #[test]

@@ -10,12 +10,15 @@
 //! by `init_colours`, `match`, `graph_match`, `jump_surface`) or, for a
 //! per-corner texture result (`jump_surface`), the mean height over the
 //! vertex's corners' `CornerUvs`. Colours, frames and texture coordinates are
-//! kept. The loaded source mesh is never modified: when it is the active mesh
+//! kept. With `smoothing > 0` the sampled heights are first averaged over
+//! one-rings (texel-scale speckle and seams between matched patches would
+//! otherwise read as spikes). The loaded source mesh is never modified: when it is the active mesh
 //! the stage displaces a copy, which becomes the active mesh.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::channels::{
     displace_along_normals, heights_at_corner_uvs, heights_at_texels, mean_height,
+    smooth_vertex_heights,
 };
 use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::stages::world::*;
@@ -56,6 +59,8 @@ pub struct DisplaceSettings {
     pub amplitude: f64,
     /// Which recorded coordinates address the height map.
     pub coordinates: HeightCoordinates,
+    /// Passes of one-ring averaging of the sampled heights.
+    pub smoothing: u32,
 }
 
 impl Default for DisplaceSettings {
@@ -63,6 +68,7 @@ impl Default for DisplaceSettings {
         Self {
             amplitude: 0.1,
             coordinates: HeightCoordinates::Auto,
+            smoothing: 0,
         }
     }
 }
@@ -80,6 +86,12 @@ impl StageSettings for DisplaceSettings {
             unit: "",
             range: ParamRange::OneOf(&["auto", "source_texels", "corner_uvs"]),
             doc: "exemplar coordinates that address the height map: auto = per-corner UVs when the result has them, else per-vertex source texels",
+        },
+        ParamDoc {
+            name: "smoothing",
+            unit: "passes",
+            range: ParamRange::Int(0, 100),
+            doc: "one-ring averaging passes over the sampled heights before displacing; removes spikes from texel-scale speckle and patch seams",
         },
     ];
 }
@@ -136,7 +148,7 @@ impl Stage for Displace {
                 HeightCoordinates::CornerUvs => true,
                 HeightCoordinates::SourceTexels => false,
             };
-            let (heights, moved) = if use_uvs {
+            let (mut heights, moved) = if use_uvs {
                 let Some(uvs) = uvs else {
                     return fail_with(
                         "coordinates = \"corner_uvs\" but the active mesh has no per-corner texture coordinates; run jump_surface first or use \"source_texels\"".into(),
@@ -151,6 +163,10 @@ impl Stage for Displace {
                 };
                 (heights_at_texels(height, channels.wrap, &texels.0), vec![true; nv])
             };
+            if settings.smoothing > 0 {
+                let topo = crate::mesh::Topology::build(mesh);
+                smooth_vertex_heights(&topo, &mut heights, &moved, settings.smoothing);
+            }
             let mean = mean_height(height);
             let normals = mesh.vertex_normals();
             let amplitude = settings.amplitude as f32;
