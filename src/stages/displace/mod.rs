@@ -1,6 +1,7 @@
 //! Stage `displace`: the height map follows the synthesis and displaces the
 //! mesh (issue 7; the displacement examples of Bangay & Morkel 2006 §4, the
-//! luggage and donkey, and Zelinka & Garland 2004 §7).
+//! luggage and donkey of Fig. 10c,f, and the mannequin of Wei & Levoy 2001
+//! Fig. 9).
 //!
 //! Each vertex of the active mesh moves along its area-weighted unit normal
 //! by `amplitude · (h − h̄)`, where `h` is `[input] height_map` sampled
@@ -114,7 +115,7 @@ impl Stage for Displace {
     const KIND: &'static str = "displace";
     const SUMMARY: &'static str = "moves vertices along their normals by the height map at their recorded exemplar coordinates";
     const PAPER: &'static str =
-        "Bangay & Morkel 2006 §4 (displacement); Zelinka & Garland 2004 §7; issue 7";
+        "Bangay & Morkel 2006 §4, Fig. 10c,f; Wei & Levoy 2001 Fig. 9 (displacement)";
     type Settings = DisplaceSettings;
 
     fn requires(_: &Self::Settings) -> Vec<Datum> {
