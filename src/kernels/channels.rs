@@ -87,6 +87,19 @@ pub fn frame_angle(s: Vec3, tangent: Vec3, normal: Vec3) -> f32 {
     sin.atan2(cos)
 }
 
+/// A normal-map texel copied from the exemplar at a sample whose synthesis
+/// frame has tangent `s`, re-expressed in a target tangent frame with
+/// x-axis `tangent` and normal `normal` (right-handed, y = normal × tangent),
+/// encoded again: [`decode_normal`], [`reorient_normal`] by
+/// [`frame_angle`]`(s, tangent, normal)`, [`encode_normal`]. What a bake
+/// writes into a normal-map atlas texel.
+pub fn normal_texel_in_frame(texel: [f32; 3], s: Vec3, tangent: Vec3, normal: Vec3) -> [f32; 3] {
+    encode_normal(reorient_normal(
+        decode_normal(texel),
+        frame_angle(s, tangent, normal),
+    ))
+}
+
 /// Rec. 709 luminance of a pixel's first three channels (the first channel
 /// alone for grey images).
 #[inline]
@@ -339,6 +352,22 @@ mod tests {
             let world2 = r.x * x + r.y * y + r.z * n;
             assert!(close(world, world2, 1e-5), "θ {theta}: {world} vs {world2}");
         }
+    }
+
+    #[test]
+    fn texel_in_a_frame_turned_by_the_field_turns_with_it() {
+        // A bump tilted to +X in the exemplar; the synthesis frame's s is the
+        // target's x turned by +30° about +Z: the baked normal is tilted 30°
+        // counter-clockwise from +X.
+        let tex = encode_normal(Vec3::new(0.5, 0.0, 0.866_025_4));
+        let phi = 30f32.to_radians();
+        let s = Vec3::new(phi.cos(), phi.sin(), 0.0);
+        let out = decode_normal(normal_texel_in_frame(tex, s, Vec3::X, Vec3::Z));
+        let expected = Vec3::new(0.5 * phi.cos(), 0.5 * phi.sin(), 0.866_025_4);
+        assert!(close(out, expected, 1e-5), "{out} vs {expected}");
+        // Same frame: unchanged.
+        let same = decode_normal(normal_texel_in_frame(tex, Vec3::X, Vec3::X, Vec3::Z));
+        assert!(close(same, decode_normal(tex), 1e-6));
     }
 
     #[test]
