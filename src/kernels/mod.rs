@@ -1,6 +1,7 @@
 //! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
 
 pub mod bake_triangles;
+pub mod channels;
 pub mod diffuse_orientation;
 pub mod flatten;
 pub mod frames;
@@ -20,4 +21,3 @@ pub mod surface_sample;
 pub mod sweep;
 pub mod vertex_order;
 pub mod wl_match;
-pub mod channels;

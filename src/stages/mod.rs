@@ -3,6 +3,7 @@
 
 pub mod builtin_pyramid;
 pub mod diffuse_orientation;
+pub mod displace;
 pub mod export;
 pub mod graph_match;
 pub mod init_colours;
@@ -18,4 +19,3 @@ pub mod subdivide_sqrt2;
 pub mod tangent_field;
 pub mod wl_match;
 pub mod world;
-pub mod displace;
