@@ -608,3 +608,31 @@ passes = [0]
         );
     }
 }
+
+#[test]
+fn displacement_is_identical_at_one_and_two_threads() {
+    let text = plane_config(
+        "derive:luminance",
+        "[[stage]]\nkind = \"init_colours\"",
+        0.3,
+    )
+    .replace("amplitude = 0.3", "amplitude = 0.3\nsmoothing = 3");
+    let positions = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                let w = world_for(&text).expect("runs");
+                let e = w.resource::<ActiveMesh>().0;
+                w.get::<Geometry>(e).unwrap().0.positions.clone()
+            })
+    };
+    let (a, b) = (positions(1), positions(2));
+    assert!(a.iter().any(|p| p.z != 0.0), "something moved");
+    assert!(
+        a.iter()
+            .zip(&b)
+            .all(|(x, y)| x.to_array().map(f32::to_bits) == y.to_array().map(f32::to_bits))
+    );
+}
