@@ -1,6 +1,7 @@
 //! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
 
 pub mod bake_triangles;
+pub mod channels;
 pub mod diffuse_orientation;
 pub mod flatten;
 pub mod frames;

@@ -3,6 +3,7 @@
 
 pub mod builtin_pyramid;
 pub mod diffuse_orientation;
+pub mod displace;
 pub mod export;
 pub mod graph_match;
 pub mod init_colours;

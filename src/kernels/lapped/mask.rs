@@ -225,6 +225,10 @@ pub struct TexturePatch {
     /// The conservative polygonal hull of the non-transparent pixels, in
     /// patch units around the centre (§3.3).
     pub hull: Hull,
+    /// The exemplar pixel of the patch's top-left pixel (before wrapping):
+    /// patch pixel `(x, y)` is exemplar texel `origin + (x, y)`, so other
+    /// exemplar channels can follow a paste (issue 7).
+    pub origin: [i64; 2],
 }
 
 impl TexturePatch {
@@ -294,6 +298,7 @@ impl TexturePatch {
             alpha,
             centre_px,
             hull,
+            origin,
         })
     }
 

@@ -201,6 +201,7 @@ type LevelQuery<'w, 's> = Query<
         Option<&'static VertexColours>,
         Option<&'static SweepField>,
         Option<&'static LevelParents>,
+        Option<&'static SourceTexels>,
     ),
 >;
 
@@ -294,7 +295,7 @@ impl Stage for GraphMatch {
             let mut per_level = Vec::new();
             let mut total = PassStats::default();
             for (li, &e) in levels.iter().enumerate() {
-                let Ok((geometry, frames, colours, sweep, parents)) = meshes.get(e) else {
+                let Ok((geometry, frames, colours, sweep, parents, texels)) = meshes.get(e) else {
                     return;
                 };
                 let mesh = &geometry.0;
@@ -311,7 +312,13 @@ impl Stage for GraphMatch {
                     // texels) stand for level 0.
                     (None, _) => match colours {
                         Some(c) if c.channels == ch && c.values.len() == nv * ch => {
-                            SynthesisState::from_colours(c.values.clone(), ch, 0)
+                            let mut s = SynthesisState::from_colours(c.values.clone(), ch, 0);
+                            // Keep where those colours came from, so vertices
+                            // no pass rematches still name their texel.
+                            if let Some(t) = texels.filter(|t| t.0.len() == nv) {
+                                s.texels.clone_from(&t.0);
+                            }
+                            s
                         }
                         _ => SynthesisState::uncoloured(nv, ch),
                     },

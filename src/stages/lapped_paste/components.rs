@@ -46,6 +46,13 @@ pub struct PatchDrawn(pub Vec<bool>);
 #[derive(Resource, Clone, Debug, Default)]
 pub struct TexturePatches(pub Vec<Image>);
 
+/// Per texture patch of [`TexturePatches`], the exemplar pixel of its
+/// top-left pixel (`TexturePatch::origin`): a paste's patch coordinate
+/// `uv` (in `[0, 1]` of the patch) is exemplar pixel
+/// `origin + uv · (width, height)`, so other exemplar channels follow.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct TexturePatchOrigins(pub Vec<[i64; 2]>);
+
 /// A texture atlas of the lapped texture on a mesh entity (Praun et al.
 /// §4): per-corner coordinates into the composited atlas image.
 #[derive(Component, Clone, Debug, Default)]

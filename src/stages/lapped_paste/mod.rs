@@ -537,6 +537,9 @@ impl Stage for LappedPaste {
                     PatchDrawn(drawn),
                 ));
             }
+            commands.insert_resource(TexturePatchOrigins(
+                textures.iter().map(|t| t.origin).collect(),
+            ));
             commands.insert_resource(TexturePatches(
                 textures.into_iter().map(|t| t.image).collect(),
             ));
