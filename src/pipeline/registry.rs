@@ -205,6 +205,7 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<diffuse_orientation::DiffuseOrientation>(),
         entry::<graph_match::GraphMatch>(),
         entry::<export::Export>(),
+        entry::<bake::Bake>(),
     ]
 }
 
