@@ -511,13 +511,22 @@ v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[3])))
 
 #[test]
 fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
-    let world = run(&jump_bake("../shared/data/meshes/bunny_1k8.obj", 256, r#""glb""#)).unwrap();
+    // With material channels: the normal and roughness maps become the
+    // material's normalTexture and metallicRoughnessTexture.
+    let text = jump_bake("../shared/data/meshes/bunny_1k8.obj", 256, r#""glb", "baked_obj""#)
+        .replace(
+            "exemplar = \"builtin:bricks\"",
+            "exemplar = \"builtin:bricks\"\nheight_map = \"derive:builtin\"\nnormal_map = \"derive:height\"\nroughness_map = \"derive:luminance\"",
+        );
+    let world = run(&text).unwrap();
     let asset = world.resource::<BakedAsset>();
+    let roles: Vec<&str> = asset.maps.iter().map(|(r, _)| r.as_str()).collect();
+    assert_eq!(roles, ["normal", "roughness", "height"]);
     let bytes = surfsynth::output::gltf::encode_glb(asset).unwrap();
 
     // Re-read with the gltf crate.
     let gltf = gltf::Gltf::from_slice(&bytes).expect("the gltf crate parses the GLB");
-    assert_eq!(gltf.textures().count(), 1);
+    assert_eq!(gltf.textures().count(), 3, "colour, normal, metallic-roughness");
     let image = gltf.images().next().unwrap();
     match image.source() {
         gltf::image::Source::View { mime_type, view } => {
@@ -530,6 +539,13 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
     }
     let material = gltf.materials().next().unwrap();
     assert!(material.pbr_metallic_roughness().base_color_texture().is_some());
+    assert!(material.normal_texture().is_some());
+    assert!(
+        material
+            .pbr_metallic_roughness()
+            .metallic_roughness_texture()
+            .is_some()
+    );
     let prim = gltf.meshes().next().unwrap().primitives().next().unwrap();
     let positions = prim.get(&gltf::Semantic::Positions).unwrap().count();
     let uvs = prim.get(&gltf::Semantic::TexCoords(0)).unwrap().count();

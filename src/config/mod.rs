@@ -201,6 +201,29 @@ pub struct RawInput {
     /// Whether the exemplar tiles: `repeat` (toroidal neighbourhoods) or `clamp`.
     #[serde(default)]
     pub exemplar_wrap: Wrap,
+    /// Height (displacement) map that follows the synthesis: a path to an
+    /// image the exemplar's size (an RGB file is reduced to its luminance),
+    /// `derive:luminance` (the exemplar's luminance) or `derive:builtin` (a
+    /// builtin exemplar's own height). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height_map: Option<String>,
+    /// Tangent-space normal map (+X right, +Y up as displayed): a path to an
+    /// RGB image the exemplar's size or `derive:height` (Sobel of the height
+    /// map, `normal_strength`). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normal_map: Option<String>,
+    /// Roughness map: a path to an image the exemplar's size (reduced to
+    /// luminance) or `derive:luminance` (1 − the exemplar's luminance). Optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roughness_map: Option<String>,
+    /// Relief of `normal_map = "derive:height"`: pixels of height that a
+    /// height difference of 1 spans; 0..=100, default 4.
+    #[serde(default = "default_normal_strength")]
+    pub normal_strength: f32,
+}
+
+fn default_normal_strength() -> f32 {
+    4.0
 }
 
 /// `[output]`: the output folder and run-wide output settings.

@@ -119,6 +119,50 @@ pub fn builtin_exemplar(name: &str, options: &ExemplarOptions) -> Result<Image, 
     Ok(render(pattern, options))
 }
 
+/// The height map of the builtin exemplar `name` (without the `builtin:`
+/// prefix): a one-channel image of the same size and layout as
+/// [`builtin_exemplar`] with the same `options`, values in `[0, 1]`, tileable
+/// (the `height_map = "derive:builtin"` channel of a config). Bricks stand
+/// proud of recessed mortar with bevelled edges and a fine grain; the noise's
+/// height is its large-scale fractal value; the checker's light squares and
+/// the stripes' red band are raised.
+///
+/// # Errors
+///
+/// As [`builtin_exemplar`]: an unknown name or options out of range.
+pub fn builtin_height(name: &str, options: &ExemplarOptions) -> Result<Image, ImageError> {
+    // Same name check and message as the colour exemplar.
+    let Some(pattern) = Pattern::from_name(name) else {
+        return builtin_exemplar(name, options);
+    };
+    options.validate(name)?;
+    let size = options.size;
+    let ss: u32 = match pattern {
+        Pattern::Noise => 1,
+        _ if size <= 256 => 4,
+        _ => 2,
+    };
+    let ctx = Context::new(options);
+    let mut img = Image::new(size, size, 1);
+    img.data
+        .par_chunks_mut(size as usize)
+        .enumerate()
+        .for_each(|(y, row)| {
+            for (x, out) in row.iter_mut().enumerate() {
+                let mut acc = 0.0f32;
+                for sy in 0..ss {
+                    for sx in 0..ss {
+                        let u = (x as f32 + (sx as f32 + 0.5) / ss as f32) / size as f32;
+                        let v = (y as f32 + (sy as f32 + 0.5) / ss as f32) / size as f32;
+                        acc += ctx.height(pattern, u, v);
+                    }
+                }
+                *out = (acc / (ss * ss) as f32).clamp(0.0, 1.0);
+            }
+        });
+    Ok(img)
+}
+
 /// Checks that `img` is at least `needed`×`needed` pixels, the size of a
 /// neighbourhood or patch (`what`, e.g. "neighbourhood") some method needs.
 ///
@@ -225,6 +269,55 @@ impl Context {
             Pattern::Bricks => self.bricks(u, v),
             Pattern::Noise => self.noise(u, v),
         }
+    }
+
+    /// Height in `[0, 1]` of the pattern at `(u, v)` ([`builtin_height`]).
+    fn height(&self, pattern: Pattern, u: f32, v: f32) -> f32 {
+        match pattern {
+            Pattern::Checker => {
+                let c = self.checker(u, v);
+                if c[0] > 0.5 { 1.0 } else { 0.0 }
+            }
+            Pattern::Stripes => {
+                let phase = (u * self.cells as f32).rem_euclid(1.0);
+                if phase < 0.45 {
+                    1.0
+                } else if phase < 0.6 {
+                    0.5
+                } else {
+                    0.0
+                }
+            }
+            Pattern::Bricks => self.brick_height(u, v),
+            Pattern::Noise => fbm(u, v, self.cells, 5, self.size, self.seed, 1),
+        }
+    }
+
+    /// Bricks at 0.7–1.0 with a bevel over about 1.5 pixels at their edges,
+    /// mortar at 0–0.1; the same layout and grain as [`Self::bricks`].
+    fn brick_height(&self, u: f32, v: f32) -> f32 {
+        let cells = self.cells as f32;
+        let rows = 2 * self.cells;
+        let brick_h = self.size as f32 / rows as f32;
+        let brick_w = 2.0 * brick_h;
+        let mortar_px = (0.125 * brick_h).max(1.0);
+        let y = v * rows as f32;
+        let row = (y.floor() as i64).rem_euclid(rows as i64);
+        let fy = y - y.floor();
+        let x = u * cells + if row % 2 == 1 { 0.5 } else { 0.0 };
+        let fx = x - x.floor();
+        let grain = fbm(u, v, 4 * self.cells, 3, self.size, self.seed, 7);
+        let px = fx * brick_w;
+        let py = fy * brick_h;
+        if px < mortar_px || py < mortar_px {
+            return 0.1 * grain;
+        }
+        let edge = (px - mortar_px)
+            .min(py - mortar_px)
+            .min(brick_w - px)
+            .min(brick_h - py);
+        let bevel = 1.0 - (-edge / 1.5).exp();
+        0.2 + 0.65 * bevel + 0.15 * grain
     }
 
     fn checker(&self, u: f32, v: f32) -> Rgb {
@@ -564,6 +657,36 @@ mod tests {
             }
         );
         assert!(toml::from_str::<ExemplarOptions>("colour = 1").is_err());
+    }
+
+    #[test]
+    fn builtin_heights_match_the_colour_layout() {
+        let opts = ExemplarOptions::default();
+        for (name, _) in BUILTIN_EXEMPLARS {
+            let h = builtin_height(name, &opts).unwrap();
+            assert_eq!((h.width, h.height, h.channels), (64, 64, 1), "{name}");
+            assert!(h.data.iter().all(|v| (0.0..=1.0).contains(v)), "{name}");
+            let (lo, hi) = h
+                .data
+                .iter()
+                .fold((1.0f32, 0.0f32), |(a, b), &v| (a.min(v), b.max(v)));
+            assert!(hi - lo > 0.3, "{name}: height range {lo}..{hi} is flat");
+        }
+        // Bricks: mortar rows (y = 8) low, brick rows (y = 4) high.
+        let h = builtin_height("bricks", &opts).unwrap();
+        let row_mean = |y: u32| (0..64).map(|x| h.pixel(x, y)[0]).sum::<f32>() / 64.0;
+        assert!(
+            row_mean(8) < 0.2 && row_mean(4) > 0.5,
+            "{} {}",
+            row_mean(8),
+            row_mean(4)
+        );
+        assert!(
+            builtin_height("plaid", &opts)
+                .unwrap_err()
+                .to_string()
+                .contains("bricks")
+        );
     }
 
     #[test]

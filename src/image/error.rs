@@ -23,4 +23,18 @@ pub enum ImageError {
     /// A builtin exemplar name or option is wrong.
     #[error("builtin exemplar {name:?}: {message}")]
     Builtin { name: String, message: String },
+    /// A material channel map (height, normal, roughness) is not the size
+    /// of the colour exemplar it follows.
+    #[error(
+        "{key} {path} is {width}x{height} pixels but the exemplar {exemplar} is {exemplar_width}x{exemplar_height}; channel maps must be the same size as the exemplar"
+    )]
+    ChannelSize {
+        key: String,
+        path: String,
+        width: u32,
+        height: u32,
+        exemplar: String,
+        exemplar_width: u32,
+        exemplar_height: u32,
+    },
 }

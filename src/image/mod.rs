@@ -7,6 +7,7 @@ pub mod io;
 pub mod pyramid;
 pub mod sample;
 
+pub use builtin::builtin_height;
 pub use builtin::{BUILTIN_EXEMPLARS, ExemplarOptions, builtin_exemplar, check_exemplar_size};
 pub use error::ImageError;
 pub use io::{exemplar_from_spec, load_image};

@@ -21,3 +21,4 @@ pub mod surface_sample;
 pub mod sweep;
 pub mod vertex_order;
 pub mod wl_match;
+pub mod channels;

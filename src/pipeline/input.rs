@@ -17,6 +17,8 @@ pub struct LoadedInput {
     pub exemplar: Image,
     /// Its display name.
     pub exemplar_name: String,
+    /// Extra exemplar maps (height, normal, roughness), the exemplar's size.
+    pub channels: crate::stages::world::ExemplarChannels,
 }
 
 fn table_into<T: serde::de::DeserializeOwned>(
@@ -102,10 +104,172 @@ fn load_exemplar(
         table_into(&input.exemplar_options, file, "input.exemplar_options")?;
     let (exemplar, exemplar_name) =
         crate::image::exemplar_from_spec(&input.exemplar, base_dir, &opts)?;
+    let channels = load_channels(input, base_dir, file, &exemplar, &exemplar_name, &opts)?;
     Ok(LoadedInput {
         mesh: PolyMesh::new(),
         load_report: String::new(),
         exemplar,
         exemplar_name,
+        channels,
+    })
+}
+
+/// Largest `normal_strength`.
+const MAX_NORMAL_STRENGTH: f32 = 100.0;
+
+/// Loads or derives the extra exemplar maps of `[input]` (`height_map`,
+/// `normal_map`, `roughness_map`): files must be the exemplar's size; grey
+/// maps keep their first channel or the luminance of RGB files; normal maps
+/// need three channels.
+fn load_channels(
+    input: &RawInput,
+    base_dir: &Path,
+    file: &str,
+    exemplar: &Image,
+    exemplar_name: &str,
+    opts: &crate::image::ExemplarOptions,
+) -> Result<crate::stages::world::ExemplarChannels, PipelineError> {
+    use crate::kernels::channels as ch;
+    let value_err = |key: &str, message: String| -> PipelineError {
+        ConfigError::Value {
+            file: file.to_string(),
+            key: key.to_string(),
+            message,
+        }
+        .into()
+    };
+    let load_file = |key: &str, spec: &str| -> Result<Image, PipelineError> {
+        let path = Path::new(spec);
+        let full = if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            base_dir.join(path)
+        };
+        let img = crate::image::load_image(&full)?;
+        if (img.width, img.height) != (exemplar.width, exemplar.height) {
+            return Err(crate::image::ImageError::ChannelSize {
+                key: key.to_string(),
+                path: spec.to_string(),
+                width: img.width,
+                height: img.height,
+                exemplar: exemplar_name.to_string(),
+                exemplar_width: exemplar.width,
+                exemplar_height: exemplar.height,
+            }
+            .into());
+        }
+        Ok(img)
+    };
+    let grey = |img: Image| {
+        if img.channels >= 3 {
+            ch::luminance_image(&img)
+        } else {
+            let c = img.channels.max(1) as usize;
+            Image {
+                width: img.width,
+                height: img.height,
+                channels: 1,
+                data: img.data.chunks_exact(c).map(|p| p[0]).collect(),
+            }
+        }
+    };
+    let unknown_derive = |key: &str, spec: &str, allowed: &str| {
+        value_err(
+            key,
+            format!(
+                "{spec:?} is not a known derivation; allowed: {allowed}, or a path to an image file"
+            ),
+        )
+    };
+
+    let height = match input.height_map.as_deref().map(str::trim) {
+        None => None,
+        Some("derive:luminance") => Some(ch::luminance_image(exemplar)),
+        Some("derive:builtin") => {
+            let Some(name) = input.exemplar.trim().strip_prefix("builtin:") else {
+                return Err(value_err(
+                    "input.height_map",
+                    format!(
+                        "\"derive:builtin\" needs a builtin exemplar (exemplar = \"builtin:NAME\"), not {exemplar_name:?}; use \"derive:luminance\" or a file"
+                    ),
+                ));
+            };
+            Some(crate::image::builtin_height(name.trim(), opts)?)
+        }
+        Some(spec) if spec.starts_with("derive:") => {
+            return Err(unknown_derive(
+                "input.height_map",
+                spec,
+                "derive:luminance, derive:builtin",
+            ));
+        }
+        Some(spec) => Some(grey(load_file("input.height_map", spec)?)),
+    };
+
+    let strength = input.normal_strength;
+    if !(strength.is_finite() && (0.0..=MAX_NORMAL_STRENGTH).contains(&strength)) {
+        return Err(value_err(
+            "input.normal_strength",
+            format!("{strength} is out of range; allowed: 0..={MAX_NORMAL_STRENGTH}"),
+        ));
+    }
+    let normal = match input.normal_map.as_deref().map(str::trim) {
+        None => None,
+        Some("derive:height") => {
+            let Some(h) = height.as_ref() else {
+                return Err(value_err(
+                    "input.normal_map",
+                    "\"derive:height\" needs a height map; set input.height_map (e.g. \"derive:luminance\")".into(),
+                ));
+            };
+            Some(ch::normal_from_height(h, strength, input.exemplar_wrap))
+        }
+        Some(spec) if spec.starts_with("derive:") => {
+            return Err(unknown_derive("input.normal_map", spec, "derive:height"));
+        }
+        Some(spec) => {
+            let img = load_file("input.normal_map", spec)?;
+            if img.channels < 3 {
+                return Err(value_err(
+                    "input.normal_map",
+                    format!(
+                        "{spec} has {} channel(s); a normal map needs 3 (RGB) or 4 (RGBA)",
+                        img.channels
+                    ),
+                ));
+            }
+            let c = img.channels as usize;
+            let data = img
+                .data
+                .chunks_exact(c)
+                .flat_map(|p| [p[0], p[1], p[2]])
+                .collect();
+            Some(Image {
+                width: img.width,
+                height: img.height,
+                channels: 3,
+                data,
+            })
+        }
+    };
+
+    let roughness = match input.roughness_map.as_deref().map(str::trim) {
+        None => None,
+        Some("derive:luminance") => Some(ch::inverted_luminance_image(exemplar)),
+        Some(spec) if spec.starts_with("derive:") => {
+            return Err(unknown_derive(
+                "input.roughness_map",
+                spec,
+                "derive:luminance",
+            ));
+        }
+        Some(spec) => Some(grey(load_file("input.roughness_map", spec)?)),
+    };
+
+    Ok(crate::stages::world::ExemplarChannels {
+        normal,
+        roughness,
+        height,
+        wrap: input.exemplar_wrap,
     })
 }

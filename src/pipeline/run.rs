@@ -53,6 +53,7 @@ pub fn setup_world(pipeline: &Pipeline, world: &mut World, input: LoadedInput) {
         name: input.exemplar_name,
         wrap: pipeline.input.exemplar_wrap,
     });
+    world.insert_resource(input.channels);
     world.insert_resource(RunSeed(pipeline.seed));
     world.insert_resource(TexelSpacing(spacing));
     world.insert_resource(Metrics::default());

@@ -89,6 +89,22 @@ pub struct Exemplar {
     pub wrap: Wrap,
 }
 
+/// Extra exemplar maps that follow the colour synthesis (issue 7): each the
+/// colour exemplar's size, addressed with the exemplar's wrap, so a vertex's
+/// [`SourceTexels`] or a corner's [`CornerUvs`] read them as they read the
+/// colours. Always present (all `None` when the config gives no maps).
+#[derive(Resource, Clone, Debug, Default)]
+pub struct ExemplarChannels {
+    /// Tangent-space normal map, RGB (`kernels::channels` convention).
+    pub normal: Option<Image>,
+    /// Roughness, one channel in `[0, 1]`.
+    pub roughness: Option<Image>,
+    /// Height (displacement), one channel in `[0, 1]`.
+    pub height: Option<Image>,
+    /// The exemplar's wrap.
+    pub wrap: Wrap,
+}
+
 /// The run's seed; every random stream derives from it, the stage index and a
 /// stream id, so results never depend on thread count or scheduling.
 #[derive(Resource, Clone, Copy, Debug)]

@@ -25,6 +25,7 @@
 
 use super::raster::barycentric;
 use crate::image::{Image, sample::Wrap};
+use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
 use crate::kernels::retile::SurfaceProjector;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -124,22 +125,14 @@ impl AtlasFrames {
     }
 }
 
-/// Rotates the tangent-space normal `n` (x right, y up, z out) by `angle`
-/// about z.
-#[inline]
-pub fn rotate_tangent_normal(n: Vec3, angle: f32) -> Vec3 {
-    let (s, c) = angle.sin_cos();
-    Vec3::new(c * n.x - s * n.y, s * n.x + c * n.y, n.z)
-}
-
 /// What a channel holds, which decides how look-ups are combined.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ChannelKind {
     /// Colour (RGB): a weighted sum.
     Colour,
-    /// A tangent-space normal map (RGB = (n + 1) / 2): look-ups are decoded,
-    /// rotated by their contribution's angle, summed, renormalised and
-    /// encoded.
+    /// A tangent-space normal map (`kernels::channels` convention): look-ups
+    /// are decoded, re-oriented from their synthesis frame into the atlas
+    /// frame (`reorient_normal`), summed, renormalised and encoded.
     Normal,
     /// A scalar map (roughness, height): a weighted sum of the first channel.
     Scalar,
@@ -256,10 +249,13 @@ pub fn bake_channels(
                 let mut wsum = 0.0f32;
                 for k in samples.contribs.iter().filter(|k| k.texture == 0) {
                     m.image.sample_uv(k.uv.x, k.uv.y, wrap, buf);
-                    let rgb = Vec3::from(rgb_of(buf));
+                    let rgb = rgb_of(buf);
                     let v = match m.kind {
-                        ChannelKind::Normal => rotate_tangent_normal(rgb * 2.0 - Vec3::ONE, k.angle),
-                        _ => rgb,
+                        // The synthesis frame is the atlas frame turned by
+                        // `angle`: in `reorient_normal`'s terms the atlas
+                        // x-axis is at −angle from the synthesis `s`.
+                        ChannelKind::Normal => reorient_normal(decode_normal(rgb), -k.angle),
+                        _ => Vec3::from(rgb),
                     };
                     acc += v * k.weight;
                     wsum += k.weight;
@@ -273,9 +269,7 @@ pub fn bake_channels(
                         row[3 * x..3 * x + 3].copy_from_slice(&v.to_array());
                     }
                     ChannelKind::Normal => {
-                        let n = acc.try_normalize().unwrap_or(Vec3::Z);
-                        let e = (n + Vec3::ONE) * 0.5;
-                        row[3 * x..3 * x + 3].copy_from_slice(&e.to_array());
+                        row[3 * x..3 * x + 3].copy_from_slice(&encode_normal(acc));
                     }
                 }
             }

@@ -17,7 +17,7 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::atlas::bake::{
-    AtlasFrames, BakeTarget, BlendUvSource, ChannelMap, ContributionSource, LappedSource,
+    AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource, LappedSource,
     VertexColourSource, bake_channels,
 };
 use crate::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
@@ -124,7 +124,8 @@ impl Stage for Bake {
                sources: Query<Entity, With<SourceMesh>>,
                meshes: MeshQuery,
                pastes: Query<PasteQuery>,
-               patch_textures: Option<Res<TexturePatches>>| {
+               patch_textures: Option<Res<TexturePatches>>,
+               channels: Option<Res<ExemplarChannels>>| {
             let mut fail = |message: String| fail(&mut failure, ctx.index, Self::KIND, message);
             let Some(source) = sources.iter().next() else {
                 fail("there is no source mesh to bake onto".into());
@@ -135,7 +136,12 @@ impl Stage for Bake {
                 return;
             };
             let patches = patch_textures.as_deref().map(|t| t.0.as_slice()).unwrap_or(&[]);
-            match bake_world(&settings, source, active.0, &exemplar, &geometry.0, &meshes, &pastes, patches) {
+            let inputs = BakeInputs {
+                exemplar: &exemplar,
+                channels: channels.as_deref(),
+                patches,
+            };
+            match bake_world(&settings, source, active.0, &inputs, &geometry.0, &meshes, &pastes) {
                 Ok((asset, record)) => {
                     for (k, v) in record {
                         metrics.record(ctx.index, k, v);
@@ -149,18 +155,24 @@ impl Stage for Bake {
     }
 }
 
+/// The images a bake samples.
+struct BakeInputs<'a> {
+    exemplar: &'a Exemplar,
+    channels: Option<&'a ExemplarChannels>,
+    patches: &'a [Image],
+}
+
 /// Builds the atlas of `mesh` (the source mesh) and bakes the result.
-#[allow(clippy::too_many_arguments)]
 fn bake_world(
     settings: &BakeSettings,
     source: Entity,
     active: Entity,
-    exemplar: &Exemplar,
+    inputs: &BakeInputs,
     mesh: &PolyMesh,
     meshes: &MeshQuery,
     pastes: &Query<PasteQuery>,
-    patches: &[Image],
 ) -> Result<(BakedAsset, Vec<(&'static str, serde_json::Value)>), String> {
+    let (exemplar, patches) = (inputs.exemplar, inputs.patches);
     let _span = tracing::info_span!("bake", size = settings.size).entered();
     let (corner_tris, _) = mesh.triangulate_corners();
     let tris: Vec<[u32; 3]> = corner_tris
@@ -188,7 +200,24 @@ fn bake_world(
     let mut lapped: Vec<_> = pastes.iter().filter(|p| p.0.0 == active).collect();
     lapped.sort_by_key(|p| *p.1);
     let textures: Vec<&Image> = std::iter::once(&exemplar.image).chain(patches).collect();
-    let maps: Vec<ChannelMap> = Vec::new();
+    // Every exemplar map present goes through the same contributions.
+    let mut roles: Vec<&'static str> = Vec::new();
+    let mut maps: Vec<ChannelMap> = Vec::new();
+    if let Some(ch) = inputs.channels {
+        for (role, img, kind) in [
+            ("normal", &ch.normal, ChannelKind::Normal),
+            ("roughness", &ch.roughness, ChannelKind::Scalar),
+            ("height", &ch.height, ChannelKind::Scalar),
+        ] {
+            if let Some(image) = img {
+                roles.push(role);
+                maps.push(ChannelMap { image, kind });
+            }
+        }
+    }
+    // Maps need exemplar coordinates: lapped patches and vertex colours
+    // without recorded source texels have none.
+    let mut maps_note = "";
     let method;
     let (colour, baked_maps) = if !lapped.is_empty() {
         if !on_source {
@@ -212,6 +241,9 @@ fn bake_world(
         }
         let src = LappedSource::new(&mesh.positions, &tris, &frames, &records, patches);
         method = "lapped_pastes";
+        if !maps.is_empty() {
+            maps_note = "lapped patches record no exemplar origin: maps are flat/neutral";
+        }
         bake_channels(&target, &src as &dyn ContributionSource, &textures, exemplar.wrap, &maps)
     } else if blend.is_some() || uvs.is_some() {
         if !on_source {
@@ -258,6 +290,9 @@ fn bake_world(
             frame_s: frame_s.as_deref(),
         };
         method = "vertex_colours";
+        if !maps.is_empty() && source_uv.is_none() {
+            maps_note = "the result records no source texels: maps are flat/neutral";
+        }
         bake_channels(&target, &src as &dyn ContributionSource, &textures, exemplar.wrap, &maps)
     } else {
         return Err("the result has nothing to bake: no vertex colours, per-corner UVs or lapped pastes; put `bake` after a synthesis stage".into());
@@ -270,16 +305,21 @@ fn bake_world(
         ("atlas_texels_per_unit", serde_json::json!(atlas.texels_per_unit)),
         ("atlas_mean_stretch", serde_json::json!(d.mean_stretch)),
         ("atlas_density_ratio_p95", serde_json::json!(d.density_ratio_p95)),
+        ("baked_maps", serde_json::json!(roles)),
     ];
+    let mut record = record;
+    if !maps_note.is_empty() {
+        record.push(("baked_maps_note", serde_json::json!(maps_note)));
+    }
     let tri_mesh = PolyMesh::from_triangles(mesh.positions.clone(), &tris);
     let asset = BakedAsset {
         mesh: tri_mesh,
         uvs: atlas.corner_uvs.iter().flatten().copied().collect(),
         colour,
-        maps: baked_maps
-            .into_iter()
-            .zip(&maps)
-            .map(|(img, _)| ("map".to_string(), img))
+        maps: roles
+            .iter()
+            .zip(baked_maps)
+            .map(|(role, img)| (role.to_string(), img))
             .collect(),
     };
     Ok((asset, record))
