@@ -6,6 +6,7 @@
 //!   closest-point query per texel plus barycentric interpolation;
 //! - `jump_uvs/torus37k`: baking per-corner UVs with the 3-way blend (three
 //!   exemplar look-ups per texel).
+//!
 //! Rasterisation and dilation (padding 4) are included in both bakes.
 //!
 //! Run: `cargo bench --bench bake`.
@@ -28,7 +29,9 @@ fn torus(u: u32, v: u32) -> PolyMesh {
         resolution: [u, v],
         ..Default::default()
     };
-    builtin_mesh("torus", &opts).expect("builtin torus").triangulated()
+    builtin_mesh("torus", &opts)
+        .expect("builtin torus")
+        .triangulated()
 }
 
 fn tris(m: &PolyMesh) -> Vec<[u32; 3]> {
@@ -39,7 +42,11 @@ fn bench(c: &mut Criterion) {
     let size = 2048u32;
     let mesh = torus(272, 136);
     let t = tris(&mesh);
-    eprintln!("torus: {} vertices, {} triangles", mesh.vertex_count(), t.len());
+    eprintln!(
+        "torus: {} vertices, {} triangles",
+        mesh.vertex_count(),
+        t.len()
+    );
     let settings = AtlasSettings {
         size,
         padding_px: 4,
@@ -51,7 +58,10 @@ fn bench(c: &mut Criterion) {
         b.iter(|| black_box(build_uv_atlas(&mesh.positions, &t, &settings).unwrap()))
     });
     let atlas = build_uv_atlas(&mesh.positions, &t, &settings).unwrap();
-    eprintln!("atlas: {} charts, fill {:.2}", atlas.charts.count, atlas.fill);
+    eprintln!(
+        "atlas: {} charts, fill {:.2}",
+        atlas.charts.count, atlas.fill
+    );
     let texel_face = rasterise_faces(&atlas.corner_uvs, size);
     let frames = AtlasFrames::new(&mesh.positions, &t, &atlas.corner_uvs);
     let target = BakeTarget {
@@ -90,7 +100,13 @@ fn bench(c: &mut Criterion) {
                 source_uv: None,
                 frame_s: None,
             };
-            black_box(bake_channels(&target, &src, &[&exemplar], Wrap::Repeat, &[]))
+            black_box(bake_channels(
+                &target,
+                &src,
+                &[&exemplar],
+                Wrap::Repeat,
+                &[],
+            ))
         })
     });
 
@@ -102,13 +118,23 @@ fn bench(c: &mut Criterion) {
                 let p = mesh.positions[v as usize];
                 Vec2::new(p.x * 0.7 + p.z * 0.3, p.y * 0.9)
             });
-            [uv, uv.map(|q| q + Vec2::new(0.13, 0.0)), uv.map(|q| q + Vec2::new(0.0, 0.29))]
+            [
+                uv,
+                uv.map(|q| q + Vec2::new(0.13, 0.0)),
+                uv.map(|q| q + Vec2::new(0.0, 0.29)),
+            ]
         })
         .collect();
     group.bench_function("jump_uvs/torus37k", |b| {
         b.iter(|| {
             let src = BlendUvSource::new(&mesh.positions, &t, &frames, &layers);
-            black_box(bake_channels(&target, &src, &[&exemplar], Wrap::Repeat, &[]))
+            black_box(bake_channels(
+                &target,
+                &src,
+                &[&exemplar],
+                Wrap::Repeat,
+                &[],
+            ))
         })
     });
     group.finish();

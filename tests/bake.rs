@@ -41,7 +41,8 @@ fn run(text: &str) -> Result<World, String> {
     let mut source = ConfigSource::from_text("bake.toml", text);
     source.base_dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let p = Pipeline::from_source(source).map_err(|e| e.to_string())?;
-    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).map_err(|e| e.to_string())?;
+    let input =
+        load_input(&p.input, &p.source.base_dir, &p.source.file).map_err(|e| e.to_string())?;
     let mut world = World::new();
     run_in_world(&p, &mut world, input).map_err(|e| e.to_string())?;
     Ok(world)
@@ -114,7 +115,13 @@ fn overlaps(uvs: &[[Vec2; 3]], size: usize) -> (usize, usize) {
 /// below 1.3, and every chart's mean density is the same within 1 %.
 #[test]
 fn atlas_charts_do_not_overlap_stay_in_the_unit_square_and_keep_density() {
-    for name in ["bunny_1k8.obj", "teapot_open.obj", "mushroom.off", "fandisk.off", "nut.ply"] {
+    for name in [
+        "bunny_1k8.obj",
+        "teapot_open.obj",
+        "mushroom.off",
+        "fandisk.off",
+        "nut.ply",
+    ] {
         let mesh = load(name);
         let tris = triangles(&mesh);
         let settings = AtlasSettings {
@@ -123,7 +130,10 @@ fn atlas_charts_do_not_overlap_stay_in_the_unit_square_and_keep_density() {
         };
         let atlas = build_uv_atlas(&mesh.positions, &tris, &settings).unwrap();
         let (double, covered) = overlaps(&atlas.corner_uvs, 1024);
-        assert_eq!(double, 0, "{name}: {double} of {covered} texels in two faces");
+        assert_eq!(
+            double, 0,
+            "{name}: {double} of {covered} texels in two faces"
+        );
         assert!(atlas.fill > 0.3, "{name}: fill {}", atlas.fill);
         let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
         assert!(d.density_ratio_p95 < 2.0, "{name}: {d:?}");
@@ -131,7 +141,9 @@ fn atlas_charts_do_not_overlap_stay_in_the_unit_square_and_keep_density() {
         let (lo, hi) = d
             .chart_density
             .iter()
-            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
         assert!(hi / lo < 1.01, "{name}: chart densities {lo}..{hi}");
     }
 }
@@ -143,7 +155,10 @@ fn atlas_of_a_plane_is_one_undistorted_chart() {
     let atlas = build_uv_atlas(&mesh.positions, &tris, &AtlasSettings::default()).unwrap();
     assert_eq!(atlas.charts.count, 1);
     let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
-    assert!(d.mean_stretch < 1.001 && d.density_ratio_p95 < 1.001, "{d:?}");
+    assert!(
+        d.mean_stretch < 1.001 && d.density_ratio_p95 < 1.001,
+        "{d:?}"
+    );
 }
 
 #[test]
@@ -242,7 +257,11 @@ fn baking_a_vertex_coloured_plane_reproduces_its_colours() {
     assert!(n > (size * size / 4) as usize, "{n} texels covered");
     assert!(worst < 2e-3, "largest colour error {worst}");
     // The gutter next to the chart is dilated, not black.
-    let filled = baked.data.chunks_exact(3).filter(|p| p.iter().any(|&v| v > 0.0)).count();
+    let filled = baked
+        .data
+        .chunks_exact(3)
+        .filter(|p| p.iter().any(|&v| v > 0.0))
+        .count();
     assert!(filled > n, "dilation fills the gutters: {filled} vs {n}");
 }
 
@@ -267,7 +286,10 @@ fn a_normal_map_follows_the_synthesis_frame_rotation() {
     let texel_face = rasterise_faces(&atlas.corner_uvs, size);
     let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
     let up = mesh.face_normal(0);
-    let (ex, ey) = (up.any_orthonormal_vector(), up.cross(up.any_orthonormal_vector()));
+    let (ex, ey) = (
+        up.any_orthonormal_vector(),
+        up.cross(up.any_orthonormal_vector()),
+    );
     let tilt = Vec3::new(0.6, 0.0, 0.8);
     let mut normal_map = Image::new(8, 8, 3);
     for px in normal_map.data.chunks_exact_mut(3) {
@@ -329,13 +351,17 @@ fn bake_runs_on_meshes_with_boundaries_and_several_components() {
         ("../shared/data/meshes/teapot_open.obj", 2),
         ("../shared/data/meshes/mushroom.off", 2),
     ] {
-        let world = run(&jump_bake(mesh, 512, r#""glb", "baked_obj""#)).unwrap_or_else(|e| panic!("{mesh}: {e}"));
+        let world = run(&jump_bake(mesh, 512, r#""glb", "baked_obj""#))
+            .unwrap_or_else(|e| panic!("{mesh}: {e}"));
         let asset = world.resource::<BakedAsset>();
         assert_eq!(asset.uvs.len(), asset.mesh.corner_count());
         assert_eq!(asset.colour.width, 512);
         let m = &world.resource::<Metrics>().stages[3];
         assert_eq!(m["bake_method"], "jump_map_blend");
-        assert!(m["atlas_charts"].as_u64().unwrap() >= min_charts, "{mesh}: {m:?}");
+        assert!(
+            m["atlas_charts"].as_u64().unwrap() >= min_charts,
+            "{mesh}: {m:?}"
+        );
         assert!(world.resource::<ExportJob>().baked_asset.is_some());
     }
 }
@@ -372,7 +398,11 @@ formats = ["glb"]
     let colours = world.get::<VertexColours>(active).unwrap();
     let mean_v: f32 = colours.values.iter().sum::<f32>() / colours.values.len() as f32;
     // Mean over the texels inside chart faces.
-    let faces: Vec<[Vec2; 3]> = asset.uvs.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    let faces: Vec<[Vec2; 3]> = asset
+        .uvs
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
     let texel_face = rasterise_faces(&faces, asset.colour.width);
     let inside: Vec<f32> = texel_face
         .iter()
@@ -381,7 +411,10 @@ formats = ["glb"]
         .flat_map(|(i, _)| asset.colour.data[3 * i..3 * i + 3].to_vec())
         .collect();
     let mean_t = inside.iter().sum::<f32>() / inside.len() as f32;
-    assert!((mean_v - mean_t).abs() < 0.1, "vertex mean {mean_v}, baked mean {mean_t}");
+    assert!(
+        (mean_v - mean_t).abs() < 0.1,
+        "vertex mean {mean_v}, baked mean {mean_t}"
+    );
 
     // Lapped pastes, composited in order.
     let text = r#"
@@ -411,7 +444,10 @@ formats = ["baked_obj"]
         let mean = d.iter().sum::<f32>() / d.len() as f32;
         d.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / d.len() as f32
     };
-    assert!(spread > 1e-3, "the pastes' texture shows: variance {spread}");
+    assert!(
+        spread > 1e-3,
+        "the pastes' texture shows: variance {spread}"
+    );
 }
 
 #[test]
@@ -424,7 +460,7 @@ exemplar = "builtin:bricks"
 kind = "export"
 formats = ["glb"]
 "#;
-    let e = run(text).err().expect("glb without bake fails");
+    let e = run(text).expect_err("glb without bake fails");
     assert!(e.contains("add a `bake` stage"), "{e}");
     let text = r#"
 [input]
@@ -433,7 +469,7 @@ exemplar = "builtin:bricks"
 [[stage]]
 kind = "bake"
 "#;
-    let e = run(text).err().expect("nothing to bake");
+    let e = run(text).expect_err("nothing to bake");
     assert!(e.contains("nothing to bake"), "{e}");
 }
 
@@ -441,7 +477,10 @@ kind = "bake"
 fn bake_is_identical_at_one_and_two_threads() {
     let text = jump_bake("builtin:torus", 256, r#""glb""#);
     let glb = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
         pool.install(|| {
             let world = run(&text).unwrap();
             surfsynth::output::gltf::encode_glb(world.resource::<BakedAsset>()).unwrap()
@@ -465,7 +504,13 @@ fn khronos_validate(bytes: &[u8]) -> Option<serde_json::Value> {
     if !module.exists() {
         std::fs::create_dir_all(&root).ok()?;
         let out = Command::new("npm")
-            .args(["install", "--no-audit", "--no-fund", "--silent", "gltf-validator@2.0.0-dev.3.10"])
+            .args([
+                "install",
+                "--no-audit",
+                "--no-fund",
+                "--silent",
+                "gltf-validator@2.0.0-dev.3.10",
+            ])
             .current_dir(&root)
             .output();
         match out {
@@ -526,7 +571,11 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
 
     // Re-read with the gltf crate.
     let gltf = gltf::Gltf::from_slice(&bytes).expect("the gltf crate parses the GLB");
-    assert_eq!(gltf.textures().count(), 3, "colour, normal, metallic-roughness");
+    assert_eq!(
+        gltf.textures().count(),
+        3,
+        "colour, normal, metallic-roughness"
+    );
     let image = gltf.images().next().unwrap();
     match image.source() {
         gltf::image::Source::View { mime_type, view } => {
@@ -538,7 +587,12 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
         gltf::image::Source::Uri { .. } => panic!("the texture must be embedded"),
     }
     let material = gltf.materials().next().unwrap();
-    assert!(material.pbr_metallic_roughness().base_color_texture().is_some());
+    assert!(
+        material
+            .pbr_metallic_roughness()
+            .base_color_texture()
+            .is_some()
+    );
     assert!(material.normal_texture().is_some());
     assert!(
         material
@@ -558,7 +612,8 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
     if let Some(report) = khronos_validate(&bytes) {
         let issues = &report["issues"];
         assert_eq!(
-            issues["numErrors"], 0,
+            issues["numErrors"],
+            0,
             "validator errors: {}",
             serde_json::to_string_pretty(&issues["messages"]).unwrap()
         );

@@ -53,7 +53,7 @@ pub fn split_vertices(
     let face_normals = mesh.face_normals();
     let mut index: HashMap<(u32, u32, u32), u32> = HashMap::with_capacity(mesh.corner_count());
     let (mut pos, mut nrm, mut tex, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for f in 0..mesh.face_count() {
+    for (f, face_normal) in face_normals.iter().enumerate() {
         for c in mesh.face_corners(f) {
             let v = mesh.corner_vertex[c];
             let uv = uvs[c];
@@ -64,7 +64,7 @@ pub fn split_vertices(
                     .get(v as usize)
                     .copied()
                     .filter(|n| n.is_finite() && n.length_squared() > 0.5)
-                    .or_else(|| face_normals[f].try_normalize())
+                    .or_else(|| face_normal.try_normalize())
                     .unwrap_or(Vec3::Z);
                 nrm.push(n.normalize());
                 tex.push(uv);
@@ -78,7 +78,7 @@ pub fn split_vertices(
 
 /// Appends `bytes` to `bin` at a 4-byte boundary; returns (offset, length).
 fn push_aligned(bin: &mut Vec<u8>, bytes: &[u8]) -> (usize, usize) {
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let offset = bin.len();
@@ -105,13 +105,22 @@ pub fn encode_glb(asset: &BakedAsset) -> Result<Vec<u8>, OutputError> {
     };
     let f32s = |v: &mut Vec<u8>, xs: &[f32]| xs.iter().for_each(|x| v.extend(x.to_le_bytes()));
     let mut b = Vec::with_capacity(12 * pos.len());
-    f32s(&mut b, &pos.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
+    f32s(
+        &mut b,
+        &pos.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>(),
+    );
     let v_pos = view(&mut bin, &b, Some(ARRAY_BUFFER));
     b.clear();
-    f32s(&mut b, &nrm.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
+    f32s(
+        &mut b,
+        &nrm.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>(),
+    );
     let v_nrm = view(&mut bin, &b, Some(ARRAY_BUFFER));
     b.clear();
-    f32s(&mut b, &tex.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>());
+    f32s(
+        &mut b,
+        &tex.iter().flat_map(|p| p.to_array()).collect::<Vec<_>>(),
+    );
     let v_tex = view(&mut bin, &b, Some(ARRAY_BUFFER));
     b.clear();
     idx.iter().for_each(|i| b.extend(i.to_le_bytes()));
@@ -159,7 +168,7 @@ pub fn encode_glb(asset: &BakedAsset) -> Result<Vec<u8>, OutputError> {
             _ => {}
         }
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let textures: Vec<Value> = (0..images.len())
@@ -208,7 +217,11 @@ pub fn encode_glb(asset: &BakedAsset) -> Result<Vec<u8>, OutputError> {
 pub fn metallic_roughness(roughness: &Image) -> Image {
     let mut out = Image::new(roughness.width, roughness.height, 3);
     let c = roughness.channels.max(1) as usize;
-    for (o, px) in out.data.chunks_exact_mut(3).zip(roughness.data.chunks_exact(c)) {
+    for (o, px) in out
+        .data
+        .chunks_exact_mut(3)
+        .zip(roughness.data.chunks_exact(c))
+    {
         o.copy_from_slice(&[1.0, px[0], 0.0]);
     }
     out

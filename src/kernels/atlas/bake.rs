@@ -170,6 +170,13 @@ fn rgb_of(px: &[f32]) -> [f32; 3] {
     }
 }
 
+/// A row index, its colour row and its row of every map.
+type RowSlices<'r> = (usize, &'r mut [f32], Vec<&'r mut [f32]>);
+
+/// The pastes of a lapped texture in order: per paste its patch index and,
+/// per face it holds, the face and its corners' coordinates in the patch.
+pub type PasteFaces = (u32, Vec<(u32, [Vec2; 3])>);
+
 /// Bakes the colour channel (RGB, through `textures`: 0 the exemplar,
 /// `k + 1` lapped patch `k`) and every map of `maps` (through texture 0
 /// only; RGB for colour and normal maps, one channel for scalar ones), then
@@ -181,7 +188,8 @@ pub fn bake_channels(
     wrap: Wrap,
     maps: &[ChannelMap],
 ) -> (Image, Vec<Image>) {
-    let _span = tracing::info_span!("bake_channels", size = target.size, maps = maps.len()).entered();
+    let _span =
+        tracing::info_span!("bake_channels", size = target.size, maps = maps.len()).entered();
     let s = target.size as usize;
     let mut colour = Image::new(target.size, target.size, 3);
     let mut outs: Vec<Image> = maps
@@ -193,7 +201,7 @@ pub fn bake_channels(
         .collect();
     let widths: Vec<usize> = outs.iter().map(|o| o.channels as usize * s).collect();
     // Split every output into rows, then hand each worker one row of each.
-    let mut rows: Vec<(usize, &mut [f32], Vec<&mut [f32]>)> = colour
+    let mut rows: Vec<RowSlices> = colour
         .data
         .chunks_mut(3 * s)
         .enumerate()
@@ -265,7 +273,11 @@ pub fn bake_channels(
                         row[x] = if wsum > 0.0 { acc.x / wsum } else { 0.5 };
                     }
                     ChannelKind::Colour => {
-                        let v = if wsum > 0.0 { acc / wsum } else { Vec3::splat(0.5) };
+                        let v = if wsum > 0.0 {
+                            acc / wsum
+                        } else {
+                            Vec3::splat(0.5)
+                        };
                         row[3 * x..3 * x + 3].copy_from_slice(&v.to_array());
                     }
                     ChannelKind::Normal => {
@@ -278,7 +290,13 @@ pub fn bake_channels(
     drop(rows);
     let filled: Vec<bool> = target.texel_face.iter().map(|&f| f != u32::MAX).collect();
     let mut mask = filled.clone();
-    super::raster::dilate(&mut colour.data, 3, target.size, &mut mask, target.padding_px);
+    super::raster::dilate(
+        &mut colour.data,
+        3,
+        target.size,
+        &mut mask,
+        target.padding_px,
+    );
     for out in &mut outs {
         let mut mask = filled.clone();
         let c = out.channels as usize;
@@ -447,7 +465,7 @@ impl<'a> LappedSource<'a> {
         positions: &[Vec3],
         tris: &[[u32; 3]],
         frames: &AtlasFrames,
-        pastes: &[(u32, Vec<(u32, [Vec2; 3])>)],
+        pastes: &[PasteFaces],
         patches: &'a [Image],
     ) -> Self {
         let fc = tris.len();
@@ -526,7 +544,12 @@ impl ContributionSource for LappedSource<'_> {
             let uv = layer.uv[0] * b[0] + layer.uv[1] * b[1] + layer.uv[2] * b[2];
             let alpha = if patch.channels >= 4 {
                 let mut px = [0.0f32; 4];
-                patch.sample_uv(uv.x, uv.y, Wrap::Clamp, &mut px[..patch.channels.min(4) as usize]);
+                patch.sample_uv(
+                    uv.x,
+                    uv.y,
+                    Wrap::Clamp,
+                    &mut px[..patch.channels.min(4) as usize],
+                );
                 px[3].clamp(0.0, 1.0)
             } else {
                 1.0

@@ -183,7 +183,7 @@ pub fn flatten_chart(
             }
         }
         let pap = dot(&p, &ap);
-        if !(pap > 0.0) {
+        if pap.is_nan() || pap <= 0.0 {
             break;
         }
         let alpha = rz / pap;
@@ -253,7 +253,8 @@ mod tests {
             let mut r: Vec<f32> = Vec::new();
             for (t, s) in tris.iter().zip(st) {
                 for k in 0..3 {
-                    let l3 = (positions[t[k] as usize] - positions[t[(k + 1) % 3] as usize]).length();
+                    let l3 =
+                        (positions[t[k] as usize] - positions[t[(k + 1) % 3] as usize]).length();
                     r.push((s[k] - s[(k + 1) % 3]).length() / l3);
                 }
             }

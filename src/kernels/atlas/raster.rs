@@ -63,7 +63,11 @@ impl TriangleHash {
     /// An empty hash with square cells of side `cell`.
     pub fn new(cell: f32) -> Self {
         Self {
-            cell: if cell.is_finite() { cell.max(1e-12) } else { 1.0 },
+            cell: if cell.is_finite() {
+                cell.max(1e-12)
+            } else {
+                1.0
+            },
             cells: HashMap::new(),
             tris: Vec::new(),
             seen: Vec::new(),
@@ -134,7 +138,8 @@ pub fn flat_and_disjoint(tris: &[[Vec2; 3]], skip: &[bool], cell: f32) -> bool {
         if s {
             continue;
         }
-        if !(signed_area2(t) > 0.0) || hash.overlaps(t) {
+        let area = signed_area2(t);
+        if area.is_nan() || area <= 0.0 || hash.overlaps(t) {
             return false;
         }
         hash.insert(*t);

@@ -74,7 +74,11 @@ pub fn segment_charts(positions: &[Vec3], tris: &[[u32; 3]], settings: &AtlasSet
         })
         .collect();
     let mut seeds: Vec<u32> = (0..fc as u32).collect();
-    seeds.sort_by(|&a, &b| bend[a as usize].total_cmp(&bend[b as usize]).then(a.cmp(&b)));
+    seeds.sort_by(|&a, &b| {
+        bend[a as usize]
+            .total_cmp(&bend[b as usize])
+            .then(a.cmp(&b))
+    });
 
     let mut chart_of_face = vec![u32::MAX; fc];
     let mut corner_st = vec![[Vec2::ZERO; 3]; fc];
@@ -226,7 +230,13 @@ fn flatten_valid(
         (faces.len() > 1)
             .then(|| flatten_chart(positions, tris, faces, normal, &mut scratch.local))
             .flatten(),
-        Some(project_chart(positions, tris, faces, normal, &mut scratch.local)),
+        Some(project_chart(
+            positions,
+            tris,
+            faces,
+            normal,
+            &mut scratch.local,
+        )),
     ];
     for mut st in candidates.into_iter().flatten() {
         if faces.len() == 1 {

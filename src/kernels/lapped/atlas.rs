@@ -16,7 +16,9 @@ use super::mask::TexturePatch;
 use crate::image::Image;
 use crate::image::sample::Wrap;
 use crate::kernels::atlas::raster::{barycentric, signed_area2};
-pub use crate::kernels::atlas::{AtlasSettings, Charts, pack_charts, rasterise_faces, skyline_pack};
+pub use crate::kernels::atlas::{
+    AtlasSettings, Charts, pack_charts, rasterise_faces, skyline_pack,
+};
 use glam::Vec2;
 use rayon::prelude::*;
 

@@ -17,8 +17,8 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::atlas::bake::{
-    AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource, LappedSource,
-    VertexColourSource, bake_channels,
+    AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
+    LappedSource, VertexColourSource, bake_channels,
 };
 use crate::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
 use crate::kernels::retile::SurfaceProjector;
@@ -106,7 +106,8 @@ pub struct Bake;
 impl Stage for Bake {
     const KIND: &'static str = "bake";
     const SUMMARY: &'static str = "UV atlas of the original mesh (charts, conformal flattening, packing, dilated gutters) and the result baked into it: vertex colours, jump-map UVs (3-way blend) or lapped pastes";
-    const PAPER: &'static str = "Lévy et al. 2002 (LSCM); Zelinka & Garland 2004 §6.5; Praun et al. 2000 §4";
+    const PAPER: &'static str =
+        "Lévy et al. 2002 (LSCM); Zelinka & Garland 2004 §6.5; Praun et al. 2000 §4";
     type Settings = BakeSettings;
 
     fn requires(_: &Self::Settings) -> Vec<Datum> {
@@ -135,13 +136,24 @@ impl Stage for Bake {
                 fail("the source mesh has no geometry".into());
                 return;
             };
-            let patches = patch_textures.as_deref().map(|t| t.0.as_slice()).unwrap_or(&[]);
+            let patches = patch_textures
+                .as_deref()
+                .map(|t| t.0.as_slice())
+                .unwrap_or(&[]);
             let inputs = BakeInputs {
                 exemplar: &exemplar,
                 channels: channels.as_deref(),
                 patches,
             };
-            match bake_world(&settings, source, active.0, &inputs, &geometry.0, &meshes, &pastes) {
+            match bake_world(
+                &settings,
+                source,
+                active.0,
+                &inputs,
+                &geometry.0,
+                &meshes,
+                &pastes,
+            ) {
                 Ok((asset, record)) => {
                     for (k, v) in record {
                         metrics.record(ctx.index, k, v);
@@ -154,6 +166,9 @@ impl Stage for Bake {
         .into_configs()
     }
 }
+
+/// Metrics of the bake, by name.
+type MetricList = Vec<(&'static str, serde_json::Value)>;
 
 /// The images a bake samples.
 struct BakeInputs<'a> {
@@ -171,7 +186,7 @@ fn bake_world(
     mesh: &PolyMesh,
     meshes: &MeshQuery,
     pastes: &Query<PasteQuery>,
-) -> Result<(BakedAsset, Vec<(&'static str, serde_json::Value)>), String> {
+) -> Result<(BakedAsset, MetricList), String> {
     let (exemplar, patches) = (inputs.exemplar, inputs.patches);
     let _span = tracing::info_span!("bake", size = settings.size).entered();
     let (corner_tris, _) = mesh.triangulate_corners();
@@ -184,7 +199,8 @@ fn bake_world(
         normal_cone_deg: settings.normal_cone as f32,
         padding_px: settings.padding,
     };
-    let atlas = build_uv_atlas(&mesh.positions, &tris, &atlas_settings).map_err(|e| e.to_string())?;
+    let atlas =
+        build_uv_atlas(&mesh.positions, &tris, &atlas_settings).map_err(|e| e.to_string())?;
     let texel_face = rasterise_faces(&atlas.corner_uvs, settings.size);
     let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
     let target = BakeTarget {
@@ -244,7 +260,13 @@ fn bake_world(
         if !maps.is_empty() {
             maps_note = "lapped patches record no exemplar origin: maps are flat/neutral";
         }
-        bake_channels(&target, &src as &dyn ContributionSource, &textures, exemplar.wrap, &maps)
+        bake_channels(
+            &target,
+            &src as &dyn ContributionSource,
+            &textures,
+            exemplar.wrap,
+            &maps,
+        )
     } else if blend.is_some() || uvs.is_some() {
         if !on_source {
             return Err("the per-corner UVs lie on a mesh other than the loaded one; bake needs them on the original mesh".into());
@@ -264,13 +286,24 @@ fn bake_world(
             _ => return Err("the result's UVs do not match the mesh's corners".into()),
         };
         let src = BlendUvSource::new(&mesh.positions, &tris, &frames, &layers);
-        bake_channels(&target, &src as &dyn ContributionSource, &textures, exemplar.wrap, &maps)
+        bake_channels(
+            &target,
+            &src as &dyn ContributionSource,
+            &textures,
+            exemplar.wrap,
+            &maps,
+        )
     } else if let Some(c) = colours {
         if c.channels == 0 || c.values.len() != c.channels * result.0.vertex_count() {
             return Err("the result's vertex colours do not match its vertices".into());
         }
         let projector = SurfaceProjector::new(&result.0);
-        let result_tris: Vec<[u32; 3]> = result.0.triangulated().faces().map(|f| [f[0], f[1], f[2]]).collect();
+        let result_tris: Vec<[u32; 3]> = result
+            .0
+            .triangulated()
+            .faces()
+            .map(|f| [f[0], f[1], f[2]])
+            .collect();
         let size = Vec2::new(exemplar.image.width as f32, exemplar.image.height as f32);
         let source_uv: Option<Vec<Vec2>> = source_texels
             .filter(|t| t.0.len() == result.0.vertex_count())
@@ -293,7 +326,13 @@ fn bake_world(
         if !maps.is_empty() && source_uv.is_none() {
             maps_note = "the result records no source texels: maps are flat/neutral";
         }
-        bake_channels(&target, &src as &dyn ContributionSource, &textures, exemplar.wrap, &maps)
+        bake_channels(
+            &target,
+            &src as &dyn ContributionSource,
+            &textures,
+            exemplar.wrap,
+            &maps,
+        )
     } else {
         return Err("the result has nothing to bake: no vertex colours, per-corner UVs or lapped pastes; put `bake` after a synthesis stage".into());
     };
@@ -302,9 +341,15 @@ fn bake_world(
         ("bake_method", serde_json::json!(method)),
         ("atlas_charts", serde_json::json!(atlas.charts.count)),
         ("atlas_fill", serde_json::json!(atlas.fill)),
-        ("atlas_texels_per_unit", serde_json::json!(atlas.texels_per_unit)),
+        (
+            "atlas_texels_per_unit",
+            serde_json::json!(atlas.texels_per_unit),
+        ),
         ("atlas_mean_stretch", serde_json::json!(d.mean_stretch)),
-        ("atlas_density_ratio_p95", serde_json::json!(d.density_ratio_p95)),
+        (
+            "atlas_density_ratio_p95",
+            serde_json::json!(d.density_ratio_p95),
+        ),
         ("baked_maps", serde_json::json!(roles)),
     ];
     let mut record = record;

@@ -42,7 +42,15 @@ impl StageSettings for ExportSettings {
         ParamDoc {
             name: "formats",
             unit: "",
-            range: ParamRange::OneOf(&["ply", "obj", "preview", "baked", "pastes", "glb", "baked_obj"]),
+            range: ParamRange::OneOf(&[
+                "ply",
+                "obj",
+                "preview",
+                "baked",
+                "pastes",
+                "glb",
+                "baked_obj",
+            ]),
             doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs",
         },
         ParamDoc {
