@@ -5,7 +5,8 @@
 //! Layout: vertices are split where a mesh vertex has more than one atlas
 //! coordinate (chart seams); POSITION (with min/max), NORMAL (smooth,
 //! area-weighted), TEXCOORD_0 (glTF's `v = 0` is the top row, as ours),
-//! u32 indices. Material: `baseColorTexture`; a baked `normal` map becomes
+//! u32 indices; TANGENT (atlas `u` axis, handedness +1) when a normal map
+//! is present. Material: `baseColorTexture`; a baked `normal` map becomes
 //! `normalTexture`; `roughness` becomes `metallicRoughnessTexture` (G =
 //! roughness, B = metallic 0).
 
@@ -29,13 +30,26 @@ fn encode_error(message: impl Into<String>) -> OutputError {
     }
 }
 
+/// The glTF vertex arrays of a mesh.
+#[derive(Clone, Debug, Default)]
+pub struct SplitMesh {
+    /// Positions.
+    pub positions: Vec<Vec3>,
+    /// Unit normals (smooth, area-weighted).
+    pub normals: Vec<Vec3>,
+    /// Texture coordinates.
+    pub uvs: Vec<Vec2>,
+    /// Unit tangents along the atlas `u` axis, orthogonal to the normal,
+    /// with handedness +1 (bitangent = normal × tangent points up the
+    /// texture, glTF's normal-map +Y).
+    pub tangents: Vec<[f32; 4]>,
+    /// Triangle indices.
+    pub indices: Vec<u32>,
+}
+
 /// Splits `mesh` (triangles) into glTF vertices: one per distinct (vertex,
-/// atlas coordinate). Returns positions, normals, texcoords and indices.
-#[allow(clippy::type_complexity)]
-pub fn split_vertices(
-    mesh: &PolyMesh,
-    uvs: &[Vec2],
-) -> Result<(Vec<Vec3>, Vec<Vec3>, Vec<Vec2>, Vec<u32>), OutputError> {
+/// atlas coordinate).
+pub fn split_vertices(mesh: &PolyMesh, uvs: &[Vec2]) -> Result<SplitMesh, OutputError> {
     if !mesh.is_triangle_mesh() {
         return Err(encode_error("the mesh is not triangulated"));
     }
@@ -53,7 +67,15 @@ pub fn split_vertices(
     let face_normals = mesh.face_normals();
     let mut index: HashMap<(u32, u32, u32), u32> = HashMap::with_capacity(mesh.corner_count());
     let (mut pos, mut nrm, mut tex, mut idx) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut tan_sum: Vec<Vec3> = Vec::new();
     for (f, face_normal) in face_normals.iter().enumerate() {
+        // The face's atlas `u` gradient, weighted by its area.
+        let r = mesh.face_corners(f);
+        let p = [r.start, r.start + 1, r.start + 2]
+            .map(|c| mesh.positions[mesh.corner_vertex[c] as usize]);
+        let u = [r.start, r.start + 1, r.start + 2].map(|c| uvs[c].x);
+        let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+        let grad = crate::kernels::atlas::bake::gradient(p, u).normalize_or_zero() * area;
         for c in mesh.face_corners(f) {
             let v = mesh.corner_vertex[c];
             let uv = uvs[c];
@@ -68,12 +90,30 @@ pub fn split_vertices(
                     .unwrap_or(Vec3::Z);
                 nrm.push(n.normalize());
                 tex.push(uv);
+                tan_sum.push(Vec3::ZERO);
                 (pos.len() - 1) as u32
             });
+            tan_sum[i as usize] += grad;
             idx.push(i);
         }
     }
-    Ok((pos, nrm, tex, idx))
+    let tangents = tan_sum
+        .iter()
+        .zip(&nrm)
+        .map(|(t, n)| {
+            let t = (*t - *n * t.dot(*n))
+                .try_normalize()
+                .unwrap_or_else(|| n.any_orthonormal_vector());
+            [t.x, t.y, t.z, 1.0]
+        })
+        .collect();
+    Ok(SplitMesh {
+        positions: pos,
+        normals: nrm,
+        uvs: tex,
+        tangents,
+        indices: idx,
+    })
 }
 
 /// Appends `bytes` to `bin` at a 4-byte boundary; returns (offset, length).
@@ -88,7 +128,9 @@ fn push_aligned(bin: &mut Vec<u8>, bytes: &[u8]) -> (usize, usize) {
 
 /// Encodes the asset as GLB bytes.
 pub fn encode_glb(asset: &BakedAsset) -> Result<Vec<u8>, OutputError> {
-    let (pos, nrm, tex, idx) = split_vertices(&asset.mesh, &asset.uvs)?;
+    let split = split_vertices(&asset.mesh, &asset.uvs)?;
+    let (pos, nrm, tex, idx) = (&split.positions, &split.normals, &split.uvs, &split.indices);
+    let has_normal_map = asset.maps.iter().any(|(role, _)| role == "normal");
     if pos.iter().any(|p| !p.is_finite()) {
         return Err(encode_error("a vertex position is not finite"));
     }
@@ -125,17 +167,32 @@ pub fn encode_glb(asset: &BakedAsset) -> Result<Vec<u8>, OutputError> {
     b.clear();
     idx.iter().for_each(|i| b.extend(i.to_le_bytes()));
     let v_idx = view(&mut bin, &b, Some(ELEMENT_ARRAY_BUFFER));
+    let v_tan = has_normal_map.then(|| {
+        b.clear();
+        f32s(
+            &mut b,
+            &split.tangents.iter().flatten().copied().collect::<Vec<_>>(),
+        );
+        view(&mut bin, &b, Some(ARRAY_BUFFER))
+    });
     let (lo, hi) = pos.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
-    let accessors = json!([
+    let mut accessors = json!([
         {"bufferView": v_pos, "componentType": FLOAT, "count": pos.len(), "type": "VEC3",
          "min": lo.to_array(), "max": hi.to_array()},
         {"bufferView": v_nrm, "componentType": FLOAT, "count": nrm.len(), "type": "VEC3"},
         {"bufferView": v_tex, "componentType": FLOAT, "count": tex.len(), "type": "VEC2"},
         {"bufferView": v_idx, "componentType": UNSIGNED_INT, "count": idx.len(), "type": "SCALAR"},
     ]);
+    let mut attributes = json!({"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2});
+    if let (Some(v), Some(list)) = (v_tan, accessors.as_array_mut()) {
+        list.push(
+            json!({"bufferView": v, "componentType": FLOAT, "count": pos.len(), "type": "VEC4"}),
+        );
+        attributes["TANGENT"] = json!(4);
+    }
     // Images: colour first, then the maps glTF has a slot for.
     let mut images: Vec<Value> = Vec::new();
     let mut add_image = |bin: &mut Vec<u8>, img: &Image| -> Result<usize, OutputError> {
@@ -180,7 +237,7 @@ pub fn encode_glb(asset: &BakedAsset) -> Result<Vec<u8>, OutputError> {
         "scenes": [{"nodes": [0]}],
         "nodes": [{"mesh": 0, "name": "baked"}],
         "meshes": [{"primitives": [{
-            "attributes": {"POSITION": 0, "NORMAL": 1, "TEXCOORD_0": 2},
+            "attributes": attributes,
             "indices": 3,
             "material": 0,
             "mode": 4
