@@ -623,3 +623,37 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
         );
     }
 }
+
+#[test]
+fn atlas_splits_charts_at_non_manifold_edges_and_orientation_flips() {
+    // Three triangles on one edge (a fin), a fourth with flipped winding
+    // next to the first, a degenerate sliver and a duplicate vertex index.
+    let positions = vec![
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.5, 1.0, 0.0),
+        Vec3::new(0.5, -1.0, 0.0),
+        Vec3::new(0.5, 0.0, 1.0),
+        Vec3::new(1.5, 1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+    ];
+    let tris = vec![
+        [0, 1, 2],
+        [1, 0, 3],
+        [0, 1, 4],
+        [2, 5, 1], // traverses 1→2 like [0, 1, 2]: a flip
+        [1, 6, 6], // degenerate
+        [2, 5, 6],
+    ];
+    let settings = AtlasSettings {
+        size: 128,
+        ..Default::default()
+    };
+    let atlas = build_uv_atlas(&positions, &tris, &settings).unwrap();
+    let (double, covered) = overlaps(&atlas.corner_uvs, 128);
+    assert_eq!(double, 0, "{double} of {covered} texels in two faces");
+    // The fin's three faces cannot share one chart across the edge 0–1.
+    let c = &atlas.charts.chart_of_face;
+    assert!(!(c[0] == c[1] && c[1] == c[2]), "charts {c:?}");
+    assert_ne!(c[0], c[3], "an orientation flip ends the chart: {c:?}");
+}
