@@ -185,22 +185,22 @@ pub fn rasterise_faces(corner_uvs: &[[Vec2; 3]], size: u32) -> Vec<u32> {
 /// Grows the filled texels of a `size × size` image with `channels` values
 /// per texel outwards by `passes` texels: each pass, every unfilled texel
 /// with filled 4-neighbours takes their mean. `filled` is updated. Rows are
-/// processed in parallel; the result does not depend on the thread count.
+/// read in parallel and only the new texels are stored between passes (no
+/// copy of the image); the result does not depend on the thread count.
 pub fn dilate(data: &mut [f32], channels: usize, size: u32, filled: &mut [bool], passes: u32) {
     let _span = tracing::debug_span!("dilate", passes).entered();
     let s = size as usize;
     let c = channels;
     for _ in 0..passes {
-        let before: Vec<bool> = filled.to_vec();
-        let snapshot: Vec<f32> = data.to_vec();
-        let any = std::sync::atomic::AtomicBool::new(false);
-        data.par_chunks_mut(s * c)
-            .zip(filled.par_chunks_mut(s))
-            .enumerate()
-            .for_each(|(y, (row, frow))| {
+        let (src, mask) = (&*data, &*filled);
+        // Per row: the texels this pass fills and their values, flat.
+        let grown: Vec<(Vec<usize>, Vec<f32>)> = (0..s)
+            .into_par_iter()
+            .map(|y| {
+                let (mut at, mut values) = (Vec::new(), Vec::new());
                 let mut sum = vec![0.0f32; c];
                 for x in 0..s {
-                    if before[y * s + x] {
+                    if mask[y * s + x] {
                         continue;
                     }
                     sum.fill(0.0);
@@ -211,24 +211,29 @@ pub fn dilate(data: &mut [f32], channels: usize, size: u32, filled: &mut [bool],
                             continue;
                         }
                         let j = ny as usize * s + nx as usize;
-                        if before[j] {
-                            for (acc, v) in sum.iter_mut().zip(&snapshot[c * j..c * j + c]) {
+                        if mask[j] {
+                            for (acc, v) in sum.iter_mut().zip(&src[c * j..c * j + c]) {
                                 *acc += v;
                             }
                             n += 1.0;
                         }
                     }
                     if n > 0.0 {
-                        for (out, v) in row[c * x..c * x + c].iter_mut().zip(&sum) {
-                            *out = v / n;
-                        }
-                        frow[x] = true;
-                        any.store(true, std::sync::atomic::Ordering::Relaxed);
+                        at.push(y * s + x);
+                        values.extend(sum.iter().map(|v| v / n));
                     }
                 }
-            });
-        if !any.into_inner() {
+                (at, values)
+            })
+            .collect();
+        if grown.iter().all(|r| r.0.is_empty()) {
             break;
+        }
+        for (at, values) in grown {
+            for (&i, v) in at.iter().zip(values.chunks_exact(c.max(1))) {
+                data[c * i..c * i + c].copy_from_slice(v);
+                filled[i] = true;
+            }
         }
     }
 }
