@@ -1,5 +1,6 @@
 //! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
 
+pub mod atlas;
 pub mod bake_triangles;
 pub mod channels;
 pub mod diffuse_orientation;

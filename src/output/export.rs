@@ -51,6 +51,19 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     )?);
                 }
             }
+            "glb" => {
+                if let Some(asset) = &job.baked_asset {
+                    let path = dir.join(format!("{}.glb", job.stem));
+                    let bytes = super::gltf::encode_glb(asset)?;
+                    super::write_bytes_atomic(&path, &bytes)?;
+                    files.push(path);
+                }
+            }
+            "baked_obj" => {
+                if let Some(asset) = &job.baked_asset {
+                    files.extend(write_baked_obj(dir, &format!("{}_atlas", job.stem), asset)?);
+                }
+            }
             "pastes" => {
                 if let Some(pastes) = &job.pastes {
                     files.extend(write_pastes(dir, &job.stem, &job.mesh, pastes)?);
@@ -158,6 +171,43 @@ pub fn write_pastes(
             mtl,
             "newmtl patch_{k}\nKa 1 1 1\nKd 1 1 1\nKs 0 0 0\nd 1\nillum 1\nmap_Kd {png}\nmap_d {png}"
         );
+    }
+    let mtl_path = dir.join(&mtl_name);
+    write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;
+    files.push(mtl_path);
+    write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
+    Ok(files)
+}
+
+/// Writes the `bake` stage's asset as `dir/STEM.obj` (the original mesh,
+/// triangulated, with atlas coordinates), `STEM.mtl` and `STEM.png` (colour),
+/// plus `STEM_normal.png` (`norm`, and `map_Bump` for older readers),
+/// `STEM_roughness.png` (`map_Pr`) and `STEM_height.png` (`disp`) when those
+/// maps were baked. Returns the paths, the `.obj` first (written last).
+pub fn write_baked_obj(
+    dir: &Path,
+    stem: &str,
+    asset: &crate::stages::world::BakedAsset,
+) -> Result<Vec<PathBuf>, OutputError> {
+    let obj_path = dir.join(format!("{stem}.obj"));
+    let mtl_name = format!("{stem}.mtl");
+    let text = super::obj::encode_obj(&asset.mesh, Some(&asset.uvs), None, Some(&mtl_name))?;
+    let mut files = vec![obj_path.clone()];
+    let png = format!("{stem}.png");
+    write_png(&dir.join(&png), &asset.colour)?;
+    files.push(dir.join(&png));
+    let mut mtl = super::obj::encode_mtl(&png);
+    for (role, img) in &asset.maps {
+        let name = format!("{stem}_{role}.png");
+        let line = match role.as_str() {
+            "normal" => format!("norm {name}\nmap_Bump {name}\n"),
+            "roughness" => format!("map_Pr {name}\n"),
+            "height" => format!("disp {name}\n"),
+            _ => continue,
+        };
+        write_png(&dir.join(&name), img)?;
+        files.push(dir.join(&name));
+        mtl.push_str(&line);
     }
     let mtl_path = dir.join(&mtl_name);
     write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;

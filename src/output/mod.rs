@@ -6,6 +6,7 @@
 
 mod error;
 pub mod export;
+pub mod gltf;
 pub mod obj;
 pub mod ply;
 pub mod render;

@@ -206,6 +206,7 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<graph_match::GraphMatch>(),
         entry::<export::Export>(),
         entry::<displace::Displace>(),
+        entry::<bake::Bake>(),
     ]
 }
 

@@ -1,6 +1,7 @@
 //! Stages: one folder per stage with its settings, systems and registration.
 //! The world model (components and resources) is in [`world`].
 
+pub mod bake;
 pub mod builtin_pyramid;
 pub mod diffuse_orientation;
 pub mod displace;

@@ -203,6 +203,9 @@ pub struct ExportJob {
     pub baked: Option<(PolyMesh, Vec<Vec2>, Image)>,
     /// Lapped-texture pastes for runtime pasting (format `pastes`).
     pub pastes: Option<PasteExport>,
+    /// The `bake` stage's atlas of the original mesh (formats `glb`,
+    /// `baked_obj`).
+    pub baked_asset: Option<BakedAsset>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
@@ -303,3 +306,20 @@ pub struct LevelParents(pub crate::kernels::sqrt2::Parents);
 /// vertex `v` of a coarser level is vertex `v` of every finer one.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct Sqrt2Pyramid(pub Vec<Entity>);
+
+// ----- bake (issue 7) -------------------------------------------------------------
+
+/// The result baked into a UV atlas of the ORIGINAL mesh by the `bake`
+/// stage; the `export` formats `glb` and `baked_obj` write it.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct BakedAsset {
+    /// The original mesh, fan-triangulated (vertices unchanged).
+    pub mesh: PolyMesh,
+    /// Per corner of `mesh`, its atlas coordinates (`v = 0` at the top row).
+    pub uvs: Vec<Vec2>,
+    /// The baked colour (RGB).
+    pub colour: Image,
+    /// Further baked exemplar maps by role (`normal`: tangent-space RGB,
+    /// `roughness`, `height`: one channel), in that order when present.
+    pub maps: Vec<(String, Image)>,
+}

@@ -42,8 +42,16 @@ impl StageSettings for ExportSettings {
         ParamDoc {
             name: "formats",
             unit: "",
-            range: ParamRange::OneOf(&["ply", "obj", "preview", "baked", "pastes"]),
-            doc: "ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs",
+            range: ParamRange::OneOf(&[
+                "ply",
+                "obj",
+                "preview",
+                "baked",
+                "pastes",
+                "glb",
+                "baked_obj",
+            ]),
+            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs",
         },
         ParamDoc {
             name: "preview_size",
@@ -141,8 +149,10 @@ impl Stage for Export {
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![]
     }
-    fn systems(settings: Self::Settings, _ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |active: Res<ActiveMesh>,
+               baked_asset: Option<Res<BakedAsset>>,
+               mut failure: ResMut<StageFailure>,
                exemplar: Res<Exemplar>,
                mut job: ResMut<ExportJob>,
                meshes: ExportQuery,
@@ -151,6 +161,20 @@ impl Stage for Export {
             let Ok((geometry, colours, uvs, blend, atlas)) = meshes.get(active.0) else {
                 return;
             };
+            // The `bake` stage's asset (formats glb, baked_obj).
+            let wants_asset = settings
+                .formats
+                .iter()
+                .any(|f| f == "glb" || f == "baked_obj");
+            if wants_asset && baked_asset.is_none() {
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "formats `glb` and `baked_obj` write the `bake` stage's atlas: add a `bake` stage before `export`",
+                );
+                return;
+            }
             let mesh = &geometry.0;
             // Lapped-texture pastes on the active mesh, in paste order.
             let mut lapped: Vec<_> = pastes.iter().filter(|p| p.0.0 == active.0).collect();
@@ -219,6 +243,19 @@ impl Stage for Export {
                         images.push((format!("atlas_preview_{i}.png"), img));
                     }
                 }
+                if let Some(asset) = baked_asset.as_deref() {
+                    // The original mesh through the baked atlas.
+                    let baked_shading = Shading::CornerUvs {
+                        uvs: &asset.uvs,
+                        texture: &asset.colour,
+                        wrap: crate::image::sample::Wrap::Clamp,
+                    };
+                    let baked_views =
+                        render_views(&asset.mesh, &baked_shading, settings.preview_size, &options);
+                    for (i, img) in baked_views.into_iter().enumerate() {
+                        images.push((format!("bake_preview_{i}.png"), img));
+                    }
+                }
                 views
             } else {
                 Vec::new()
@@ -246,6 +283,10 @@ impl Stage for Export {
                 images,
                 baked,
                 pastes: paste_export,
+                baked_asset: baked_asset
+                    .as_deref()
+                    .filter(|_| wants_asset)
+                    .cloned(),
             };
         })
         .into_configs()

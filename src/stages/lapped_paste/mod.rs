@@ -502,7 +502,6 @@ impl Stage for LappedPaste {
                     size: settings.atlas_size,
                     normal_cone_deg: settings.atlas_normal_cone,
                     padding_px: settings.atlas_padding,
-                    ..Default::default()
                 };
                 match build_atlas(&tri, &out.coverage, &textures, &atlas_settings) {
                     Some(atlas) => {

@@ -1,0 +1,574 @@
+//! Baking a synthesis result into an atlas of the original mesh.
+//!
+//! Every atlas texel is a weighted sum of *contributions*: an exemplar (or
+//! lapped patch) coordinate, a weight, and the angle of the synthesis frame
+//! relative to the atlas tangent frame at that texel. A channel — colour,
+//! normal, roughness, height — is one image sampled through the same
+//! contributions, so every exemplar map follows one synthesis; tangent-space
+//! normals are rotated by each contribution's angle before they are summed.
+//! Colour may also come *directly* (vertex colours, a lapped base colour)
+//! with its own weight.
+//!
+//! Sources of contributions ([`ContributionSource`]):
+//! - [`VertexColourSource`]: a retiled or subdivided result: the texel's
+//!   surface point on the original mesh is projected onto the result mesh
+//!   (closest point facing the same way) and the result triangle's vertex
+//!   colours (and source texels, when recorded) are interpolated
+//!   barycentrically;
+//! - [`BlendUvSource`]: per-corner UVs on the original mesh, with the
+//!   jump-map 3-way blend (Zelinka & Garland 2004 §6.5) when given;
+//! - [`LappedSource`]: lapped-texture pastes composited in paste order
+//!   (Praun et al. 2000), "over" on a base colour.
+//!
+//! Rows are baked in parallel; every texel depends only on its inputs, so
+//! the result is the same at any thread count.
+
+use super::raster::barycentric;
+use crate::image::{Image, sample::Wrap};
+use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
+use crate::kernels::retile::SurfaceProjector;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// One exemplar look-up feeding a texel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Contribution {
+    /// Texture coordinates (`[0, 1]`, `v = 0` at the top row) in
+    /// `texture`.
+    pub uv: Vec2,
+    /// Weight of the look-up.
+    pub weight: f32,
+    /// Angle (radians, counter-clockwise seen from outside) from the atlas
+    /// tangent frame's `s` axis to the synthesis frame's at this texel.
+    pub angle: f32,
+    /// 0: the exemplar (and its channel maps); `k + 1`: lapped patch `k`
+    /// (colour only).
+    pub texture: u32,
+}
+
+/// Everything that makes one texel.
+#[derive(Clone, Debug, Default)]
+pub struct TexelSamples {
+    /// The exemplar look-ups.
+    pub contribs: Vec<Contribution>,
+    /// A colour not from a look-up (RGB).
+    pub direct: [f32; 3],
+    /// Its weight.
+    pub direct_weight: f32,
+    /// When true the colour channel is `direct` alone (vertex colours);
+    /// the contributions then serve the other channels.
+    pub colour_direct_only: bool,
+}
+
+impl TexelSamples {
+    fn clear(&mut self) {
+        self.contribs.clear();
+        self.direct = [0.0; 3];
+        self.direct_weight = 0.0;
+        self.colour_direct_only = false;
+    }
+}
+
+/// Fills the samples of a texel on triangle `face` of the original mesh at
+/// barycentric coordinates `bary`.
+pub trait ContributionSource: Sync {
+    /// Fills `out` (cleared by the caller).
+    fn texel(&self, face: u32, bary: [f32; 3], out: &mut TexelSamples);
+}
+
+/// Per triangle of the original mesh: its unit normal and the unit atlas
+/// tangent `s` (the direction in which the atlas `u` grows).
+#[derive(Clone, Debug, Default)]
+pub struct AtlasFrames {
+    /// Unit normals (zero for a degenerate triangle).
+    pub normal: Vec<Vec3>,
+    /// Unit atlas `s` axes.
+    pub s: Vec<Vec3>,
+}
+
+/// Gradient over the 3-D triangle `p` of the linear function with corner
+/// values `f`.
+pub fn gradient(p: [Vec3; 3], f: [f32; 3]) -> Vec3 {
+    let n2 = (p[1] - p[0]).cross(p[2] - p[0]);
+    let a2 = n2.length_squared();
+    if a2 <= 0.0 {
+        return Vec3::ZERO;
+    }
+    (0..3)
+        .map(|k| n2.cross(p[(k + 2) % 3] - p[(k + 1) % 3]) * f[k])
+        .sum::<Vec3>()
+        / a2
+}
+
+impl AtlasFrames {
+    /// The frames of `tris` over `positions` with per-triangle atlas
+    /// coordinates `uvs`.
+    pub fn new(positions: &[Vec3], tris: &[[u32; 3]], uvs: &[[Vec2; 3]]) -> Self {
+        let (normal, s) = tris
+            .par_iter()
+            .zip(uvs)
+            .map(|(t, uv)| {
+                let p = t.map(|v| positions[v as usize]);
+                let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+                (n, gradient(p, uv.map(|q| q.x)).normalize_or_zero())
+            })
+            .unzip();
+        Self { normal, s }
+    }
+
+    /// Angle from the atlas `s` axis of triangle `f` to the world direction
+    /// `dir`, around the triangle normal.
+    #[inline]
+    pub fn angle_to(&self, f: usize, dir: Vec3) -> f32 {
+        let (n, s) = (self.normal[f], self.s[f]);
+        n.dot(s.cross(dir)).atan2(s.dot(dir))
+    }
+}
+
+/// What a channel holds, which decides how look-ups are combined.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChannelKind {
+    /// Colour (RGB): a weighted sum.
+    Colour,
+    /// A tangent-space normal map (`kernels::channels` convention): look-ups
+    /// are decoded, re-oriented from their synthesis frame into the atlas
+    /// frame (`reorient_normal`), summed, renormalised and encoded.
+    Normal,
+    /// A scalar map (roughness, height): a weighted sum of the first channel.
+    Scalar,
+}
+
+/// An exemplar map to bake.
+#[derive(Clone, Copy, Debug)]
+pub struct ChannelMap<'a> {
+    /// The map, the exemplar's size.
+    pub image: &'a Image,
+    /// How to combine look-ups.
+    pub kind: ChannelKind,
+}
+
+/// The atlas geometry a bake writes into.
+#[derive(Clone, Copy, Debug)]
+pub struct BakeTarget<'a> {
+    /// Per triangle of the original mesh, its corners' atlas coordinates.
+    pub corner_uvs: &'a [[Vec2; 3]],
+    /// Which triangle covers each texel centre (`u32::MAX`: gutter).
+    pub texel_face: &'a [u32],
+    /// Side of the atlas, texels.
+    pub size: u32,
+    /// Gutter texels to dilate into.
+    pub padding_px: u32,
+}
+
+/// Reads RGB out of a look-up of any channel count.
+#[inline]
+fn rgb_of(px: &[f32]) -> [f32; 3] {
+    match px.len() {
+        0 => [0.0; 3],
+        1 | 2 => [px[0]; 3],
+        _ => [px[0], px[1], px[2]],
+    }
+}
+
+/// A row index, its colour row and its row of every map.
+type RowSlices<'r> = (usize, &'r mut [f32], Vec<&'r mut [f32]>);
+
+/// The pastes of a lapped texture in order: per paste its patch index and,
+/// per face it holds, the face and its corners' coordinates in the patch.
+pub type PasteFaces = (u32, Vec<(u32, [Vec2; 3])>);
+
+/// Bakes the colour channel (RGB, through `textures`: 0 the exemplar,
+/// `k + 1` lapped patch `k`) and every map of `maps` (through texture 0
+/// only; RGB for colour and normal maps, one channel for scalar ones), then
+/// dilates them into the gutters.
+pub fn bake_channels(
+    target: &BakeTarget,
+    source: &dyn ContributionSource,
+    textures: &[&Image],
+    wrap: Wrap,
+    maps: &[ChannelMap],
+) -> (Image, Vec<Image>) {
+    let _span =
+        tracing::info_span!("bake_channels", size = target.size, maps = maps.len()).entered();
+    let s = target.size as usize;
+    let mut colour = Image::new(target.size, target.size, 3);
+    let mut outs: Vec<Image> = maps
+        .iter()
+        .map(|m| {
+            let c = if m.kind == ChannelKind::Scalar { 1 } else { 3 };
+            Image::new(target.size, target.size, c)
+        })
+        .collect();
+    let widths: Vec<usize> = outs.iter().map(|o| o.channels as usize * s).collect();
+    // Split every output into rows, then hand each worker one row of each.
+    let mut rows: Vec<RowSlices> = colour
+        .data
+        .chunks_mut(3 * s)
+        .enumerate()
+        .map(|(y, r)| (y, r, Vec::with_capacity(maps.len())))
+        .collect();
+    for (out, &w) in outs.iter_mut().zip(&widths) {
+        for (row, chunk) in rows.iter_mut().zip(out.data.chunks_mut(w)) {
+            row.2.push(chunk);
+        }
+    }
+    let max_c = textures
+        .iter()
+        .map(|t| t.channels)
+        .chain(maps.iter().map(|m| m.image.channels))
+        .max()
+        .unwrap_or(4) as usize;
+    rows.par_iter_mut().for_each(|(y, crow, mrows)| {
+        let mut samples = TexelSamples::default();
+        let mut px = vec![0.0f32; max_c];
+        for x in 0..s {
+            let f = target.texel_face[*y * s + x];
+            if f == u32::MAX {
+                continue;
+            }
+            let t = target.corner_uvs[f as usize].map(|p| p * target.size as f32);
+            let b = barycentric(&t, Vec2::new(x as f32 + 0.5, *y as f32 + 0.5));
+            let b = b.map(|v| v.max(0.0));
+            let sum = (b[0] + b[1] + b[2]).max(1e-12);
+            let b = b.map(|v| v / sum);
+            samples.clear();
+            source.texel(f, b, &mut samples);
+            // Colour.
+            let mut c = samples.direct.map(|v| v * samples.direct_weight);
+            if !samples.colour_direct_only {
+                for k in &samples.contribs {
+                    let Some(tex) = textures.get(k.texture as usize) else {
+                        continue;
+                    };
+                    let w = if k.texture == 0 { wrap } else { Wrap::Clamp };
+                    let buf = &mut px[..tex.channels as usize];
+                    tex.sample_uv(k.uv.x, k.uv.y, w, buf);
+                    let rgb = rgb_of(buf);
+                    for i in 0..3 {
+                        c[i] += k.weight * rgb[i];
+                    }
+                }
+            }
+            crow[3 * x..3 * x + 3].copy_from_slice(&c);
+            // Maps, through the exemplar's look-ups only.
+            for (m, row) in maps.iter().zip(mrows.iter_mut()) {
+                let buf = &mut px[..m.image.channels as usize];
+                let mut acc = Vec3::ZERO;
+                let mut wsum = 0.0f32;
+                for k in samples.contribs.iter().filter(|k| k.texture == 0) {
+                    m.image.sample_uv(k.uv.x, k.uv.y, wrap, buf);
+                    let rgb = rgb_of(buf);
+                    let v = match m.kind {
+                        // The synthesis frame is the atlas frame turned by
+                        // `angle`: in `reorient_normal`'s terms the atlas
+                        // x-axis is at −angle from the synthesis `s`.
+                        ChannelKind::Normal => reorient_normal(decode_normal(rgb), -k.angle),
+                        _ => Vec3::from(rgb),
+                    };
+                    acc += v * k.weight;
+                    wsum += k.weight;
+                }
+                match m.kind {
+                    ChannelKind::Scalar => {
+                        row[x] = if wsum > 0.0 { acc.x / wsum } else { 0.5 };
+                    }
+                    ChannelKind::Colour => {
+                        let v = if wsum > 0.0 {
+                            acc / wsum
+                        } else {
+                            Vec3::splat(0.5)
+                        };
+                        row[3 * x..3 * x + 3].copy_from_slice(&v.to_array());
+                    }
+                    ChannelKind::Normal => {
+                        row[3 * x..3 * x + 3].copy_from_slice(&encode_normal(acc));
+                    }
+                }
+            }
+        }
+    });
+    drop(rows);
+    let filled: Vec<bool> = target.texel_face.iter().map(|&f| f != u32::MAX).collect();
+    let mut mask = filled.clone();
+    super::raster::dilate(
+        &mut colour.data,
+        3,
+        target.size,
+        &mut mask,
+        target.padding_px,
+    );
+    for out in &mut outs {
+        let mut mask = filled.clone();
+        let c = out.channels as usize;
+        super::raster::dilate(&mut out.data, c, target.size, &mut mask, target.padding_px);
+    }
+    (colour, outs)
+}
+
+// ----- sources ------------------------------------------------------------------
+
+/// Per-corner UVs on the original mesh, optionally blended 3 ways.
+pub struct BlendUvSource<'a> {
+    /// Per triangle, for each base vertex `b`, the corners' exemplar UVs.
+    /// Without a blend the three layers are equal.
+    pub layers: &'a [[[Vec2; 3]; 3]],
+    /// Per triangle and layer, the synthesis frame's angle to the atlas
+    /// frame (see [`BlendUvSource::angles`]).
+    pub angles: Vec<[f32; 3]>,
+}
+
+impl<'a> BlendUvSource<'a> {
+    /// Prepares the source: the angle of each layer's exemplar `s` axis
+    /// (the gradient of its `u`) to the atlas `s` axis.
+    pub fn new(
+        positions: &[Vec3],
+        tris: &[[u32; 3]],
+        frames: &AtlasFrames,
+        layers: &'a [[[Vec2; 3]; 3]],
+    ) -> Self {
+        let angles = tris
+            .par_iter()
+            .zip(layers)
+            .enumerate()
+            .map(|(f, (t, l))| {
+                let p = t.map(|v| positions[v as usize]);
+                l.map(|uv| frames.angle_to(f, gradient(p, uv.map(|q| q.x))))
+            })
+            .collect();
+        Self { layers, angles }
+    }
+}
+
+impl ContributionSource for BlendUvSource<'_> {
+    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+        let f = face as usize;
+        let (Some(layers), Some(angles)) = (self.layers.get(f), self.angles.get(f)) else {
+            return;
+        };
+        let same = layers[0] == layers[1] && layers[1] == layers[2];
+        for (base, uvs) in layers.iter().enumerate() {
+            let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
+            let weight = if same { 1.0 } else { b[base] };
+            out.contribs.push(Contribution {
+                uv,
+                weight,
+                angle: angles[base],
+                texture: 0,
+            });
+            if same {
+                break;
+            }
+        }
+    }
+}
+
+/// Vertex colours on a result mesh other than the original (retiled,
+/// subdivided).
+pub struct VertexColourSource<'a> {
+    /// Original-mesh positions.
+    pub positions: &'a [Vec3],
+    /// Original-mesh triangles.
+    pub tris: &'a [[u32; 3]],
+    /// Atlas frames of the original mesh.
+    pub frames: &'a AtlasFrames,
+    /// Closest points on the result mesh.
+    pub projector: &'a SurfaceProjector,
+    /// The result's triangles (vertex ids), as the projector numbers them.
+    pub result_tris: &'a [[u32; 3]],
+    /// Result vertex colours, `channels` per vertex.
+    pub colours: &'a [f32],
+    /// Values per vertex in `colours`.
+    pub channels: usize,
+    /// Per result vertex, its exemplar coordinate (`[0, 1]`), when the
+    /// method recorded it.
+    pub source_uv: Option<&'a [Vec2]>,
+    /// Per result vertex, its synthesis frame's `s` axis, when known.
+    pub frame_s: Option<&'a [Vec3]>,
+}
+
+impl ContributionSource for VertexColourSource<'_> {
+    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+        let f = face as usize;
+        let t = self.tris[f];
+        let p = self.positions[t[0] as usize] * b[0]
+            + self.positions[t[1] as usize] * b[1]
+            + self.positions[t[2] as usize] * b[2];
+        let normal = self.frames.normal[f];
+        let hit = if normal == Vec3::ZERO {
+            self.projector.project(p)
+        } else {
+            self.projector.project_facing(p, normal, u32::MAX)
+        };
+        let Some(hit) = hit else {
+            return;
+        };
+        let Some(rt) = self.result_tris.get(hit.face as usize) else {
+            return;
+        };
+        let w = hit.bary.to_array();
+        let c = self.channels;
+        let mut rgb = [0.0f32; 3];
+        for (k, &v) in rt.iter().enumerate() {
+            let vals = &self.colours[v as usize * c..v as usize * c + c];
+            let px = rgb_of(vals);
+            for i in 0..3 {
+                rgb[i] += w[k] * px[i];
+            }
+        }
+        out.direct = rgb;
+        out.direct_weight = 1.0;
+        out.colour_direct_only = true;
+        if let Some(uvs) = self.source_uv {
+            for (k, &v) in rt.iter().enumerate() {
+                let angle = self
+                    .frame_s
+                    .map_or(0.0, |s| self.frames.angle_to(f, s[v as usize]));
+                out.contribs.push(Contribution {
+                    uv: uvs[v as usize],
+                    weight: w[k],
+                    angle,
+                    texture: 0,
+                });
+            }
+        }
+    }
+}
+
+/// One paste's layer on a face of a lapped texture.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PasteLayer {
+    /// Lapped patch index.
+    pub patch: u32,
+    /// The face's corners' coordinates in the patch.
+    pub uv: [Vec2; 3],
+    /// The patch frame's angle to the atlas frame on this face.
+    pub angle: f32,
+}
+
+/// Lapped-texture pastes on the original mesh, composited in paste order.
+pub struct LappedSource<'a> {
+    /// CSR offsets: layers of face `f` are `layers[start[f]..start[f + 1]]`,
+    /// in paste order.
+    pub start: Vec<u32>,
+    /// The layers.
+    pub layers: Vec<PasteLayer>,
+    /// RGBA patches (straight alpha).
+    pub patches: &'a [Image],
+    /// Colour under every paste.
+    pub base: [f32; 3],
+}
+
+impl<'a> LappedSource<'a> {
+    /// Collects per face, in paste order, the layers of `pastes`: each a
+    /// patch index and, per face it holds, the face and its corners' UVs.
+    pub fn new(
+        positions: &[Vec3],
+        tris: &[[u32; 3]],
+        frames: &AtlasFrames,
+        pastes: &[PasteFaces],
+        patches: &'a [Image],
+    ) -> Self {
+        let fc = tris.len();
+        let mut count = vec![0u32; fc + 1];
+        for (_, faces) in pastes {
+            for &(f, _) in faces {
+                if (f as usize) < fc {
+                    count[f as usize + 1] += 1;
+                }
+            }
+        }
+        for i in 0..fc {
+            count[i + 1] += count[i];
+        }
+        let start = count.clone();
+        let mut fill = count;
+        let mut layers = vec![
+            PasteLayer {
+                patch: 0,
+                uv: [Vec2::ZERO; 3],
+                angle: 0.0,
+            };
+            start[fc] as usize
+        ];
+        for (patch, faces) in pastes {
+            for &(f, uv) in faces {
+                let fi = f as usize;
+                if fi >= fc {
+                    continue;
+                }
+                let p = tris[fi].map(|v| positions[v as usize]);
+                layers[fill[fi] as usize] = PasteLayer {
+                    patch: *patch,
+                    uv,
+                    angle: frames.angle_to(fi, gradient(p, uv.map(|q| q.x))),
+                };
+                fill[fi] += 1;
+            }
+        }
+        // The base: the alpha-weighted mean colour of the first patch.
+        let base = patches.first().map_or([0.5; 3], |t| {
+            let (mut sum, mut w) = ([0.0f64; 3], 0.0f64);
+            for px in t.data.chunks_exact(t.channels.max(1) as usize) {
+                let a = if px.len() >= 4 { px[3] as f64 } else { 1.0 };
+                let rgb = rgb_of(px);
+                for k in 0..3 {
+                    sum[k] += rgb[k] as f64 * a;
+                }
+                w += a;
+            }
+            sum.map(|v| (v / w.max(1e-12)) as f32)
+        });
+        Self {
+            start,
+            layers,
+            patches,
+            base,
+        }
+    }
+}
+
+impl ContributionSource for LappedSource<'_> {
+    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+        let f = face as usize;
+        if f + 1 >= self.start.len() {
+            return;
+        }
+        let layers = &self.layers[self.start[f] as usize..self.start[f + 1] as usize];
+        // Back to front: weight_i = α_i Π_{j > i} (1 − α_j).
+        let mut remaining = 1.0f32;
+        let first = out.contribs.len();
+        for layer in layers.iter().rev() {
+            let Some(patch) = self.patches.get(layer.patch as usize) else {
+                continue;
+            };
+            let uv = layer.uv[0] * b[0] + layer.uv[1] * b[1] + layer.uv[2] * b[2];
+            let alpha = if patch.channels >= 4 {
+                let mut px = [0.0f32; 4];
+                patch.sample_uv(
+                    uv.x,
+                    uv.y,
+                    Wrap::Clamp,
+                    &mut px[..patch.channels.min(4) as usize],
+                );
+                px[3].clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
+            if alpha > 0.0 {
+                out.contribs.push(Contribution {
+                    uv,
+                    weight: alpha * remaining,
+                    angle: layer.angle,
+                    texture: layer.patch + 1,
+                });
+            }
+            remaining *= 1.0 - alpha;
+            if remaining <= 0.0 {
+                break;
+            }
+        }
+        out.contribs[first..].reverse();
+        out.direct = self.base;
+        out.direct_weight = remaining;
+    }
+}

@@ -1,0 +1,371 @@
+//! Stage `bake`: lays the ORIGINAL mesh out in a UV atlas and bakes the
+//! active result into it, so the synthesis becomes a textured asset of the
+//! loaded mesh (exported by `export` as `glb` or `baked_obj`).
+//!
+//! What is baked, by what the result holds (first match):
+//! 1. lapped-texture pastes on the original mesh — composited in paste order;
+//! 2. per-corner UVs on the original mesh — with the jump-map 3-way blend
+//!    when `jump_surface` made blend layers;
+//! 3. vertex colours on the active mesh (retiled, subdivided, or the
+//!    original) — each texel's surface point is projected onto the result
+//!    mesh and its colours interpolated barycentrically.
+//!
+//! Reads: `SourceMesh` geometry, `ActiveMesh` (`VertexColours`,
+//! `SourceTexels`, `Frames`, `CornerUvs`, `BlendUvs`, lapped pastes),
+//! `Exemplar`. Writes: the `BakedAsset` resource, metrics.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::image::Image;
+use crate::kernels::atlas::bake::{
+    AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
+    LappedSource, VertexColourSource, bake_channels,
+};
+use crate::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
+use crate::kernels::retile::SurfaceProjector;
+use crate::mesh::PolyMesh;
+use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::lapped_paste::components::*;
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use glam::{Vec2, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// Settings of `bake`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct BakeSettings {
+    /// Side of the square atlas texture, pixels.
+    pub size: u32,
+    /// Gutter around every chart, pixels.
+    pub padding: u32,
+    /// Normal cone of a chart, degrees.
+    pub normal_cone: f64,
+}
+
+impl Default for BakeSettings {
+    fn default() -> Self {
+        Self {
+            size: 1024,
+            padding: 4,
+            normal_cone: 60.0,
+        }
+    }
+}
+
+impl StageSettings for BakeSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "size",
+            unit: "pixels",
+            range: ParamRange::Int(256, 8192),
+            doc: "side of the square atlas texture the result is baked into",
+        },
+        ParamDoc {
+            name: "padding",
+            unit: "pixels (texels)",
+            range: ParamRange::Int(0, 64),
+            doc: "gutter kept around every chart and filled by dilating the chart's texels, so bilinear filtering and mipmaps do not bleed",
+        },
+        ParamDoc {
+            name: "normal_cone",
+            unit: "degrees",
+            range: ParamRange::Float(5.0, 85.0),
+            doc: "largest angle between a chart face's normal and its chart seed's: smaller gives more, flatter charts (less distortion, more seams)",
+        },
+    ];
+}
+
+/// What the bake reads of a mesh entity.
+type MeshQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static VertexColours>,
+        Option<&'static CornerUvs>,
+        Option<&'static BlendUvs>,
+        Option<&'static SourceTexels>,
+        Option<&'static Frames>,
+    ),
+>;
+
+/// What the bake reads of a paste entity.
+type PasteQuery = (
+    &'static PasteOf,
+    &'static PasteOrder,
+    &'static TexturePatchIndex,
+    &'static PatchFaces,
+    &'static PatchUvs,
+);
+
+/// The `bake` stage.
+pub struct Bake;
+
+impl Stage for Bake {
+    const KIND: &'static str = "bake";
+    const SUMMARY: &'static str = "UV atlas of the original mesh (charts, conformal flattening, packing, dilated gutters) and the result baked into it: vertex colours, jump-map UVs (3-way blend) or lapped pastes";
+    const PAPER: &'static str =
+        "Lévy et al. 2002 (LSCM); Zelinka & Garland 2004 §6.5; Praun et al. 2000 §4";
+    type Settings = BakeSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               active: Res<ActiveMesh>,
+               exemplar: Res<Exemplar>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               sources: Query<Entity, With<SourceMesh>>,
+               meshes: MeshQuery,
+               pastes: Query<PasteQuery>,
+               patch_textures: Option<Res<TexturePatches>>,
+               channels: Option<Res<ExemplarChannels>>| {
+            let mut fail = |message: String| fail(&mut failure, ctx.index, Self::KIND, message);
+            let Some(source) = sources.iter().next() else {
+                fail("there is no source mesh to bake onto".into());
+                return;
+            };
+            let Ok((geometry, ..)) = meshes.get(source) else {
+                fail("the source mesh has no geometry".into());
+                return;
+            };
+            let patches = patch_textures
+                .as_deref()
+                .map(|t| t.0.as_slice())
+                .unwrap_or(&[]);
+            let inputs = BakeInputs {
+                exemplar: &exemplar,
+                channels: channels.as_deref(),
+                patches,
+            };
+            match bake_world(
+                &settings,
+                source,
+                active.0,
+                &inputs,
+                &geometry.0,
+                &meshes,
+                &pastes,
+            ) {
+                Ok((asset, record)) => {
+                    for (k, v) in record {
+                        metrics.record(ctx.index, k, v);
+                    }
+                    commands.insert_resource(asset);
+                }
+                Err(message) => fail(message),
+            }
+        })
+        .into_configs()
+    }
+}
+
+/// Metrics of the bake, by name.
+type MetricList = Vec<(&'static str, serde_json::Value)>;
+
+/// The images a bake samples.
+struct BakeInputs<'a> {
+    exemplar: &'a Exemplar,
+    channels: Option<&'a ExemplarChannels>,
+    patches: &'a [Image],
+}
+
+/// Builds the atlas of `mesh` (the source mesh) and bakes the result.
+fn bake_world(
+    settings: &BakeSettings,
+    source: Entity,
+    active: Entity,
+    inputs: &BakeInputs,
+    mesh: &PolyMesh,
+    meshes: &MeshQuery,
+    pastes: &Query<PasteQuery>,
+) -> Result<(BakedAsset, MetricList), String> {
+    let (exemplar, patches) = (inputs.exemplar, inputs.patches);
+    let _span = tracing::info_span!("bake", size = settings.size).entered();
+    let (corner_tris, _) = mesh.triangulate_corners();
+    let tris: Vec<[u32; 3]> = corner_tris
+        .iter()
+        .map(|t| t.map(|c| mesh.corner_vertex[c as usize]))
+        .collect();
+    let atlas_settings = AtlasSettings {
+        size: settings.size,
+        normal_cone_deg: settings.normal_cone as f32,
+        padding_px: settings.padding,
+    };
+    let atlas =
+        build_uv_atlas(&mesh.positions, &tris, &atlas_settings).map_err(|e| e.to_string())?;
+    let texel_face = rasterise_faces(&atlas.corner_uvs, settings.size);
+    let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
+    let target = BakeTarget {
+        corner_uvs: &atlas.corner_uvs,
+        texel_face: &texel_face,
+        size: settings.size,
+        padding_px: settings.padding,
+    };
+    let Ok((result, colours, uvs, blend, source_texels, result_frames)) = meshes.get(active) else {
+        return Err("the active mesh has no geometry".into());
+    };
+    let on_source = active == source;
+    let mut lapped: Vec<_> = pastes.iter().filter(|p| p.0.0 == active).collect();
+    lapped.sort_by_key(|p| *p.1);
+    let textures: Vec<&Image> = std::iter::once(&exemplar.image).chain(patches).collect();
+    // Every exemplar map present goes through the same contributions.
+    let mut roles: Vec<&'static str> = Vec::new();
+    let mut maps: Vec<ChannelMap> = Vec::new();
+    if let Some(ch) = inputs.channels {
+        for (role, img, kind) in [
+            ("normal", &ch.normal, ChannelKind::Normal),
+            ("roughness", &ch.roughness, ChannelKind::Scalar),
+            ("height", &ch.height, ChannelKind::Scalar),
+        ] {
+            if let Some(image) = img {
+                roles.push(role);
+                maps.push(ChannelMap { image, kind });
+            }
+        }
+    }
+    // Maps need exemplar coordinates: lapped patches and vertex colours
+    // without recorded source texels have none.
+    let mut maps_note = "";
+    let method;
+    let (colour, baked_maps) = if !lapped.is_empty() {
+        if !on_source {
+            return Err("the lapped pastes lie on a mesh other than the loaded one; bake needs them on the original mesh (no retile before lapped_paste)".into());
+        }
+        if !mesh.is_triangle_mesh() {
+            return Err("lapped pastes need a triangle mesh".into());
+        }
+        let mut records = Vec::with_capacity(lapped.len());
+        for (_, _, texture, faces, puvs) in &lapped {
+            if puvs.0.len() != 3 * faces.0.len() {
+                return Err("a paste's texture coordinates do not match its faces".into());
+            }
+            let list: Vec<(u32, [Vec2; 3])> = faces
+                .0
+                .iter()
+                .enumerate()
+                .map(|(i, &f)| (f, [puvs.0[3 * i], puvs.0[3 * i + 1], puvs.0[3 * i + 2]]))
+                .collect();
+            records.push((texture.0, list));
+        }
+        let src = LappedSource::new(&mesh.positions, &tris, &frames, &records, patches);
+        method = "lapped_pastes";
+        if !maps.is_empty() {
+            maps_note = "lapped patches record no exemplar origin: maps are flat/neutral";
+        }
+        bake_channels(
+            &target,
+            &src as &dyn ContributionSource,
+            &textures,
+            exemplar.wrap,
+            &maps,
+        )
+    } else if blend.is_some() || uvs.is_some() {
+        if !on_source {
+            return Err("the per-corner UVs lie on a mesh other than the loaded one; bake needs them on the original mesh".into());
+        }
+        let layers: Vec<[[Vec2; 3]; 3]> = match (blend, uvs) {
+            (Some(b), _) if b.0.len() == tris.len() => {
+                method = "jump_map_blend";
+                b.0.clone()
+            }
+            (_, Some(u)) if u.0.len() == mesh.corner_count() => {
+                method = "corner_uvs";
+                corner_tris
+                    .iter()
+                    .map(|t| [t.map(|c| u.0[c as usize]); 3])
+                    .collect()
+            }
+            _ => return Err("the result's UVs do not match the mesh's corners".into()),
+        };
+        let src = BlendUvSource::new(&mesh.positions, &tris, &frames, &layers);
+        bake_channels(
+            &target,
+            &src as &dyn ContributionSource,
+            &textures,
+            exemplar.wrap,
+            &maps,
+        )
+    } else if let Some(c) = colours {
+        if c.channels == 0 || c.values.len() != c.channels * result.0.vertex_count() {
+            return Err("the result's vertex colours do not match its vertices".into());
+        }
+        let projector = SurfaceProjector::new(&result.0);
+        let result_tris: Vec<[u32; 3]> = result
+            .0
+            .triangulated()
+            .faces()
+            .map(|f| [f[0], f[1], f[2]])
+            .collect();
+        let size = Vec2::new(exemplar.image.width as f32, exemplar.image.height as f32);
+        let source_uv: Option<Vec<Vec2>> = source_texels
+            .filter(|t| t.0.len() == result.0.vertex_count())
+            .map(|t| t.0.iter().map(|p| *p / size).collect());
+        let frame_s: Option<Vec<Vec3>> = result_frames
+            .filter(|f| f.0.len() == result.0.vertex_count())
+            .map(|f| f.0.iter().map(|fr| fr.s).collect());
+        let src = VertexColourSource {
+            positions: &mesh.positions,
+            tris: &tris,
+            frames: &frames,
+            projector: &projector,
+            result_tris: &result_tris,
+            colours: &c.values,
+            channels: c.channels,
+            source_uv: source_uv.as_deref(),
+            frame_s: frame_s.as_deref(),
+        };
+        method = "vertex_colours";
+        if !maps.is_empty() && source_uv.is_none() {
+            maps_note = "the result records no source texels: maps are flat/neutral";
+        }
+        bake_channels(
+            &target,
+            &src as &dyn ContributionSource,
+            &textures,
+            exemplar.wrap,
+            &maps,
+        )
+    } else {
+        return Err("the result has nothing to bake: no vertex colours, per-corner UVs or lapped pastes; put `bake` after a synthesis stage".into());
+    };
+    let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
+    let record = vec![
+        ("bake_method", serde_json::json!(method)),
+        ("atlas_charts", serde_json::json!(atlas.charts.count)),
+        ("atlas_fill", serde_json::json!(atlas.fill)),
+        (
+            "atlas_texels_per_unit",
+            serde_json::json!(atlas.texels_per_unit),
+        ),
+        ("atlas_mean_stretch", serde_json::json!(d.mean_stretch)),
+        (
+            "atlas_density_ratio_p95",
+            serde_json::json!(d.density_ratio_p95),
+        ),
+        ("baked_maps", serde_json::json!(roles)),
+    ];
+    let mut record = record;
+    if !maps_note.is_empty() {
+        record.push(("baked_maps_note", serde_json::json!(maps_note)));
+    }
+    let tri_mesh = PolyMesh::from_triangles(mesh.positions.clone(), &tris);
+    let asset = BakedAsset {
+        mesh: tri_mesh,
+        uvs: atlas.corner_uvs.iter().flatten().copied().collect(),
+        colour,
+        maps: roles
+            .iter()
+            .zip(baked_maps)
+            .map(|(role, img)| (role.to_string(), img))
+            .collect(),
+    };
+    Ok((asset, record))
+}

@@ -1,0 +1,659 @@
+//! The `bake` stage and its shared atlas: the GLB passes the Khronos glTF
+//! validator and re-reads with the `gltf` crate; atlas charts never overlap,
+//! stay in [0, 1] and keep texel density within a stated bound; baking a
+//! vertex-coloured plane reproduces its colours; a normal map follows the
+//! synthesis frame's rotation; the bake runs on meshes with boundaries and
+//! several components, for each kind of result, identically at 1 and 2
+//! threads.
+
+mod common;
+use bevy_ecs::prelude::*;
+use common::*;
+use glam::{Vec2, Vec3};
+use surfsynth::config::ConfigSource;
+use surfsynth::image::Image;
+use surfsynth::image::sample::Wrap;
+use surfsynth::kernels::atlas::bake::{
+    AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, VertexColourSource,
+    bake_channels,
+};
+use surfsynth::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
+use surfsynth::kernels::retile::SurfaceProjector;
+use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
+use surfsynth::mesh::{LoadOptions, PolyMesh, load_mesh};
+use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
+use surfsynth::stages::world::*;
+
+fn load(name: &str) -> PolyMesh {
+    load_mesh(&shared(&format!("meshes/{name}")), &LoadOptions::default())
+        .unwrap_or_else(|e| panic!("{name}: {e}"))
+        .0
+}
+
+fn triangles(mesh: &PolyMesh) -> Vec<[u32; 3]> {
+    mesh.triangulated()
+        .faces()
+        .map(|f| [f[0], f[1], f[2]])
+        .collect()
+}
+
+fn run(text: &str) -> Result<World, String> {
+    let mut source = ConfigSource::from_text("bake.toml", text);
+    source.base_dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let p = Pipeline::from_source(source).map_err(|e| e.to_string())?;
+    let input =
+        load_input(&p.input, &p.source.base_dir, &p.source.file).map_err(|e| e.to_string())?;
+    let mut world = World::new();
+    run_in_world(&p, &mut world, input).map_err(|e| e.to_string())?;
+    Ok(world)
+}
+
+/// A jump-map pipeline on `mesh`, baked at `size`.
+fn jump_bake(mesh: &str, size: u32, formats: &str) -> String {
+    format!(
+        r#"
+seed = 3
+[input]
+mesh = "{mesh}"
+exemplar = "builtin:bricks"
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+[[stage]]
+kind = "jump_map"
+[[stage]]
+kind = "jump_surface"
+[[stage]]
+kind = "bake"
+size = {size}
+[[stage]]
+kind = "export"
+formats = [{formats}]
+preview_size = 64
+"#
+    )
+}
+
+/// Counts texel centres strictly inside more than one face, and checks
+/// every corner lies in [0, 1].
+fn overlaps(uvs: &[[Vec2; 3]], size: usize) -> (usize, usize) {
+    let mut hits = vec![0u8; size * size];
+    for uv in uvs {
+        for p in uv {
+            assert!(
+                (0.0..=1.0).contains(&p.x) && (0.0..=1.0).contains(&p.y),
+                "a corner at {p} lies outside [0, 1]"
+            );
+        }
+        let t = uv.map(|p| p * size as f32);
+        let area = (t[1] - t[0]).perp_dot(t[2] - t[0]);
+        if area.abs() < 1e-9 {
+            continue;
+        }
+        let lo = t[0].min(t[1]).min(t[2]);
+        let hi = t[0].max(t[1]).max(t[2]);
+        for y in lo.y.floor() as usize..(hi.y.ceil() as usize).min(size) {
+            for x in lo.x.floor() as usize..(hi.x.ceil() as usize).min(size) {
+                let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                let b0 = (t[1] - p).perp_dot(t[2] - p) / area;
+                let b1 = (t[2] - p).perp_dot(t[0] - p) / area;
+                if b0 > 1e-4 && b1 > 1e-4 && 1.0 - b0 - b1 > 1e-4 {
+                    hits[y * size + x] = hits[y * size + x].saturating_add(1);
+                }
+            }
+        }
+    }
+    (
+        hits.iter().filter(|&&h| h > 1).count(),
+        hits.iter().filter(|&&h| h > 0).count(),
+    )
+}
+
+/// Stated bound: on every shared mesh, 95 % of the surface (by area) has a
+/// texel density within 2× of the mean, the mean conformal stretch σ₁/σ₂ is
+/// below 1.3, and every chart's mean density is the same within 1 %.
+#[test]
+fn atlas_charts_do_not_overlap_stay_in_the_unit_square_and_keep_density() {
+    for name in [
+        "bunny_1k8.obj",
+        "teapot_open.obj",
+        "mushroom.off",
+        "fandisk.off",
+        "nut.ply",
+    ] {
+        let mesh = load(name);
+        let tris = triangles(&mesh);
+        let settings = AtlasSettings {
+            size: 1024,
+            ..Default::default()
+        };
+        let atlas = build_uv_atlas(&mesh.positions, &tris, &settings).unwrap();
+        let (double, covered) = overlaps(&atlas.corner_uvs, 1024);
+        assert_eq!(
+            double, 0,
+            "{name}: {double} of {covered} texels in two faces"
+        );
+        assert!(atlas.fill > 0.3, "{name}: fill {}", atlas.fill);
+        let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
+        assert!(d.density_ratio_p95 < 2.0, "{name}: {d:?}");
+        assert!(d.mean_stretch < 1.3, "{name}: {d:?}");
+        let (lo, hi) = d
+            .chart_density
+            .iter()
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), &x| {
+                (lo.min(x), hi.max(x))
+            });
+        assert!(hi / lo < 1.01, "{name}: chart densities {lo}..{hi}");
+    }
+}
+
+#[test]
+fn atlas_of_a_plane_is_one_undistorted_chart() {
+    let mesh = builtin_mesh("jittered_plane", &BuiltinOptions::default()).unwrap();
+    let tris = triangles(&mesh);
+    let atlas = build_uv_atlas(&mesh.positions, &tris, &AtlasSettings::default()).unwrap();
+    assert_eq!(atlas.charts.count, 1);
+    let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
+    assert!(
+        d.mean_stretch < 1.001 && d.density_ratio_p95 < 1.001,
+        "{d:?}"
+    );
+}
+
+#[test]
+fn atlas_errors_name_the_problem() {
+    let e = build_uv_atlas(&[Vec3::ZERO], &[[0, 1, 2]], &AtlasSettings::default()).unwrap_err();
+    assert!(e.to_string().contains("vertex 1"), "{e}");
+    let e = build_uv_atlas(&[], &[], &AtlasSettings::default()).unwrap_err();
+    assert!(e.to_string().contains("no faces"), "{e}");
+    // 200 separate triangles with 16 texels of gutter cannot fit in 64².
+    let mut positions = Vec::new();
+    let mut tris = Vec::new();
+    for i in 0..200u32 {
+        let o = Vec3::new(i as f32 * 3.0, 0.0, 0.0);
+        positions.extend([o, o + Vec3::X, o + Vec3::Y]);
+        tris.push([3 * i, 3 * i + 1, 3 * i + 2]);
+    }
+    let settings = AtlasSettings {
+        size: 64,
+        padding_px: 16,
+        ..Default::default()
+    };
+    let e = build_uv_atlas(&positions, &tris, &settings).unwrap_err();
+    assert!(e.to_string().contains("raise the size"), "{e}");
+}
+
+/// A pseudo-random value in [0, 1) for vertex `v`, channel `c`.
+fn hash01(v: u32, c: u32) -> f32 {
+    let x = surfsynth::stages::world::mix(17, v as u64, c as u64);
+    (x >> 40) as f32 / (1u64 << 24) as f32
+}
+
+#[test]
+fn baking_a_vertex_coloured_plane_reproduces_its_colours() {
+    let opts = BuiltinOptions {
+        resolution: [12, 9],
+        ..Default::default()
+    };
+    let mesh = builtin_mesh("jittered_plane", &opts).unwrap();
+    let tris = triangles(&mesh);
+    let colours: Vec<f32> = (0..mesh.vertex_count() as u32)
+        .flat_map(|v| (0..3).map(move |c| hash01(v, c)))
+        .collect();
+    let size = 256u32;
+    let settings = AtlasSettings {
+        size,
+        padding_px: 3,
+        ..Default::default()
+    };
+    let atlas = build_uv_atlas(&mesh.positions, &tris, &settings).unwrap();
+    let texel_face = rasterise_faces(&atlas.corner_uvs, size);
+    let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
+    let projector = SurfaceProjector::new(&mesh);
+    let src = VertexColourSource {
+        positions: &mesh.positions,
+        tris: &tris,
+        frames: &frames,
+        projector: &projector,
+        result_tris: &tris,
+        colours: &colours,
+        channels: 3,
+        source_uv: None,
+        frame_s: None,
+    };
+    let target = BakeTarget {
+        corner_uvs: &atlas.corner_uvs,
+        texel_face: &texel_face,
+        size,
+        padding_px: 3,
+    };
+    let exemplar = Image::new(4, 4, 3);
+    let (baked, _) = bake_channels(&target, &src, &[&exemplar], Wrap::Repeat, &[]);
+    let (mut worst, mut n) = (0.0f32, 0usize);
+    for y in 0..size as usize {
+        for x in 0..size as usize {
+            let f = texel_face[y * size as usize + x];
+            if f == u32::MAX {
+                continue;
+            }
+            let t = atlas.corner_uvs[f as usize].map(|p| p * size as f32);
+            let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let area = (t[1] - t[0]).perp_dot(t[2] - t[0]);
+            let b0 = (t[1] - p).perp_dot(t[2] - p) / area;
+            let b1 = (t[2] - p).perp_dot(t[0] - p) / area;
+            let b = [b0, b1, 1.0 - b0 - b1].map(|v| v.max(0.0));
+            let s = b[0] + b[1] + b[2];
+            for c in 0..3 {
+                let expect: f32 = (0..3)
+                    .map(|k| b[k] / s * colours[3 * tris[f as usize][k] as usize + c])
+                    .sum();
+                let got = baked.pixel(x as u32, y as u32)[c];
+                worst = worst.max((got - expect).abs());
+            }
+            n += 1;
+        }
+    }
+    assert!(n > (size * size / 4) as usize, "{n} texels covered");
+    assert!(worst < 2e-3, "largest colour error {worst}");
+    // The gutter next to the chart is dilated, not black.
+    let filled = baked
+        .data
+        .chunks_exact(3)
+        .filter(|p| p.iter().any(|&v| v > 0.0))
+        .count();
+    assert!(filled > n, "dilation fills the gutters: {filled} vs {n}");
+}
+
+#[test]
+fn a_normal_map_follows_the_synthesis_frame_rotation() {
+    // A flat plane; the exemplar is laid on it turned by θ (corner UVs of
+    // a rotated, uniform mapping). A constant normal map tilted towards the
+    // exemplar's +x must come out, in world space, tilted towards the
+    // surface direction of the exemplar's +x: rotated by θ.
+    let mesh = builtin_mesh("plane", &BuiltinOptions::default()).unwrap();
+    let tris = triangles(&mesh);
+    let size = 128u32;
+    let atlas = build_uv_atlas(
+        &mesh.positions,
+        &tris,
+        &AtlasSettings {
+            size,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let texel_face = rasterise_faces(&atlas.corner_uvs, size);
+    let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
+    let up = mesh.face_normal(0);
+    let (ex, ey) = (
+        up.any_orthonormal_vector(),
+        up.cross(up.any_orthonormal_vector()),
+    );
+    let tilt = Vec3::new(0.6, 0.0, 0.8);
+    let mut normal_map = Image::new(8, 8, 3);
+    for px in normal_map.data.chunks_exact_mut(3) {
+        px.copy_from_slice(&((tilt + Vec3::ONE) * 0.5).to_array());
+    }
+    for theta in [0.0f32, 30.0, 90.0, 200.0] {
+        let th = theta.to_radians();
+        // Exemplar s axis on the surface: ex turned by θ about the normal.
+        let s_e = ex * th.cos() + ey * th.sin();
+        let t_e = up.cross(s_e);
+        let layers: Vec<[[Vec2; 3]; 3]> = tris
+            .iter()
+            .map(|t| {
+                let uv = t.map(|v| {
+                    let p = mesh.positions[v as usize];
+                    // u along s_e, v down = against t_e.
+                    Vec2::new(p.dot(s_e), -p.dot(t_e)) * 0.5
+                });
+                [uv; 3]
+            })
+            .collect();
+        let src = BlendUvSource::new(&mesh.positions, &tris, &frames, &layers);
+        let target = BakeTarget {
+            corner_uvs: &atlas.corner_uvs,
+            texel_face: &texel_face,
+            size,
+            padding_px: 2,
+        };
+        let maps = [ChannelMap {
+            image: &normal_map,
+            kind: ChannelKind::Normal,
+        }];
+        let exemplar = Image::new(8, 8, 3);
+        let (_, out) = bake_channels(&target, &src, &[&exemplar], Wrap::Repeat, &maps);
+        let expect = (s_e * tilt.x + t_e * tilt.y + up * tilt.z).normalize();
+        let mut checked = 0;
+        for (i, &f) in texel_face.iter().enumerate() {
+            if f == u32::MAX {
+                continue;
+            }
+            let px = &out[0].data[3 * i..3 * i + 3];
+            let n = Vec3::new(px[0], px[1], px[2]) * 2.0 - Vec3::ONE;
+            let s_a = frames.s[f as usize];
+            let t_a = up.cross(s_a);
+            let world = (s_a * n.x + t_a * n.y + up * n.z).normalize();
+            assert!(
+                world.dot(expect) > 0.999,
+                "θ = {theta}°: baked normal {world} vs {expect}"
+            );
+            checked += 1;
+        }
+        assert!(checked > 1000);
+    }
+}
+
+#[test]
+fn bake_runs_on_meshes_with_boundaries_and_several_components() {
+    for (mesh, min_charts) in [
+        ("../shared/data/meshes/teapot_open.obj", 2),
+        ("../shared/data/meshes/mushroom.off", 2),
+    ] {
+        let world = run(&jump_bake(mesh, 512, r#""glb", "baked_obj""#))
+            .unwrap_or_else(|e| panic!("{mesh}: {e}"));
+        let asset = world.resource::<BakedAsset>();
+        assert_eq!(asset.uvs.len(), asset.mesh.corner_count());
+        assert_eq!(asset.colour.width, 512);
+        let m = &world.resource::<Metrics>().stages[3];
+        assert_eq!(m["bake_method"], "jump_map_blend");
+        assert!(
+            m["atlas_charts"].as_u64().unwrap() >= min_charts,
+            "{mesh}: {m:?}"
+        );
+        assert!(world.resource::<ExportJob>().baked_asset.is_some());
+    }
+}
+
+#[test]
+fn bake_of_vertex_colours_on_a_retiled_mesh_and_of_lapped_pastes() {
+    // Vertex colours on a retiled mesh (projected back onto the original).
+    let text = r#"
+seed = 5
+[input]
+mesh = "../shared/data/meshes/eight.off"
+exemplar = "builtin:stripes"
+[[stage]]
+kind = "retile"
+levels = 1
+[[stage]]
+kind = "orientation"
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "bake"
+size = 256
+[[stage]]
+kind = "export"
+formats = ["glb"]
+"#;
+    let world = run(text).unwrap();
+    let m = &world.resource::<Metrics>().stages[3];
+    assert_eq!(m["bake_method"], "vertex_colours");
+    let asset = world.resource::<BakedAsset>();
+    // The baked colours are the result's: their mean matches the vertex
+    // colours' mean.
+    let active = world.resource::<ActiveMesh>().0;
+    let colours = world.get::<VertexColours>(active).unwrap();
+    let mean_v: f32 = colours.values.iter().sum::<f32>() / colours.values.len() as f32;
+    // Mean over the texels inside chart faces.
+    let faces: Vec<[Vec2; 3]> = asset
+        .uvs
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    let texel_face = rasterise_faces(&faces, asset.colour.width);
+    let inside: Vec<f32> = texel_face
+        .iter()
+        .enumerate()
+        .filter(|(_, f)| **f != u32::MAX)
+        .flat_map(|(i, _)| asset.colour.data[3 * i..3 * i + 3].to_vec())
+        .collect();
+    let mean_t = inside.iter().sum::<f32>() / inside.len() as f32;
+    assert!(
+        (mean_v - mean_t).abs() < 0.1,
+        "vertex mean {mean_v}, baked mean {mean_t}"
+    );
+
+    // Lapped pastes, composited in order.
+    let text = r#"
+seed = 4
+[input]
+mesh = "../shared/data/meshes/eight.off"
+exemplar = "builtin:noise"
+[[stage]]
+kind = "tangent_field"
+isotropic = true
+patch_size = 0.25
+[[stage]]
+kind = "lapped_paste"
+[[stage]]
+kind = "bake"
+size = 256
+[[stage]]
+kind = "export"
+formats = ["baked_obj"]
+"#;
+    let world = run(text).unwrap();
+    let m = &world.resource::<Metrics>().stages[2];
+    assert_eq!(m["bake_method"], "lapped_pastes");
+    let asset = world.resource::<BakedAsset>();
+    let spread = {
+        let d = &asset.colour.data;
+        let mean = d.iter().sum::<f32>() / d.len() as f32;
+        d.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / d.len() as f32
+    };
+    assert!(
+        spread > 1e-3,
+        "the pastes' texture shows: variance {spread}"
+    );
+}
+
+#[test]
+fn formats_that_need_a_bake_say_so() {
+    let text = r#"
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[[stage]]
+kind = "export"
+formats = ["glb"]
+"#;
+    let e = run(text).expect_err("glb without bake fails");
+    assert!(e.contains("add a `bake` stage"), "{e}");
+    let text = r#"
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[[stage]]
+kind = "bake"
+"#;
+    let e = run(text).expect_err("nothing to bake");
+    assert!(e.contains("nothing to bake"), "{e}");
+}
+
+#[test]
+fn bake_is_identical_at_one_and_two_threads() {
+    let text = jump_bake("builtin:torus", 256, r#""glb""#);
+    let glb = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            let world = run(&text).unwrap();
+            surfsynth::output::gltf::encode_glb(world.resource::<BakedAsset>()).unwrap()
+        })
+    };
+    assert!(glb(1) == glb(2), "GLB bytes differ between 1 and 2 threads");
+}
+
+/// Runs the Khronos glTF validator (npm `gltf-validator`, installed on
+/// demand into `target/gltf-validator`) on `bytes`; `None` with a printed
+/// reason when node/npm are missing or the install fails.
+fn khronos_validate(bytes: &[u8]) -> Option<serde_json::Value> {
+    use std::process::Command;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/gltf-validator");
+    let module = root.join("node_modules/gltf-validator");
+    let ok = |c: &mut Command| c.output().map(|o| o.status.success()).unwrap_or(false);
+    if !ok(Command::new("node").arg("--version")) {
+        eprintln!("SKIPPED: node is not installed; the Khronos validator needs it");
+        return None;
+    }
+    if !module.exists() {
+        std::fs::create_dir_all(&root).ok()?;
+        let out = Command::new("npm")
+            .args([
+                "install",
+                "--no-audit",
+                "--no-fund",
+                "--silent",
+                "gltf-validator@2.0.0-dev.3.10",
+            ])
+            .current_dir(&root)
+            .output();
+        match out {
+            Ok(o) if o.status.success() && module.exists() => {}
+            Ok(o) => {
+                eprintln!(
+                    "SKIPPED: `npm install gltf-validator` failed: {}",
+                    String::from_utf8_lossy(&o.stderr)
+                );
+                return None;
+            }
+            Err(e) => {
+                eprintln!("SKIPPED: npm is not available: {e}");
+                return None;
+            }
+        }
+    }
+    let dir = tempfile::tempdir().ok()?;
+    let glb = dir.path().join("asset.glb");
+    std::fs::write(&glb, bytes).ok()?;
+    let script = r#"
+const v = require(process.argv[2]);
+const fs = require('fs');
+v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[3])))
+  .then(r => { console.log(JSON.stringify(r)); })
+  .catch(e => { console.error(String(e)); process.exit(3); });
+"#;
+    let script_path = dir.path().join("validate.js");
+    std::fs::write(&script_path, script).ok()?;
+    let out = Command::new("node")
+        .arg(&script_path)
+        .arg(module.to_str()?)
+        .arg(glb.to_str()?)
+        .output()
+        .ok()?;
+    assert!(
+        out.status.success(),
+        "the validator could not run: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(serde_json::from_slice(&out.stdout).expect("validator prints JSON"))
+}
+
+#[test]
+fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
+    // With material channels: the normal and roughness maps become the
+    // material's normalTexture and metallicRoughnessTexture.
+    let text = jump_bake("../shared/data/meshes/bunny_1k8.obj", 256, r#""glb", "baked_obj""#)
+        .replace(
+            "exemplar = \"builtin:bricks\"",
+            "exemplar = \"builtin:bricks\"\nheight_map = \"derive:builtin\"\nnormal_map = \"derive:height\"\nroughness_map = \"derive:luminance\"",
+        );
+    let world = run(&text).unwrap();
+    let asset = world.resource::<BakedAsset>();
+    let roles: Vec<&str> = asset.maps.iter().map(|(r, _)| r.as_str()).collect();
+    assert_eq!(roles, ["normal", "roughness", "height"]);
+    let bytes = surfsynth::output::gltf::encode_glb(asset).unwrap();
+
+    // Re-read with the gltf crate.
+    let gltf = gltf::Gltf::from_slice(&bytes).expect("the gltf crate parses the GLB");
+    assert_eq!(
+        gltf.textures().count(),
+        3,
+        "colour, normal, metallic-roughness"
+    );
+    let image = gltf.images().next().unwrap();
+    match image.source() {
+        gltf::image::Source::View { mime_type, view } => {
+            assert_eq!(mime_type, "image/png");
+            let blob = gltf.blob.as_ref().expect("BIN chunk");
+            let png = &blob[view.offset()..view.offset() + view.length()];
+            assert_eq!(&png[1..4], b"PNG");
+        }
+        gltf::image::Source::Uri { .. } => panic!("the texture must be embedded"),
+    }
+    let material = gltf.materials().next().unwrap();
+    assert!(
+        material
+            .pbr_metallic_roughness()
+            .base_color_texture()
+            .is_some()
+    );
+    assert!(material.normal_texture().is_some());
+    assert!(
+        material
+            .pbr_metallic_roughness()
+            .metallic_roughness_texture()
+            .is_some()
+    );
+    let prim = gltf.meshes().next().unwrap().primitives().next().unwrap();
+    let positions = prim.get(&gltf::Semantic::Positions).unwrap().count();
+    let uvs = prim.get(&gltf::Semantic::TexCoords(0)).unwrap().count();
+    assert_eq!(uvs, positions, "one UV per glTF vertex");
+    // Seams split vertices: at least the mesh's vertices, at most its corners.
+    assert!(positions >= asset.mesh.vertex_count() && positions <= asset.mesh.corner_count());
+    assert_eq!(prim.indices().unwrap().count(), asset.mesh.corner_count());
+
+    // The Khronos validator.
+    if let Some(report) = khronos_validate(&bytes) {
+        let issues = &report["issues"];
+        assert_eq!(
+            issues["numErrors"],
+            0,
+            "validator errors: {}",
+            serde_json::to_string_pretty(&issues["messages"]).unwrap()
+        );
+        eprintln!(
+            "gltf-validator: {} errors, {} warnings",
+            issues["numErrors"], issues["numWarnings"]
+        );
+    }
+}
+
+#[test]
+fn atlas_splits_charts_at_non_manifold_edges_and_orientation_flips() {
+    // Three triangles on one edge (a fin), a fourth with flipped winding
+    // next to the first, a degenerate sliver and a duplicate vertex index.
+    let positions = vec![
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(1.0, 0.0, 0.0),
+        Vec3::new(0.5, 1.0, 0.0),
+        Vec3::new(0.5, -1.0, 0.0),
+        Vec3::new(0.5, 0.0, 1.0),
+        Vec3::new(1.5, 1.0, 0.0),
+        Vec3::new(2.0, 0.0, 0.0),
+    ];
+    let tris = vec![
+        [0, 1, 2],
+        [1, 0, 3],
+        [0, 1, 4],
+        [2, 5, 1], // traverses 1→2 like [0, 1, 2]: a flip
+        [1, 6, 6], // degenerate
+        [2, 5, 6],
+    ];
+    let settings = AtlasSettings {
+        size: 128,
+        ..Default::default()
+    };
+    let atlas = build_uv_atlas(&positions, &tris, &settings).unwrap();
+    let (double, covered) = overlaps(&atlas.corner_uvs, 128);
+    assert_eq!(double, 0, "{double} of {covered} texels in two faces");
+    // The fin's three faces cannot share one chart across the edge 0–1.
+    let c = &atlas.charts.chart_of_face;
+    assert!(!(c[0] == c[1] && c[1] == c[2]), "charts {c:?}");
+    assert_ne!(c[0], c[3], "an orientation flip ends the chart: {c:?}");
+}
