@@ -187,6 +187,10 @@ pub struct ExportJob {
     pub baked: Option<(PolyMesh, Vec<Vec2>, Image)>,
     /// Lapped-texture pastes for runtime pasting (format `pastes`).
     pub pastes: Option<PasteExport>,
+    /// The result mapped back onto the original input mesh (`map_back`):
+    /// the input mesh, its vertex colours and its preview renders, written as
+    /// `<stem>_original.ply` and `original_preview_*.png`.
+    pub original: Option<(PolyMesh, VertexColours, Vec<Image>)>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
