@@ -220,6 +220,8 @@ struct LevelGeometry {
 /// Queries per parallel task in pass 1, fixed so results do not depend on
 /// the thread count.
 const PASS1_CHUNK: usize = 64;
+/// Vertices per parallel flattening task (each task makes one scratch).
+const FLATTEN_CHUNK: usize = 256;
 /// Queries per parallel task within a pass-2 batch.
 const PASS2_CHUNK: usize = 64;
 
@@ -362,20 +364,29 @@ pub fn wei_levoy_synthesis(
             };
             let tp = template.points();
             let mut stencils = vec![StencilPoint::UNCOVERED; nv * tp];
+            // One scratch per fixed chunk of vertices: its buffers are as
+            // long as the mesh, so it must not be made per vertex (rayon's
+            // `map_init` may call its init that often).
             let uncovered: usize = stencils
-                .par_chunks_mut(tp)
+                .par_chunks_mut(tp * FLATTEN_CHUNK)
                 .enumerate()
-                .map_init(FlattenScratch::new, |scratch, (v, st)| {
-                    let r = flatten_stencil(
-                        &geo.adjacency,
-                        &level.mesh.positions,
-                        PatchSeed::Vertex(v as u32),
-                        &level.frames[v],
-                        template,
-                        st,
-                        scratch,
-                    );
-                    tp - r.covered
+                .map(|(c, chunk)| {
+                    let mut scratch = FlattenScratch::new();
+                    let mut uncovered = 0;
+                    for (i, st) in chunk.chunks_exact_mut(tp).enumerate() {
+                        let v = c * FLATTEN_CHUNK + i;
+                        let r = flatten_stencil(
+                            &geo.adjacency,
+                            &level.mesh.positions,
+                            PatchSeed::Vertex(v as u32),
+                            &level.frames[v],
+                            template,
+                            st,
+                            &mut scratch,
+                        );
+                        uncovered += tp - r.covered;
+                    }
+                    uncovered
                 })
                 .sum();
             report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
@@ -548,59 +559,94 @@ fn coarse_queries(
     if dim == 0 {
         return (out, 0);
     }
-    let positions = &levels[l].mesh.positions;
+    // One scratch per fixed chunk of vertices (see pass 2).
     let misses: usize = out
-        .par_chunks_mut(dim)
+        .par_chunks_mut(dim * FLATTEN_CHUNK)
         .enumerate()
-        .map_init(
-            || (FlattenScratch::new(), Vec::<StencilPoint>::new()),
-            |(scratch, stencil), (v, row)| {
-                let frame = &levels[l].frames[v];
-                let p: Vec3 = positions[v];
-                let mut misses = 0;
-                let mut o = 0;
-                for part in parts {
-                    let c = l + part.level_offset as usize;
-                    let cg = &geometry[c];
-                    let len = part.values(ch);
-                    let dst = &mut row[o..o + len];
-                    o += len;
-                    let hit = cg
-                        .bvh
-                        .as_ref()
-                        .and_then(|b| b.cast_line(p, frame.n, reach * cg.spacing));
-                    let Some(hit) = hit else {
-                        for px in dst.chunks_exact_mut(ch) {
-                            px.copy_from_slice(&cg.default);
-                        }
-                        misses += 1;
-                        continue;
-                    };
-                    let template = Template {
-                        size: part.size,
-                        spacing: cg.spacing,
-                    };
-                    stencil.clear();
-                    stencil.resize(template.points(), StencilPoint::UNCOVERED);
-                    flatten_stencil(
-                        &cg.adjacency,
-                        &levels[c].mesh.positions,
-                        PatchSeed::Point {
-                            tri: hit.tri,
-                            at: hit.at,
-                        },
-                        frame,
-                        template,
-                        stencil,
-                        scratch,
-                    );
-                    resample_stencil(stencil, &results[c].colours, ch, &cg.default, dst);
-                }
-                misses
-            },
-        )
+        .map(|(c, rows)| {
+            let mut scratch = FlattenScratch::new();
+            let mut stencil = Vec::<StencilPoint>::new();
+            let mut misses = 0;
+            for (i, row) in rows.chunks_exact_mut(dim).enumerate() {
+                misses += coarse_row(
+                    levels,
+                    geometry,
+                    results,
+                    l,
+                    parts,
+                    ch,
+                    reach,
+                    c * FLATTEN_CHUNK + i,
+                    row,
+                    &mut scratch,
+                    &mut stencil,
+                );
+            }
+            misses
+        })
         .sum();
     (out, misses)
+}
+
+/// The coarser parts of vertex `v`'s neighbourhood into `row`; returns the
+/// number of parent lookups that met nothing.
+#[allow(clippy::too_many_arguments)]
+fn coarse_row(
+    levels: &[SynthesisLevel],
+    geometry: &[LevelGeometry],
+    results: &[LevelResult],
+    l: usize,
+    parts: &[Part],
+    ch: usize,
+    reach: f32,
+    v: usize,
+    row: &mut [f32],
+    scratch: &mut FlattenScratch,
+    stencil: &mut Vec<StencilPoint>,
+) -> usize {
+    let positions = &levels[l].mesh.positions;
+    let frame = &levels[l].frames[v];
+    let p: Vec3 = positions[v];
+    let mut misses = 0;
+    let mut o = 0;
+    for part in parts {
+        let c = l + part.level_offset as usize;
+        let cg = &geometry[c];
+        let len = part.values(ch);
+        let dst = &mut row[o..o + len];
+        o += len;
+        let hit = cg
+            .bvh
+            .as_ref()
+            .and_then(|b| b.cast_line(p, frame.n, reach * cg.spacing));
+        let Some(hit) = hit else {
+            for px in dst.chunks_exact_mut(ch) {
+                px.copy_from_slice(&cg.default);
+            }
+            misses += 1;
+            continue;
+        };
+        let template = Template {
+            size: part.size,
+            spacing: cg.spacing,
+        };
+        stencil.clear();
+        stencil.resize(template.points(), StencilPoint::UNCOVERED);
+        flatten_stencil(
+            &cg.adjacency,
+            &levels[c].mesh.positions,
+            PatchSeed::Point {
+                tri: hit.tri,
+                at: hit.at,
+            },
+            frame,
+            template,
+            stencil,
+            scratch,
+        );
+        resample_stencil(stencil, &results[c].colours, ch, &cg.default, dst);
+    }
+    misses
 }
 
 /// SplitMix64-style mixing of three words into one seed.
