@@ -588,3 +588,88 @@ kind = "init_colours"
     }
     assert_eq!(seen, 3, "every level is initialised");
 }
+
+/// `match` on real `retile` output (not the builtin pyramid): an icosphere
+/// re-tiled to 3,000 vertices, 3 levels, orientations relaxed 4-way; the
+/// synthesised stones score a texture energy well below a random shuffle of
+/// exemplar texels, with the exhaustive and the PCA + kd-tree back-ends.
+#[test]
+fn match_on_retiled_output_beats_a_random_shuffle() {
+    use surfsynth::kernels::retile::{RetileSettings, retile};
+    let input = builtin_mesh("icosphere", &BuiltinOptions::default()).expect("icosphere");
+    let pyramid = retile(
+        &input,
+        &RetileSettings {
+            levels: 3,
+            ..RetileSettings::with_vertices(3_000)
+        },
+    )
+    .expect("retile runs");
+    let levels = levels_of(pyramid.levels.into_iter().map(|l| l.mesh).collect());
+    let relaxed = relax_orientation(
+        &views(&levels),
+        &RelaxSettings {
+            mode: OrientationMode::Relax,
+            symmetry: 4,
+            iterations: 10,
+            seed: 2,
+        },
+    );
+    let inputs: Vec<SynthesisLevel> = levels
+        .iter()
+        .zip(&relaxed.frames)
+        .map(|(l, f)| SynthesisLevel {
+            mesh: &l.mesh,
+            frames: f,
+        })
+        .collect();
+    let exemplar = texture_crop("stones", 32);
+    let fine = &levels[0];
+    let energy_of = |colours: &[f32], spacing: f32| {
+        let signal = SurfaceSignal::VertexColours {
+            values: colours,
+            channels: exemplar.channels as usize,
+        };
+        let settings = EnergySettings {
+            neighbourhood: 5,
+            samples: 1500,
+            seed: 3,
+            ..Default::default()
+        };
+        surface_texture_energy(
+            &fine.mesh,
+            &fine.topology,
+            &relaxed.frames[0],
+            spacing,
+            &signal,
+            &exemplar,
+            &settings,
+        )
+        .mean
+    };
+    let (shuffle, _) = random_texels(&exemplar, fine.mesh.vertex_count(), 5);
+    for (label, search) in [("exhaustive", SearchKind::Exhaustive), ("pca_kdtree", PCA)] {
+        let r = wei_levoy_synthesis(
+            &inputs,
+            &exemplar,
+            &WlSettings {
+                search,
+                wrap: Wrap::Repeat,
+                seed: 4,
+                ..Default::default()
+            },
+            None,
+        )
+        .expect("synthesis runs");
+        let spacing = r[0].report.spacing;
+        assert_eq!(r[0].report.parent_misses, 0, "{label}");
+        assert!(r[0].report.uncovered < 0.01, "{label}: {:?}", r[0].report);
+        let e_random = energy_of(&shuffle.values, spacing);
+        let e = energy_of(&r[0].colours, spacing);
+        eprintln!("retiled sphere, {label}: synthesis {e:.5}, shuffle {e_random:.5}");
+        assert!(
+            e <= 0.5 * e_random,
+            "{label}: synthesis energy {e} should be at most half the shuffle's {e_random}"
+        );
+    }
+}
