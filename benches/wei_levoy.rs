@@ -32,14 +32,15 @@ use surfsynth::kernels::flatten::TriangleAdjacency;
 use surfsynth::kernels::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
 };
+use surfsynth::kernels::retile::{RetileSettings, retile};
 use surfsynth::kernels::wl_match::features::exemplar_features;
 use surfsynth::kernels::wl_match::search::{Match, build_search};
 use surfsynth::kernels::wl_match::{
     PAPER_NEIGHBOURHOODS, SearchKind, SynthesisLevel, WlSettings, neighbourhood_parts,
     wei_levoy_synthesis,
 };
+use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{PolyMesh, Topology};
-use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
 
 /// The 64² exemplar: the top-left of the shared stones photograph, or the
 /// builtin bricks when the shared data is not beside the clone.
@@ -74,22 +75,29 @@ struct Level {
     adjacency: TriangleAdjacency,
 }
 
-fn sphere_pyramid(subdivisions: u32) -> Vec<Level> {
-    builtin_pyramid(&BuiltinPyramidSettings {
-        mesh: "icosphere".into(),
-        levels: 4,
-        subdivisions,
-        ..Default::default()
-    })
-    .expect("icosphere pyramid")
-    .into_iter()
-    .map(|mesh| Level {
-        normals: mesh.vertex_normals(),
-        topology: Topology::build(&mesh),
-        adjacency: TriangleAdjacency::new(&mesh),
-        mesh,
-    })
-    .collect()
+/// The paper's sphere: an icosphere re-tiled (`retile`) to 24,576 vertices,
+/// 4 levels (24,576 / 6,144 / 1,536 / 384 vertices).
+fn sphere_pyramid() -> Vec<Level> {
+    let input = builtin_mesh(
+        "icosphere",
+        &BuiltinOptions {
+            subdivisions: 5,
+            ..Default::default()
+        },
+    )
+    .expect("icosphere");
+    retile(&input, &RetileSettings::with_vertices(24_576))
+        .expect("retiled sphere")
+        .levels
+        .into_iter()
+        .map(|l| l.mesh)
+        .map(|mesh| Level {
+            normals: mesh.vertex_normals(),
+            topology: Topology::build(&mesh),
+            adjacency: TriangleAdjacency::new(&mesh),
+            mesh,
+        })
+        .collect()
 }
 
 fn views(levels: &[Level]) -> Vec<OrientationLevel<'_>> {
@@ -116,8 +124,9 @@ fn relax_settings() -> RelaxSettings {
 fn bench_relax(c: &mut Criterion) {
     let mut group = c.benchmark_group("wl_relax_orientation_30");
     group.sample_size(10);
-    for (label, s) in [("10k", 5u32), ("41k", 6)] {
-        let levels = sphere_pyramid(s);
+    {
+        let label = "24576";
+        let levels = sphere_pyramid();
         let views = views(&levels);
         group.throughput(Throughput::Elements(levels[0].mesh.vertex_count() as u64));
         group.bench_with_input(BenchmarkId::new("sphere", label), &views, |b, v| {
@@ -132,8 +141,9 @@ fn bench_synthesis(c: &mut Criterion) {
     let mut group = c.benchmark_group("wl_synthesis_64px_4_levels");
     group.sample_size(10);
     group.measurement_time(Duration::from_secs(30));
-    for (label, s) in [("10k", 5u32), ("41k", 6)] {
-        let levels = sphere_pyramid(s);
+    {
+        let label = "24576";
+        let levels = sphere_pyramid();
         let frames = relax_orientation(&views(&levels), &relax_settings()).frames;
         let inputs: Vec<SynthesisLevel> = levels
             .iter()

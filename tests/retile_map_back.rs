@@ -79,7 +79,11 @@ fn map_smooth_function_back(name: &str, input: &PolyMesh, vertices: u32) -> Case
     for (v, t) in mapped_texels.iter().enumerate() {
         assert_eq!(t.y, 0.5, "{name}: texel of vertex {v} was interpolated");
         let id = t.x - 0.5;
-        assert_eq!(id.fract(), 0.0, "{name}: texel of vertex {v} was interpolated");
+        assert_eq!(
+            id.fract(),
+            0.0,
+            "{name}: texel of vertex {v} was interpolated"
+        );
         let near = (result.positions[id as usize] - input.positions[v]).length();
         assert!(
             near <= 2.0 * edge,
@@ -158,7 +162,12 @@ fn smooth_colours_come_back_on_a_mesh_with_a_boundary_and_two_components() {
         .map(|&p| (p - lo) * scale)
         .collect();
     let n = positions.len() as u32;
-    positions.extend(torus.positions.iter().map(|&p| p + Vec3::new(4.0, 0.0, 0.0)));
+    positions.extend(
+        torus
+            .positions
+            .iter()
+            .map(|&p| p + Vec3::new(4.0, 0.0, 0.0)),
+    );
     let faces: Vec<Vec<u32>> = mushroom
         .faces()
         .map(|f| f.to_vec())
@@ -231,26 +240,40 @@ fn ply_header(path: &std::path::Path) -> (usize, bool) {
 
 #[test]
 fn the_cli_writes_the_result_mapped_back_onto_the_original_mesh() {
-    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("map_back_cli");
-    let _ = std::fs::remove_dir_all(&out);
     let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("configs/12_wl_sphere_stones_random.toml");
-    let (code, _, stderr) = common::run_cli(&[
-        "run",
-        config.to_str().expect("utf-8 path"),
-        "--out",
-        out.to_str().expect("utf-8 path"),
-        "--quiet",
-        "--set",
-        "input.mesh_options.subdivisions=3",
-        "--set",
-        "stage.1.vertices=1536",
-        "--set",
-        "stage.1.levels=2",
-        "--set",
-        "stage.4.neighbourhoods=[[3, 1], [5, 2]]",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
+    let run = |threads: &str| {
+        let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("map_back_cli_{threads}"));
+        let _ = std::fs::remove_dir_all(&out);
+        let (code, _, stderr) = common::run_cli(&[
+            "run",
+            config.to_str().expect("utf-8 path"),
+            "--out",
+            out.to_str().expect("utf-8 path"),
+            "--threads",
+            threads,
+            "--quiet",
+            "--set",
+            "input.mesh_options.subdivisions=3",
+            "--set",
+            "stage.1.vertices=1536",
+            "--set",
+            "stage.1.levels=2",
+            "--set",
+            "stage.4.neighbourhoods=[[3, 1], [5, 2]]",
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        out
+    };
+    let out = run("2");
+    // Same bytes at one thread.
+    let one = run("1");
+    assert!(
+        std::fs::read(out.join("result_original.ply")).expect("written")
+            == std::fs::read(one.join("result_original.ply")).expect("written"),
+        "result_original.ply differs between 1 and 2 threads"
+    );
     let (vertices, coloured) = ply_header(&out.join("result_original.ply"));
     // The original icosphere at 3 subdivisions has 642 vertices.
     assert_eq!(vertices, 642);
@@ -267,5 +290,8 @@ fn the_cli_writes_the_result_mapped_back_onto_the_original_mesh() {
     let m = &metrics["stages"][4]["metrics"];
     assert_eq!(m["mapped"], true, "{m}");
     assert_eq!(m["vertices"], 642, "{m}");
-    assert!(m["max_distance_texels"].as_f64().expect("a number") < 1.0, "{m}");
+    assert!(
+        m["max_distance_texels"].as_f64().expect("a number") < 1.0,
+        "{m}"
+    );
 }
