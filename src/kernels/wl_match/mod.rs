@@ -321,6 +321,7 @@ pub fn wei_levoy_synthesis(
         let started = Instant::now();
         let coarse_parts = &parts[1..];
         let coarse_dim: usize = coarse_parts.iter().map(|p| p.values(ch)).sum();
+        let coarse_span = tracing::info_span!("wl_coarse_parts", level = l).entered();
         let (coarse, misses) = coarse_queries(
             levels,
             &geometry,
@@ -330,6 +331,7 @@ pub fn wei_levoy_synthesis(
             ch,
             settings.parent_reach,
         );
+        drop(coarse_span);
         report.parent_misses = misses;
         report.flatten_seconds += started.elapsed().as_secs_f64();
 
@@ -363,6 +365,7 @@ pub fn wei_levoy_synthesis(
                 spacing: geo.spacing,
             };
             let tp = template.points();
+            let stencil_span = tracing::info_span!("wl_stencils", level = l).entered();
             let mut stencils = vec![StencilPoint::UNCOVERED; nv * tp];
             // One scratch per fixed chunk of vertices: its buffers are as
             // long as the mesh, so it must not be made per vertex (rayon's
@@ -389,6 +392,8 @@ pub fn wei_levoy_synthesis(
                     uncovered
                 })
                 .sum();
+            drop(stencil_span);
+            let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
             report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
             // Which vertices each vertex reads (covered stencil vertices).
             let reads: Vec<Vec<u32>> = stencils
@@ -413,6 +418,7 @@ pub fn wei_levoy_synthesis(
             drop(reads);
             report.batches = batches.len();
             report.flatten_seconds += started.elapsed().as_secs_f64();
+            drop(schedule_span);
 
             let db = exemplar_features(&pyramid, l, &parts, settings.wrap);
             let search = build_search(settings.search, db, mix(settings.seed, l as u64, 12));
