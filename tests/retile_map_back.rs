@@ -67,8 +67,8 @@ fn map_smooth_function_back(name: &str, input: &PolyMesh, vertices: u32) -> Case
     let (mut sum, mut max) = (0.0f64, 0.0f32);
     for (v, &p) in input.positions.iter().enumerate() {
         let want = smooth(p);
-        for c in 0..3 {
-            let e = (mapped.colours[3 * v + c] - want[c]).abs();
+        for (c, w) in want.iter().enumerate() {
+            let e = (mapped.colours[3 * v + c] - w).abs();
             sum += e as f64;
             max = max.max(e);
         }
