@@ -554,13 +554,11 @@ pub fn map_back(
     let hits: Vec<Option<SurfacePoint>> = positions
         .par_iter()
         .enumerate()
-        .map(|(v, &p)| {
-            match normals.get(v).copied() {
-                Some(normal) if normal.length_squared() > 0.0 => {
-                    projector.project_facing(p, normal, NONE)
-                }
-                _ => projector.project(p),
+        .map(|(v, &p)| match normals.get(v).copied() {
+            Some(normal) if normal.length_squared() > 0.0 => {
+                projector.project_facing(p, normal, NONE)
             }
+            _ => projector.project(p),
         })
         .collect();
     for (v, hit) in hits.iter().enumerate() {

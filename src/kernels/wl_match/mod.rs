@@ -395,26 +395,44 @@ pub fn wei_levoy_synthesis(
             drop(stencil_span);
             let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
             report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
-            // Which vertices each vertex reads (covered stencil vertices).
-            let reads: Vec<Vec<u32>> = stencils
-                .par_chunks(tp)
-                .map(|st| {
-                    let mut r: Vec<u32> = st
-                        .iter()
-                        .filter(|s| s.is_covered())
-                        .flat_map(|s| {
-                            (0..3)
-                                .filter(|&k| s.weights[k] != 0.0)
-                                .map(|k| s.vertices[k])
-                        })
-                        .collect();
-                    r.sort_unstable();
-                    r.dedup();
-                    r
+            // Which vertices each vertex reads (covered stencil vertices),
+            // as one flat list with offsets, built per fixed chunk.
+            let chunks: Vec<(Vec<u32>, Vec<u32>)> = stencils
+                .par_chunks(tp * FLATTEN_CHUNK)
+                .map(|chunk| {
+                    let mut flat = Vec::with_capacity(chunk.len());
+                    let mut counts = Vec::with_capacity(chunk.len() / tp.max(1));
+                    let mut one: Vec<u32> = Vec::with_capacity(3 * tp);
+                    for st in chunk.chunks_exact(tp) {
+                        one.clear();
+                        for s in st.iter().filter(|s| s.is_covered()) {
+                            for k in 0..3 {
+                                if s.weights[k] != 0.0 {
+                                    one.push(s.vertices[k]);
+                                }
+                            }
+                        }
+                        one.sort_unstable();
+                        one.dedup();
+                        flat.extend_from_slice(&one);
+                        counts.push(one.len() as u32);
+                    }
+                    (flat, counts)
                 })
                 .collect();
+            let mut offsets = Vec::with_capacity(nv + 1);
+            offsets.push(0usize);
+            let mut reads = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum());
+            for (flat, counts) in chunks {
+                reads.extend_from_slice(&flat);
+                for c in counts {
+                    offsets.push(offsets[offsets.len() - 1] + c as usize);
+                }
+            }
             let order = schedule::random_order(nv, mix(settings.seed, l as u64, 2));
-            let batches = schedule::dependency_batches(&order, |v| &reads[v as usize]);
+            let batches = schedule::dependency_batches(&order, |v| {
+                &reads[offsets[v as usize]..offsets[v as usize + 1]]
+            });
             drop(reads);
             report.batches = batches.len();
             report.flatten_seconds += started.elapsed().as_secs_f64();

@@ -106,7 +106,11 @@ fn build(
         )
     };
     let shift = |n: Node, by: u32| Node {
-        left: if n.left == u32::MAX { n.left } else { n.left + by },
+        left: if n.left == u32::MAX {
+            n.left
+        } else {
+            n.left + by
+        },
         right: if n.right == u32::MAX {
             n.right
         } else {
