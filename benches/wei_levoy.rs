@@ -4,16 +4,16 @@
 //! criterion reports in flop/s (2 flops per multiply-add of the matrix
 //! products).
 //!
-//! The paper's sphere has 24 576 vertices; icospheres have 10 242 or 40 962,
-//! so both pyramids are measured (levels with 10 242/2 562/642/162 and
-//! 40 962/10 242/2 562/642 vertices). The paper's timings (450 MHz Pentium II):
-//! relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
+//! The paper's sphere: an icosphere re-tiled by `retile` to 24 576 vertices,
+//! 4 levels (24 576 / 6 144 / 1 536 / 384). The paper's timings (450 MHz
+//! Pentium II): relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
 //!
-//! Measured on the shared 2-core machine under a load average of about 7
-//! (other builds running), so wall times are pessimistic: exhaustive search
-//! 45 GFLOP/s (peak ≈ 85); relaxation 0.29 s (10 k) and 1.2 s (41 k);
-//! synthesis 0.94 / 3.6 s exhaustive, 0.96 / 3.6 s PCA + kd-tree,
-//! 0.50 / 2.6 s TSVQ (10 k / 41 k). Flattening, not search, dominates at 64².
+//! Measured 2026-11-22 on the shared 2-core machine while other helpers were
+//! building (load average 4.4–6.3), so wall times are pessimistic and vary
+//! by ±30 % between runs: exhaustive search 55.8 GFLOP/s (≈ 66 % of the
+//! ≈ 85 GFLOP/s sgemm peak); relaxation (30 sweeps) 0.59–0.75 s; synthesis
+//! 2.85 s exhaustive, 1.73 s PCA + kd-tree, 1.11 s TSVQ (1.67 s in a later
+//! run at the same load). Flattening, not search, dominates at 64².
 //!
 //! Run with `cargo bench --bench wei_levoy`; keep a baseline with
 //! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
