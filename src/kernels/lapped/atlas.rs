@@ -242,11 +242,7 @@ pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
         })
         .collect();
     let mut seeds: Vec<u32> = (0..fc as u32).collect();
-    seeds.sort_by(|&a, &b| {
-        bend[a as usize]
-            .total_cmp(&bend[b as usize])
-            .then(a.cmp(&b))
-    });
+    seeds.sort_by(|&a, &b| bend[a as usize].total_cmp(&bend[b as usize]).then(a.cmp(&b)));
     for seed in seeds {
         if chart_of_face[seed as usize] != u32::MAX {
             continue;
