@@ -4,16 +4,16 @@
 //! criterion reports in flop/s (2 flops per multiply-add of the matrix
 //! products).
 //!
-//! The paper's sphere has 24 576 vertices; icospheres have 10 242 or 40 962,
-//! so both pyramids are measured (levels with 10 242/2 562/642/162 and
-//! 40 962/10 242/2 562/642 vertices). The paper's timings (450 MHz Pentium II):
-//! relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
+//! The paper's sphere: an icosphere re-tiled by `retile` to 24 576 vertices,
+//! 4 levels (24 576 / 6 144 / 1 536 / 384). The paper's timings (450 MHz
+//! Pentium II): relaxation 85 s, synthesis 695 s exhaustive, 82 s with TSVQ.
 //!
-//! Measured on the shared 2-core machine under a load average of about 7
-//! (other builds running), so wall times are pessimistic: exhaustive search
-//! 45 GFLOP/s (peak ≈ 85); relaxation 0.29 s (10 k) and 1.2 s (41 k);
-//! synthesis 0.94 / 3.6 s exhaustive, 0.96 / 3.6 s PCA + kd-tree,
-//! 0.50 / 2.6 s TSVQ (10 k / 41 k). Flattening, not search, dominates at 64².
+//! Measured 2026-11-22 on the shared 2-core machine while other helpers were
+//! building (load average 4.4–6.3), so wall times are pessimistic and vary
+//! by ±30 % between runs: exhaustive search 55.8 GFLOP/s (≈ 66 % of the
+//! ≈ 85 GFLOP/s sgemm peak); relaxation (30 sweeps) 0.59–0.75 s; synthesis
+//! 2.85 s exhaustive, 1.73 s PCA + kd-tree, 1.11 s TSVQ (1.67 s in a later
+//! run at the same load). Flattening, not search, dominates at 64².
 //!
 //! Run with `cargo bench --bench wei_levoy`; keep a baseline with
 //! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
@@ -32,14 +32,15 @@ use surfsynth::kernels::flatten::TriangleAdjacency;
 use surfsynth::kernels::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
 };
+use surfsynth::kernels::retile::{RetileSettings, retile};
 use surfsynth::kernels::wl_match::features::exemplar_features;
 use surfsynth::kernels::wl_match::search::{Match, build_search};
 use surfsynth::kernels::wl_match::{
     PAPER_NEIGHBOURHOODS, SearchKind, SynthesisLevel, WlSettings, neighbourhood_parts,
     wei_levoy_synthesis,
 };
+use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{PolyMesh, Topology};
-use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
 
 /// The 64² exemplar: the top-left of the shared stones photograph, or the
 /// builtin bricks when the shared data is not beside the clone.
@@ -74,22 +75,29 @@ struct Level {
     adjacency: TriangleAdjacency,
 }
 
-fn sphere_pyramid(subdivisions: u32) -> Vec<Level> {
-    builtin_pyramid(&BuiltinPyramidSettings {
-        mesh: "icosphere".into(),
-        levels: 4,
-        subdivisions,
-        ..Default::default()
-    })
-    .expect("icosphere pyramid")
-    .into_iter()
-    .map(|mesh| Level {
-        normals: mesh.vertex_normals(),
-        topology: Topology::build(&mesh),
-        adjacency: TriangleAdjacency::new(&mesh),
-        mesh,
-    })
-    .collect()
+/// The paper's sphere: an icosphere re-tiled (`retile`) to 24,576 vertices,
+/// 4 levels (24,576 / 6,144 / 1,536 / 384 vertices).
+fn sphere_pyramid() -> Vec<Level> {
+    let input = builtin_mesh(
+        "icosphere",
+        &BuiltinOptions {
+            subdivisions: 5,
+            ..Default::default()
+        },
+    )
+    .expect("icosphere");
+    retile(&input, &RetileSettings::with_vertices(24_576))
+        .expect("retiled sphere")
+        .levels
+        .into_iter()
+        .map(|l| l.mesh)
+        .map(|mesh| Level {
+            normals: mesh.vertex_normals(),
+            topology: Topology::build(&mesh),
+            adjacency: TriangleAdjacency::new(&mesh),
+            mesh,
+        })
+        .collect()
 }
 
 fn views(levels: &[Level]) -> Vec<OrientationLevel<'_>> {
@@ -116,8 +124,9 @@ fn relax_settings() -> RelaxSettings {
 fn bench_relax(c: &mut Criterion) {
     let mut group = c.benchmark_group("wl_relax_orientation_30");
     group.sample_size(10);
-    for (label, s) in [("10k", 5u32), ("41k", 6)] {
-        let levels = sphere_pyramid(s);
+    {
+        let label = "24576";
+        let levels = sphere_pyramid();
         let views = views(&levels);
         group.throughput(Throughput::Elements(levels[0].mesh.vertex_count() as u64));
         group.bench_with_input(BenchmarkId::new("sphere", label), &views, |b, v| {
@@ -132,8 +141,9 @@ fn bench_synthesis(c: &mut Criterion) {
     let mut group = c.benchmark_group("wl_synthesis_64px_4_levels");
     group.sample_size(10);
     group.measurement_time(Duration::from_secs(30));
-    for (label, s) in [("10k", 5u32), ("41k", 6)] {
-        let levels = sphere_pyramid(s);
+    {
+        let label = "24576";
+        let levels = sphere_pyramid();
         let frames = relax_orientation(&views(&levels), &relax_settings()).frames;
         let inputs: Vec<SynthesisLevel> = levels
             .iter()

@@ -588,3 +588,133 @@ kind = "init_colours"
     }
     assert_eq!(seen, 3, "every level is initialised");
 }
+
+/// `match` on real `retile` output (not the builtin pyramid): an icosphere
+/// re-tiled to 3,000 vertices, 3 levels, orientations relaxed 4-way; the
+/// synthesised stones score a texture energy well below a random shuffle of
+/// exemplar texels, with the exhaustive and the PCA + kd-tree back-ends.
+#[test]
+fn match_on_retiled_output_beats_a_random_shuffle() {
+    use surfsynth::kernels::retile::{RetileSettings, retile};
+    let input = builtin_mesh("icosphere", &BuiltinOptions::default()).expect("icosphere");
+    let pyramid = retile(
+        &input,
+        &RetileSettings {
+            levels: 3,
+            ..RetileSettings::with_vertices(3_000)
+        },
+    )
+    .expect("retile runs");
+    let levels = levels_of(pyramid.levels.into_iter().map(|l| l.mesh).collect());
+    let relaxed = relax_orientation(
+        &views(&levels),
+        &RelaxSettings {
+            mode: OrientationMode::Relax,
+            symmetry: 4,
+            iterations: 10,
+            seed: 2,
+        },
+    );
+    let inputs: Vec<SynthesisLevel> = levels
+        .iter()
+        .zip(&relaxed.frames)
+        .map(|(l, f)| SynthesisLevel {
+            mesh: &l.mesh,
+            frames: f,
+        })
+        .collect();
+    let exemplar = texture_crop("stones", 32);
+    let fine = &levels[0];
+    let energy_of = |colours: &[f32], spacing: f32| {
+        let signal = SurfaceSignal::VertexColours {
+            values: colours,
+            channels: exemplar.channels as usize,
+        };
+        let settings = EnergySettings {
+            neighbourhood: 5,
+            samples: 1500,
+            seed: 3,
+            ..Default::default()
+        };
+        surface_texture_energy(
+            &fine.mesh,
+            &fine.topology,
+            &relaxed.frames[0],
+            spacing,
+            &signal,
+            &exemplar,
+            &settings,
+        )
+        .mean
+    };
+    let (shuffle, _) = random_texels(&exemplar, fine.mesh.vertex_count(), 5);
+    for (label, search) in [("exhaustive", SearchKind::Exhaustive), ("pca_kdtree", PCA)] {
+        let r = wei_levoy_synthesis(
+            &inputs,
+            &exemplar,
+            &WlSettings {
+                search,
+                wrap: Wrap::Repeat,
+                seed: 4,
+                ..Default::default()
+            },
+            None,
+        )
+        .expect("synthesis runs");
+        let spacing = r[0].report.spacing;
+        assert_eq!(r[0].report.parent_misses, 0, "{label}");
+        assert!(r[0].report.uncovered < 0.01, "{label}: {:?}", r[0].report);
+        let e_random = energy_of(&shuffle.values, spacing);
+        let e = energy_of(&r[0].colours, spacing);
+        eprintln!("retiled sphere, {label}: synthesis {e:.5}, shuffle {e_random:.5}");
+        assert!(
+            e <= 0.5 * e_random,
+            "{label}: synthesis energy {e} should be at most half the shuffle's {e_random}"
+        );
+    }
+}
+
+/// `match` works on quad meshes (fan-triangulated for flattening), as the
+/// √2 hierarchy needs: a planar QUAD grid pyramid at one texel per vertex
+/// spacing synthesises stones at under half a random shuffle's energy, and
+/// every vertex stores a matched texel inside the exemplar.
+#[test]
+fn synthesis_on_a_quad_grid_beats_a_random_shuffle() {
+    let meshes = builtin_pyramid(&BuiltinPyramidSettings {
+        mesh: "plane".into(),
+        levels: 3,
+        resolution: [49, 49],
+        size: 48.0,
+        quads: true,
+        ..Default::default()
+    })
+    .expect("a quad pyramid");
+    assert!(meshes[0].faces().all(|f| f.len() == 4), "quads expected");
+    let frames: Vec<Vec<TangentFrame>> = meshes
+        .iter()
+        .map(|m| {
+            m.vertex_normals()
+                .iter()
+                .map(|&n| TangentFrame::from_up(n, Vec3::Y))
+                .collect()
+        })
+        .collect();
+    let case = PlanarCase { meshes, frames };
+    let exemplar = texture_crop("stones", 32);
+    let r = synthesize(&case, &exemplar, SearchKind::Exhaustive, 3);
+    assert!(
+        (r[0].report.spacing - 1.0).abs() < 1e-4,
+        "{:?}",
+        r[0].report
+    );
+    assert!(r[0].report.uncovered < 0.2, "{:?}", r[0].report);
+    assert!(
+        r[0].texels.iter().all(|t| t[0] < 32 && t[1] < 32),
+        "matched texels lie in the exemplar"
+    );
+    let (shuffle, _) = random_texels(&exemplar, case.meshes[0].vertex_count(), 5);
+    let e_random = energy(&case, &shuffle.values, &exemplar);
+    let e = energy(&case, &r[0].colours, &exemplar);
+    eprintln!("quad grid: synthesis {e:.5}, shuffle {e_random:.5}");
+    assert!(e <= 0.5 * e_random, "quad grid: {e} vs shuffle {e_random}");
+}

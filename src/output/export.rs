@@ -79,6 +79,20 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
             _ => {}
         }
     }
+    // The result mapped back onto the original input mesh (`map_back`).
+    if let Some((mesh, colours, previews)) = &job.original {
+        if job.formats.iter().any(|f| f == "ply") {
+            let path = dir.join(format!("{}_original.ply", job.stem));
+            let colours = (colours.values.as_slice(), colours.channels);
+            super::ply::write_ply(&path, mesh, Some(colours), &[])?;
+            files.push(path);
+        }
+        files.extend(super::render::write_previews(
+            dir,
+            "original_preview",
+            previews,
+        )?);
+    }
     Ok(files)
 }
 

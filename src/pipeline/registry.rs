@@ -204,6 +204,7 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<subdivide_sqrt2::SubdivideSqrt2>(),
         entry::<diffuse_orientation::DiffuseOrientation>(),
         entry::<graph_match::GraphMatch>(),
+        entry::<map_back::MapBack>(),
         entry::<export::Export>(),
         entry::<displace::Displace>(),
         entry::<bake::Bake>(),

@@ -12,6 +12,7 @@ pub mod jump_image;
 pub mod jump_map;
 pub mod jump_surface;
 pub mod lapped_paste;
+pub mod map_back;
 pub mod orientation;
 pub mod relax_orientation;
 pub mod result_metrics;

@@ -206,6 +206,10 @@ pub struct ExportJob {
     /// The `bake` stage's atlas of the original mesh (formats `glb`,
     /// `baked_obj`).
     pub baked_asset: Option<BakedAsset>,
+    /// The result mapped back onto the original input mesh (`map_back`):
+    /// the input mesh, its vertex colours and its preview renders, written as
+    /// `<stem>_original.ply` and `original_preview_*.png`.
+    pub original: Option<(PolyMesh, VertexColours, Vec<Image>)>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),

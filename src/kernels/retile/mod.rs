@@ -59,7 +59,10 @@ mod repair;
 mod trimesh;
 
 pub use prepare::InputReport;
-pub use project::{SurfacePoint, SurfaceProjector, closest_point_on_triangle};
+pub use project::{
+    MapBackError, MappedBack, ResultAttributes, SurfacePoint, SurfaceProjector,
+    closest_point_on_triangle, map_back,
+};
 
 use crate::mesh::PolyMesh;
 use glam::Vec3;

@@ -10,8 +10,9 @@
 //! Ericson, *Real-Time Collision Detection* (2005), §5.1.5.
 
 use super::trimesh::{NONE, TriMesh, next};
+use crate::kernels::frames::TangentFrame;
 use crate::mesh::PolyMesh;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// Most primitives in a BVH leaf.
 const LEAF_SIZE: usize = 4;
@@ -309,6 +310,11 @@ impl SurfaceProjector {
         out
     }
 
+    /// The vertex ids of triangle `face` (vertices of the mesh it was built from).
+    pub fn triangle(&self, face: u32) -> [u32; 3] {
+        self.triangles[face as usize]
+    }
+
     /// Number of triangles of the reference surface.
     pub fn triangle_count(&self) -> usize {
         self.triangles.len()
@@ -432,6 +438,157 @@ impl SurfaceProjector {
             bary: Vec3::from_array(bary),
         })
     }
+}
+
+/// Per-vertex attributes of a result surface, to be resampled elsewhere by
+/// [`map_back`].
+#[derive(Clone, Copy, Debug)]
+pub struct ResultAttributes<'a> {
+    /// `channels` values per result vertex.
+    pub colours: &'a [f32],
+    /// Values per vertex.
+    pub channels: usize,
+    /// Matched exemplar texel per result vertex, if known.
+    pub texels: Option<&'a [Vec2]>,
+    /// Tangent frame per result vertex, if known.
+    pub frames: Option<&'a [TangentFrame]>,
+}
+
+/// A result resampled at the vertices of another mesh (see [`map_back`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MappedBack {
+    /// `channels` values per target vertex: the barycentric interpolation of
+    /// the closest result triangle's vertex colours.
+    pub colours: Vec<f32>,
+    /// Per target vertex, the texel of the closest triangle's corner with the
+    /// largest barycentric weight (texel coordinates do not interpolate
+    /// across the exemplar's wrap).
+    pub texels: Option<Vec<Vec2>>,
+    /// Per target vertex, that corner's frame turned into the target's
+    /// tangent plane (n-way symmetric frames do not interpolate either).
+    pub frames: Option<Vec<TangentFrame>>,
+    /// Per target vertex, its distance to the result surface (model units).
+    pub distance: Vec<f32>,
+}
+
+/// Bad input to [`map_back`].
+#[derive(Debug, thiserror::Error, PartialEq, Eq)]
+pub enum MapBackError {
+    /// The result surface has no triangles.
+    #[error("the result mesh has no faces to map back from")]
+    NoFaces,
+    /// An attribute array does not have one entry per result vertex.
+    #[error("the result's {what} has {got} entries for {vertices} vertices")]
+    Length {
+        /// Which attribute.
+        what: &'static str,
+        /// Entries given.
+        got: usize,
+        /// Vertices of the result mesh.
+        vertices: usize,
+    },
+}
+
+/// Maps a result synthesised on a retiled surface back onto the original
+/// mesh (Wei & Levoy 2001 §5: "mapped back onto the original model in a
+/// post-process by resampling"): each target vertex (`positions`, with
+/// `normals`, which may be zero) takes the closest point of the result
+/// surface among the triangles facing its way (so a thin part is not read
+/// from its far side; any triangle when none faces that way) and
+/// interpolates the colours there barycentrically. Works on any number of
+/// components, with boundaries, and with polygon faces (fan-triangulated).
+/// Each target vertex is independent: the result does not depend on the
+/// thread count.
+///
+/// # Errors
+/// [`MapBackError`] when the result has no faces or an attribute's length is
+/// not one entry per result vertex.
+pub fn map_back(
+    result: &PolyMesh,
+    attributes: &ResultAttributes,
+    positions: &[Vec3],
+    normals: &[Vec3],
+) -> Result<MappedBack, MapBackError> {
+    use rayon::prelude::*;
+    let nv = result.vertex_count();
+    let ch = attributes.channels;
+    let check = |what: &'static str, got: usize, per: usize| {
+        if got == nv * per {
+            Ok(())
+        } else {
+            Err(MapBackError::Length {
+                what,
+                got: got / per.max(1),
+                vertices: nv,
+            })
+        }
+    };
+    check("colours", attributes.colours.len(), ch.max(1))?;
+    if let Some(t) = attributes.texels {
+        check("texels", t.len(), 1)?;
+    }
+    if let Some(f) = attributes.frames {
+        check("frames", f.len(), 1)?;
+    }
+    let projector = SurfaceProjector::new(result);
+    if projector.triangle_count() == 0 {
+        return Err(MapBackError::NoFaces);
+    }
+    let n = positions.len();
+    let mut out = MappedBack {
+        colours: vec![0.0; n * ch],
+        texels: attributes.texels.map(|_| vec![Vec2::ZERO; n]),
+        frames: attributes.frames.map(|_| {
+            vec![
+                TangentFrame {
+                    s: Vec3::X,
+                    t: Vec3::Y,
+                    n: Vec3::Z,
+                };
+                n
+            ]
+        }),
+        distance: vec![0.0; n],
+    };
+    // Closest points (the expensive part) in parallel, then a cheap gather.
+    let hits: Vec<Option<SurfacePoint>> = positions
+        .par_iter()
+        .enumerate()
+        .map(|(v, &p)| match normals.get(v).copied() {
+            Some(normal) if normal.length_squared() > 0.0 => {
+                projector.project_facing(p, normal, NONE)
+            }
+            _ => projector.project(p),
+        })
+        .collect();
+    for (v, hit) in hits.iter().enumerate() {
+        let Some(hit) = hit else { continue };
+        let tri = projector.triangle(hit.face);
+        let w = hit.bary.to_array();
+        let dst = &mut out.colours[v * ch..(v + 1) * ch];
+        for (k, &corner) in tri.iter().enumerate() {
+            let src = &attributes.colours[corner as usize * ch..(corner as usize + 1) * ch];
+            for (d, s) in dst.iter_mut().zip(src) {
+                *d += w[k] * s;
+            }
+        }
+        out.distance[v] = (hit.point - positions[v]).length();
+        let heaviest = tri[(0..3).fold(0, |b, k| if w[k] > w[b] { k } else { b })] as usize;
+        if let (Some(dst), Some(src)) = (out.texels.as_mut(), attributes.texels) {
+            dst[v] = src[heaviest];
+        }
+        if let (Some(dst), Some(src)) = (out.frames.as_mut(), attributes.frames) {
+            let f = src[heaviest];
+            let normal = normals.get(v).copied().unwrap_or(Vec3::ZERO);
+            let normal = if normal.length_squared() > 0.0 {
+                normal
+            } else {
+                f.n
+            };
+            dst[v] = TangentFrame::from_direction(normal, f.s);
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -220,6 +220,8 @@ struct LevelGeometry {
 /// Queries per parallel task in pass 1, fixed so results do not depend on
 /// the thread count.
 const PASS1_CHUNK: usize = 64;
+/// Vertices per parallel flattening task (each task makes one scratch).
+const FLATTEN_CHUNK: usize = 256;
 /// Queries per parallel task within a pass-2 batch.
 const PASS2_CHUNK: usize = 64;
 
@@ -319,6 +321,7 @@ pub fn wei_levoy_synthesis(
         let started = Instant::now();
         let coarse_parts = &parts[1..];
         let coarse_dim: usize = coarse_parts.iter().map(|p| p.values(ch)).sum();
+        let coarse_span = tracing::info_span!("wl_coarse_parts", level = l).entered();
         let (coarse, misses) = coarse_queries(
             levels,
             &geometry,
@@ -328,6 +331,7 @@ pub fn wei_levoy_synthesis(
             ch,
             settings.parent_reach,
         );
+        drop(coarse_span);
         report.parent_misses = misses;
         report.flatten_seconds += started.elapsed().as_secs_f64();
 
@@ -361,47 +365,78 @@ pub fn wei_levoy_synthesis(
                 spacing: geo.spacing,
             };
             let tp = template.points();
+            let stencil_span = tracing::info_span!("wl_stencils", level = l).entered();
             let mut stencils = vec![StencilPoint::UNCOVERED; nv * tp];
+            // One scratch per fixed chunk of vertices: its buffers are as
+            // long as the mesh, so it must not be made per vertex (rayon's
+            // `map_init` may call its init that often).
             let uncovered: usize = stencils
-                .par_chunks_mut(tp)
+                .par_chunks_mut(tp * FLATTEN_CHUNK)
                 .enumerate()
-                .map_init(FlattenScratch::new, |scratch, (v, st)| {
-                    let r = flatten_stencil(
-                        &geo.adjacency,
-                        &level.mesh.positions,
-                        PatchSeed::Vertex(v as u32),
-                        &level.frames[v],
-                        template,
-                        st,
-                        scratch,
-                    );
-                    tp - r.covered
+                .map(|(c, chunk)| {
+                    let mut scratch = FlattenScratch::new();
+                    let mut uncovered = 0;
+                    for (i, st) in chunk.chunks_exact_mut(tp).enumerate() {
+                        let v = c * FLATTEN_CHUNK + i;
+                        let r = flatten_stencil(
+                            &geo.adjacency,
+                            &level.mesh.positions,
+                            PatchSeed::Vertex(v as u32),
+                            &level.frames[v],
+                            template,
+                            st,
+                            &mut scratch,
+                        );
+                        uncovered += tp - r.covered;
+                    }
+                    uncovered
                 })
                 .sum();
+            drop(stencil_span);
+            let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
             report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
-            // Which vertices each vertex reads (covered stencil vertices).
-            let reads: Vec<Vec<u32>> = stencils
-                .par_chunks(tp)
-                .map(|st| {
-                    let mut r: Vec<u32> = st
-                        .iter()
-                        .filter(|s| s.is_covered())
-                        .flat_map(|s| {
-                            (0..3)
-                                .filter(|&k| s.weights[k] != 0.0)
-                                .map(|k| s.vertices[k])
-                        })
-                        .collect();
-                    r.sort_unstable();
-                    r.dedup();
-                    r
+            // Which vertices each vertex reads (covered stencil vertices),
+            // as one flat list with offsets, built per fixed chunk.
+            let chunks: Vec<(Vec<u32>, Vec<u32>)> = stencils
+                .par_chunks(tp * FLATTEN_CHUNK)
+                .map(|chunk| {
+                    let mut flat = Vec::with_capacity(chunk.len());
+                    let mut counts = Vec::with_capacity(chunk.len() / tp.max(1));
+                    let mut one: Vec<u32> = Vec::with_capacity(3 * tp);
+                    for st in chunk.chunks_exact(tp) {
+                        one.clear();
+                        for s in st.iter().filter(|s| s.is_covered()) {
+                            for k in 0..3 {
+                                if s.weights[k] != 0.0 {
+                                    one.push(s.vertices[k]);
+                                }
+                            }
+                        }
+                        one.sort_unstable();
+                        one.dedup();
+                        flat.extend_from_slice(&one);
+                        counts.push(one.len() as u32);
+                    }
+                    (flat, counts)
                 })
                 .collect();
+            let mut offsets = Vec::with_capacity(nv + 1);
+            offsets.push(0usize);
+            let mut reads = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum());
+            for (flat, counts) in chunks {
+                reads.extend_from_slice(&flat);
+                for c in counts {
+                    offsets.push(offsets[offsets.len() - 1] + c as usize);
+                }
+            }
             let order = schedule::random_order(nv, mix(settings.seed, l as u64, 2));
-            let batches = schedule::dependency_batches(&order, |v| &reads[v as usize]);
+            let batches = schedule::dependency_batches(&order, |v| {
+                &reads[offsets[v as usize]..offsets[v as usize + 1]]
+            });
             drop(reads);
             report.batches = batches.len();
             report.flatten_seconds += started.elapsed().as_secs_f64();
+            drop(schedule_span);
 
             let db = exemplar_features(&pyramid, l, &parts, settings.wrap);
             let search = build_search(settings.search, db, mix(settings.seed, l as u64, 12));
@@ -548,59 +583,94 @@ fn coarse_queries(
     if dim == 0 {
         return (out, 0);
     }
-    let positions = &levels[l].mesh.positions;
+    // One scratch per fixed chunk of vertices (see pass 2).
     let misses: usize = out
-        .par_chunks_mut(dim)
+        .par_chunks_mut(dim * FLATTEN_CHUNK)
         .enumerate()
-        .map_init(
-            || (FlattenScratch::new(), Vec::<StencilPoint>::new()),
-            |(scratch, stencil), (v, row)| {
-                let frame = &levels[l].frames[v];
-                let p: Vec3 = positions[v];
-                let mut misses = 0;
-                let mut o = 0;
-                for part in parts {
-                    let c = l + part.level_offset as usize;
-                    let cg = &geometry[c];
-                    let len = part.values(ch);
-                    let dst = &mut row[o..o + len];
-                    o += len;
-                    let hit = cg
-                        .bvh
-                        .as_ref()
-                        .and_then(|b| b.cast_line(p, frame.n, reach * cg.spacing));
-                    let Some(hit) = hit else {
-                        for px in dst.chunks_exact_mut(ch) {
-                            px.copy_from_slice(&cg.default);
-                        }
-                        misses += 1;
-                        continue;
-                    };
-                    let template = Template {
-                        size: part.size,
-                        spacing: cg.spacing,
-                    };
-                    stencil.clear();
-                    stencil.resize(template.points(), StencilPoint::UNCOVERED);
-                    flatten_stencil(
-                        &cg.adjacency,
-                        &levels[c].mesh.positions,
-                        PatchSeed::Point {
-                            tri: hit.tri,
-                            at: hit.at,
-                        },
-                        frame,
-                        template,
-                        stencil,
-                        scratch,
-                    );
-                    resample_stencil(stencil, &results[c].colours, ch, &cg.default, dst);
-                }
-                misses
-            },
-        )
+        .map(|(c, rows)| {
+            let mut scratch = FlattenScratch::new();
+            let mut stencil = Vec::<StencilPoint>::new();
+            let mut misses = 0;
+            for (i, row) in rows.chunks_exact_mut(dim).enumerate() {
+                misses += coarse_row(
+                    levels,
+                    geometry,
+                    results,
+                    l,
+                    parts,
+                    ch,
+                    reach,
+                    c * FLATTEN_CHUNK + i,
+                    row,
+                    &mut scratch,
+                    &mut stencil,
+                );
+            }
+            misses
+        })
         .sum();
     (out, misses)
+}
+
+/// The coarser parts of vertex `v`'s neighbourhood into `row`; returns the
+/// number of parent lookups that met nothing.
+#[allow(clippy::too_many_arguments)]
+fn coarse_row(
+    levels: &[SynthesisLevel],
+    geometry: &[LevelGeometry],
+    results: &[LevelResult],
+    l: usize,
+    parts: &[Part],
+    ch: usize,
+    reach: f32,
+    v: usize,
+    row: &mut [f32],
+    scratch: &mut FlattenScratch,
+    stencil: &mut Vec<StencilPoint>,
+) -> usize {
+    let positions = &levels[l].mesh.positions;
+    let frame = &levels[l].frames[v];
+    let p: Vec3 = positions[v];
+    let mut misses = 0;
+    let mut o = 0;
+    for part in parts {
+        let c = l + part.level_offset as usize;
+        let cg = &geometry[c];
+        let len = part.values(ch);
+        let dst = &mut row[o..o + len];
+        o += len;
+        let hit = cg
+            .bvh
+            .as_ref()
+            .and_then(|b| b.cast_line(p, frame.n, reach * cg.spacing));
+        let Some(hit) = hit else {
+            for px in dst.chunks_exact_mut(ch) {
+                px.copy_from_slice(&cg.default);
+            }
+            misses += 1;
+            continue;
+        };
+        let template = Template {
+            size: part.size,
+            spacing: cg.spacing,
+        };
+        stencil.clear();
+        stencil.resize(template.points(), StencilPoint::UNCOVERED);
+        flatten_stencil(
+            &cg.adjacency,
+            &levels[c].mesh.positions,
+            PatchSeed::Point {
+                tri: hit.tri,
+                at: hit.at,
+            },
+            frame,
+            template,
+            stencil,
+            scratch,
+        );
+        resample_stencil(stencil, &results[c].colours, ch, &cg.default, dst);
+    }
+    misses
 }
 
 /// SplitMix64-style mixing of three words into one seed.

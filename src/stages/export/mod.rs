@@ -157,7 +157,8 @@ impl Stage for Export {
                mut job: ResMut<ExportJob>,
                meshes: ExportQuery,
                pastes: Query<PasteQuery>,
-               patch_textures: Option<Res<TexturePatches>>| {
+               patch_textures: Option<Res<TexturePatches>>,
+               originals: Query<(Entity, &Geometry, &VertexColours), With<SourceMesh>>| {
             let Ok((geometry, colours, uvs, blend, atlas)) = meshes.get(active.0) else {
                 return;
             };
@@ -273,6 +274,30 @@ impl Stage for Export {
                 (None, Some(a)) => Some((a.uvs.clone(), a.image.clone())),
                 (None, None) => None,
             };
+            // The result mapped back onto the input mesh (`map_back`).
+            let original = originals
+                .single()
+                .ok()
+                .filter(|(e, g, c)| {
+                    *e != active.0 && c.values.len() == g.0.vertex_count() * c.channels
+                })
+                .map(|(_, g, c)| {
+                    let previews = if settings.formats.iter().any(|f| f == "preview") {
+                        let shading = Shading::VertexColours {
+                            values: &c.values,
+                            channels: c.channels,
+                        };
+                        render_views(
+                            &g.0,
+                            &shading,
+                            settings.preview_size,
+                            &RenderOptions::default(),
+                        )
+                    } else {
+                        Vec::new()
+                    };
+                    (g.0.clone(), c.clone(), previews)
+                });
             *job = ExportJob {
                 formats: settings.formats.clone(),
                 stem: settings.name.clone(),
@@ -287,6 +312,7 @@ impl Stage for Export {
                     .as_deref()
                     .filter(|_| wants_asset)
                     .cloned(),
+                original,
             };
         })
         .into_configs()

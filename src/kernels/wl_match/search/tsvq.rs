@@ -50,38 +50,12 @@ impl Tsvq {
         };
         if rows > 0 && s.features.dim > 0 {
             let mut order = std::mem::take(&mut s.order);
-            s.build(&mut order, 0, leaf_size.max(1));
+            let (nodes, centroids) = build(&s.features, &mut order, 0, leaf_size.max(1));
+            s.nodes = nodes;
+            s.centroids = centroids;
             s.order = order;
         }
         s
-    }
-
-    fn build(&mut self, rows: &mut [u32], offset: u32, leaf_size: usize) -> u32 {
-        let dim = self.features.dim;
-        let index = self.nodes.len() as u32;
-        let centroid = mean_of(&self.features, rows);
-        self.centroids.extend_from_slice(&centroid);
-        self.nodes.push(Node {
-            left: u32::MAX,
-            right: u32::MAX,
-            start: offset,
-            count: rows.len() as u32,
-        });
-        if rows.len() <= leaf_size {
-            return index;
-        }
-        let split = two_means(&self.features, rows, &centroid);
-        if split == 0 || split == rows.len() {
-            return index;
-        }
-        let (l, r) = rows.split_at_mut(split);
-        let left = self.build(l, offset, leaf_size);
-        let right = self.build(r, offset + split as u32, leaf_size);
-        let node = &mut self.nodes[index as usize];
-        node.left = left;
-        node.right = right;
-        debug_assert_eq!(self.centroids.len(), self.nodes.len() * dim);
-        index
     }
 
     #[inline]
@@ -89,6 +63,78 @@ impl Tsvq {
         let dim = self.features.dim;
         &self.centroids[node as usize * dim..(node as usize + 1) * dim]
     }
+}
+
+/// Clusters with more rows than this split their two halves in parallel.
+const PARALLEL_ROWS: usize = 256;
+
+/// The subtree over `rows` (which start at `offset` in the final order), in
+/// pre-order (root, left subtree, right subtree) with node indices relative
+/// to its root, and its centroids. Subtrees of large clusters are built in
+/// parallel; the layout is the same as a sequential build's.
+fn build(
+    features: &FeatureMatrix,
+    rows: &mut [u32],
+    offset: u32,
+    leaf_size: usize,
+) -> (Vec<Node>, Vec<f32>) {
+    let centroid = mean_of(features, rows);
+    let leaf = Node {
+        left: u32::MAX,
+        right: u32::MAX,
+        start: offset,
+        count: rows.len() as u32,
+    };
+    if rows.len() <= leaf_size {
+        return (vec![leaf], centroid);
+    }
+    let split = two_means(features, rows, &centroid);
+    if split == 0 || split == rows.len() {
+        return (vec![leaf], centroid);
+    }
+    let (l, r) = rows.split_at_mut(split);
+    let right_offset = offset + split as u32;
+    let ((mut nodes_l, cent_l), (nodes_r, cent_r)) = if rows_len(l, r) > PARALLEL_ROWS {
+        rayon::join(
+            || build(features, l, offset, leaf_size),
+            || build(features, r, right_offset, leaf_size),
+        )
+    } else {
+        (
+            build(features, l, offset, leaf_size),
+            build(features, r, right_offset, leaf_size),
+        )
+    };
+    let shift = |n: Node, by: u32| Node {
+        left: if n.left == u32::MAX {
+            n.left
+        } else {
+            n.left + by
+        },
+        right: if n.right == u32::MAX {
+            n.right
+        } else {
+            n.right + by
+        },
+        ..n
+    };
+    let left_len = nodes_l.len() as u32;
+    let mut nodes = Vec::with_capacity(1 + nodes_l.len() + nodes_r.len());
+    nodes.push(Node {
+        left: 1,
+        right: 1 + left_len,
+        ..leaf
+    });
+    nodes.extend(nodes_l.drain(..).map(|n| shift(n, 1)));
+    nodes.extend(nodes_r.into_iter().map(|n| shift(n, 1 + left_len)));
+    let mut centroids = centroid;
+    centroids.extend_from_slice(&cent_l);
+    centroids.extend_from_slice(&cent_r);
+    (nodes, centroids)
+}
+
+fn rows_len(l: &[u32], r: &[u32]) -> usize {
+    l.len() + r.len()
 }
 
 fn mean_of(features: &FeatureMatrix, rows: &[u32]) -> Vec<f32> {

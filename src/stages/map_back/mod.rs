@@ -1,0 +1,140 @@
+//! Stage `map_back`: maps the result synthesised on a retiled (or
+//! subdivided) surface back onto the ORIGINAL input mesh (Wei & Levoy 2001
+//! §5: "mapped back onto the original model in a post-process by
+//! resampling"). Each vertex of the `SourceMesh` entity takes the closest
+//! point of the result surface (the active mesh) and interpolates its vertex
+//! colours barycentrically; it also takes the matched exemplar texel
+//! (`SourceTexels`) and the tangent frame (`Frames`, turned into its own
+//! tangent plane) of that triangle's corner with the largest weight. The
+//! components go onto the source entity; the active mesh does not change.
+//! `export` then also writes `<name>_original.ply` (format `ply`) and
+//! `original_preview_*.png` (format `preview`).
+
+use crate::config::params::{ParamDoc, StageSettings};
+use crate::kernels::retile::{ResultAttributes, map_back};
+use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use serde::{Deserialize, Serialize};
+
+/// Settings of `map_back` (none).
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct MapBackSettings {}
+
+impl StageSettings for MapBackSettings {
+    const PARAMS: &'static [ParamDoc] = &[];
+}
+
+type ResultQuery<'w, 's> = Query<
+    'w,
+    's,
+    (
+        &'static Geometry,
+        Option<&'static VertexColours>,
+        Option<&'static SourceTexels>,
+        Option<&'static Frames>,
+    ),
+>;
+
+/// The `map_back` stage.
+pub struct MapBack;
+
+impl Stage for MapBack {
+    const KIND: &'static str = "map_back";
+    const SUMMARY: &'static str = "maps the result's colours, matched texels and frames back onto the original input mesh by closest-point resampling";
+    const PAPER: &'static str = "Wei & Levoy 2001 §5";
+    type Settings = MapBackSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh, Datum::Colours]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![]
+    }
+    fn systems(_settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               active: Res<ActiveMesh>,
+               spacing: Res<TexelSpacing>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               sources: Query<Entity, With<SourceMesh>>,
+               meshes: ResultQuery| {
+            let _span = tracing::info_span!("map_back").entered();
+            let Ok(source) = sources.single() else {
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "there is no input mesh to map the result back onto",
+                );
+                return;
+            };
+            if source == active.0 {
+                // The result already lives on the input mesh.
+                metrics.record(ctx.index, "mapped", false);
+                return;
+            }
+            let (Ok((original, ..)), Ok((result, colours, texels, frames))) =
+                (meshes.get(source), meshes.get(active.0))
+            else {
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "the input or the result mesh is missing",
+                );
+                return;
+            };
+            let Some(colours) = colours else {
+                fail(
+                    &mut failure,
+                    ctx.index,
+                    Self::KIND,
+                    "the result has no vertex colours: put `match` (or `init_colours`) before `map_back`",
+                );
+                return;
+            };
+            let attributes = ResultAttributes {
+                colours: &colours.values,
+                channels: colours.channels,
+                texels: texels.map(|t| t.0.as_slice()),
+                frames: frames.map(|f| f.0.as_slice()),
+            };
+            let normals = original.0.vertex_normals();
+            let mapped = match map_back(&result.0, &attributes, &original.0.positions, &normals) {
+                Ok(m) => m,
+                Err(e) => {
+                    fail(&mut failure, ctx.index, Self::KIND, e.to_string());
+                    return;
+                }
+            };
+            let n = mapped.distance.len().max(1) as f64;
+            let mean = mapped.distance.iter().map(|&d| d as f64).sum::<f64>() / n;
+            let max = mapped.distance.iter().copied().fold(0.0f32, f32::max);
+            metrics.record(ctx.index, "mapped", true);
+            metrics.record(ctx.index, "vertices", mapped.distance.len());
+            metrics.record(ctx.index, "mean_distance", mean);
+            metrics.record(ctx.index, "max_distance", max);
+            metrics.record(
+                ctx.index,
+                "max_distance_texels",
+                max / spacing.0.max(f32::MIN_POSITIVE),
+            );
+            let mut entity = commands.entity(source);
+            entity.insert(VertexColours {
+                channels: colours.channels,
+                values: mapped.colours,
+            });
+            if let Some(t) = mapped.texels {
+                entity.insert(SourceTexels(t));
+            }
+            if let Some(f) = mapped.frames {
+                entity.insert(Frames(f));
+            }
+        })
+        .into_configs()
+    }
+}
