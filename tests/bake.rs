@@ -657,3 +657,59 @@ fn atlas_splits_charts_at_non_manifold_edges_and_orientation_flips() {
     assert!(!(c[0] == c[1] && c[1] == c[2]), "charts {c:?}");
     assert_ne!(c[0], c[3], "an orientation flip ends the chart: {c:?}");
 }
+
+/// Exemplar maps follow lapped pastes: each patch knows where it was cut
+/// from the exemplar, so the baked height (the exemplar's luminance) equals
+/// the luminance of the baked colour wherever pastes cover the texel.
+#[test]
+fn exemplar_maps_follow_lapped_pastes() {
+    let text = r#"
+seed = 9
+[input]
+mesh = "../shared/data/meshes/eight.off"
+exemplar = "builtin:bricks"
+height_map = "derive:luminance"
+[[stage]]
+kind = "tangent_field"
+patch_size = 0.3
+[[stage]]
+kind = "lapped_paste"
+[[stage]]
+kind = "bake"
+size = 256
+"#;
+    let world = run(text).unwrap();
+    let m = &world.resource::<Metrics>().stages[2];
+    assert_eq!(m["bake_method"], "lapped_pastes");
+    let asset = world.resource::<BakedAsset>();
+    let (_, height) = asset
+        .maps
+        .iter()
+        .find(|(role, _)| role == "height")
+        .expect("a baked height map");
+    let lum: Vec<f32> = asset
+        .colour
+        .data
+        .chunks_exact(3)
+        .map(surfsynth::kernels::channels::luminance)
+        .collect();
+    assert_eq!(lum.len(), height.data.len());
+    let n = lum.len() as f32;
+    let mean_h = height.data.iter().sum::<f32>() / n;
+    let mut diff: Vec<f32> = lum
+        .iter()
+        .zip(&height.data)
+        .map(|(l, h)| (l - h).abs())
+        .collect();
+    let mut spread: Vec<f32> = height.data.iter().map(|h| (h - mean_h).abs()).collect();
+    diff.sort_by(f32::total_cmp);
+    spread.sort_by(f32::total_cmp);
+    let (med_diff, med_spread) = (diff[diff.len() / 2], spread[spread.len() / 2]);
+    // A flat (unfollowed) map has zero spread; a map read elsewhere differs
+    // from the colour's luminance by about the spread.
+    assert!(med_spread > 0.02, "the height map varies: {med_spread}");
+    assert!(
+        med_diff < 0.2 * med_spread,
+        "baked height follows the pastes: median |lum − h| {med_diff} vs spread {med_spread}"
+    );
+}

@@ -179,7 +179,7 @@ pub type PasteFaces = (u32, Vec<(u32, [Vec2; 3])>);
 
 /// Bakes the colour channel (RGB, through `textures`: 0 the exemplar,
 /// `k + 1` lapped patch `k`) and every map of `maps` (through texture 0
-/// only; RGB for colour and normal maps, one channel for scalar ones), then
+/// only — see [`bake_channels_with_patches`] for lapped patches; RGB for colour and normal maps, one channel for scalar ones), then
 /// dilates them into the gutters.
 pub fn bake_channels(
     target: &BakeTarget,
@@ -187,6 +187,32 @@ pub fn bake_channels(
     textures: &[&Image],
     wrap: Wrap,
     maps: &[ChannelMap],
+) -> (Image, Vec<Image>) {
+    bake_channels_with_patches(target, source, textures, wrap, maps, &[])
+}
+
+/// Where lapped patch `k` (texture `k + 1`) lies in the exemplar: a patch
+/// coordinate `uv` is exemplar coordinate `offset + uv · scale` (both in
+/// exemplar `[0, 1]` units), so exemplar maps follow lapped pastes too.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PatchPlacement {
+    /// Exemplar coordinate of the patch's `(0, 0)` corner.
+    pub offset: Vec2,
+    /// Patch size over exemplar size, per axis.
+    pub scale: Vec2,
+}
+
+/// [`bake_channels`], with the maps also sampled through lapped-patch
+/// look-ups: contribution texture `k + 1` reads the maps at
+/// `patches[k].offset + uv · patches[k].scale` (a patch without a
+/// placement feeds the colour only).
+pub fn bake_channels_with_patches(
+    target: &BakeTarget,
+    source: &dyn ContributionSource,
+    textures: &[&Image],
+    wrap: Wrap,
+    maps: &[ChannelMap],
+    patches: &[PatchPlacement],
 ) -> (Image, Vec<Image>) {
     let _span =
         tracing::info_span!("bake_channels", size = target.size, maps = maps.len()).entered();
@@ -255,8 +281,15 @@ pub fn bake_channels(
                 let buf = &mut px[..m.image.channels as usize];
                 let mut acc = Vec3::ZERO;
                 let mut wsum = 0.0f32;
-                for k in samples.contribs.iter().filter(|k| k.texture == 0) {
-                    m.image.sample_uv(k.uv.x, k.uv.y, wrap, buf);
+                for k in &samples.contribs {
+                    let uv = match k.texture {
+                        0 => k.uv,
+                        t => match patches.get(t as usize - 1) {
+                            Some(p) => p.offset + k.uv * p.scale,
+                            None => continue,
+                        },
+                    };
+                    m.image.sample_uv(uv.x, uv.y, wrap, buf);
                     let rgb = rgb_of(buf);
                     let v = match m.kind {
                         // The synthesis frame is the atlas frame turned by

@@ -18,7 +18,7 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::atlas::bake::{
     AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
-    LappedSource, VertexColourSource, bake_channels,
+    LappedSource, PatchPlacement, VertexColourSource, bake_channels, bake_channels_with_patches,
 };
 use crate::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
 use crate::kernels::retile::SurfaceProjector;
@@ -126,6 +126,7 @@ impl Stage for Bake {
                meshes: MeshQuery,
                pastes: Query<PasteQuery>,
                patch_textures: Option<Res<TexturePatches>>,
+               patch_origins: Option<Res<TexturePatchOrigins>>,
                channels: Option<Res<ExemplarChannels>>| {
             let mut fail = |message: String| fail(&mut failure, ctx.index, Self::KIND, message);
             let Some(source) = sources.iter().next() else {
@@ -140,10 +141,15 @@ impl Stage for Bake {
                 .as_deref()
                 .map(|t| t.0.as_slice())
                 .unwrap_or(&[]);
+            let origins = patch_origins
+                .as_deref()
+                .map(|o| o.0.as_slice())
+                .unwrap_or(&[]);
             let inputs = BakeInputs {
                 exemplar: &exemplar,
                 channels: channels.as_deref(),
                 patches,
+                origins,
             };
             match bake_world(
                 &settings,
@@ -175,6 +181,8 @@ struct BakeInputs<'a> {
     exemplar: &'a Exemplar,
     channels: Option<&'a ExemplarChannels>,
     patches: &'a [Image],
+    /// Per patch, the exemplar pixel of its top-left pixel (lapped).
+    origins: &'a [[i64; 2]],
 }
 
 /// Builds the atlas of `mesh` (the source mesh) and bakes the result.
@@ -257,15 +265,34 @@ fn bake_world(
         }
         let src = LappedSource::new(&mesh.positions, &tris, &frames, &records, patches);
         method = "lapped_pastes";
-        if !maps.is_empty() {
+        // Patch pixel (x, y) is exemplar pixel origin + (x, y): maps follow
+        // the pastes through the same look-ups.
+        let (ew, eh) = (
+            exemplar.image.width.max(1) as f32,
+            exemplar.image.height.max(1) as f32,
+        );
+        let placements: Vec<PatchPlacement> = if inputs.origins.len() == patches.len() {
+            patches
+                .iter()
+                .zip(inputs.origins)
+                .map(|(p, o)| PatchPlacement {
+                    offset: Vec2::new(o[0] as f32 / ew, o[1] as f32 / eh),
+                    scale: Vec2::new(p.width as f32 / ew, p.height as f32 / eh),
+                })
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if !maps.is_empty() && placements.is_empty() {
             maps_note = "lapped patches record no exemplar origin: maps are flat/neutral";
         }
-        bake_channels(
+        bake_channels_with_patches(
             &target,
             &src as &dyn ContributionSource,
             &textures,
             exemplar.wrap,
             &maps,
+            &placements,
         )
     } else if blend.is_some() || uvs.is_some() {
         if !on_source {
