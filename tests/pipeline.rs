@@ -165,6 +165,9 @@ fn default_config_runs() {
     assert_eq!(code, 0, "{stderr}");
     assert!(stdout.contains("total"), "time table printed: {stdout}");
     assert!(dir.path().join("metrics.json").is_file());
+    let glb = std::fs::read(dir.path().join("result.glb")).expect("the default writes result.glb");
+    assert_eq!(&glb[..4], b"glTF", "a binary glTF header");
+    assert!(dir.path().join("result_atlas.png").is_file());
 }
 
 #[test]
