@@ -15,6 +15,11 @@
 //! 2.85 s exhaustive, 1.73 s PCA + kd-tree, 1.11 s TSVQ (1.67 s in a later
 //! run at the same load). Flattening, not search, dominates at 64².
 //!
+//! Re-measured the same day on the idle machine (load < 2): exhaustive search
+//! 167 GFLOP/s (44.6 ms; about twice the ≈ 85 GFLOP/s sgemm figure — the CPU
+//! has AVX-512); relaxation (30 sweeps) 0.31 s; synthesis 0.97 s exhaustive,
+//! 0.99 s PCA + kd-tree, 0.64 s TSVQ.
+//!
 //! Run with `cargo bench --bench wei_levoy`; keep a baseline with
 //! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
 //! change with `-- --baseline main`. Select a group with a filter, e.g.
