@@ -330,12 +330,44 @@ pub fn bake_channels_with_patches(
         &mut mask,
         target.padding_px,
     );
-    for out in &mut outs {
+    fill_background(&mut colour.data, 3, &mask, None);
+    for (out, m) in outs.iter_mut().zip(maps) {
         let mut mask = filled.clone();
         let c = out.channels as usize;
         super::raster::dilate(&mut out.data, c, target.size, &mut mask, target.padding_px);
+        // Beyond the gutters: a flat normal, or the mean, so the coarsest
+        // mip levels stay neutral instead of darkening chart borders.
+        let neutral = matches!(m.kind, ChannelKind::Normal).then_some([0.5, 0.5, 1.0]);
+        fill_background(&mut out.data, c, &mask, neutral.as_ref().map(|v| &v[..]));
     }
     (colour, outs)
+}
+
+/// Sets every texel outside `filled` to `value` (or, without one, to the
+/// mean of the filled texels).
+fn fill_background(data: &mut [f32], channels: usize, filled: &[bool], value: Option<&[f32]>) {
+    let c = channels.max(1);
+    let mut fill = vec![0.0f32; c];
+    match value {
+        Some(v) => fill.iter_mut().zip(v).for_each(|(f, v)| *f = *v),
+        None => {
+            let mut sum = vec![0.0f64; c];
+            let mut n = 0usize;
+            for (px, _) in data.chunks_exact(c).zip(filled).filter(|(_, f)| **f) {
+                sum.iter_mut().zip(px).for_each(|(s, v)| *s += *v as f64);
+                n += 1;
+            }
+            if n == 0 {
+                return;
+            }
+            fill.iter_mut()
+                .zip(&sum)
+                .for_each(|(f, s)| *f = (*s / n as f64) as f32);
+        }
+    }
+    for (px, _) in data.chunks_exact_mut(c).zip(filled).filter(|(_, f)| !**f) {
+        px.copy_from_slice(&fill);
+    }
 }
 
 // ----- sources ------------------------------------------------------------------
