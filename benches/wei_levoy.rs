@@ -15,10 +15,12 @@
 //! 2.85 s exhaustive, 1.73 s PCA + kd-tree, 1.11 s TSVQ (1.67 s in a later
 //! run at the same load). Flattening, not search, dominates at 64².
 //!
-//! Re-measured the same day on the idle machine (load < 2): exhaustive search
-//! 167 GFLOP/s (44.6 ms; about twice the ≈ 85 GFLOP/s sgemm figure — the CPU
-//! has AVX-512); relaxation (30 sweeps) 0.31 s; synthesis 0.97 s exhaustive,
-//! 0.99 s PCA + kd-tree, 0.64 s TSVQ.
+//! Re-measured the same day on the idle machine (load < 2): sgemm ceiling
+//! (`sgemm_peak`, faer f32 2048³ on both cores) 215 GFLOP/s — the CPU has
+//! AVX-512, so more than the issue's ≈ 85 GFLOP/s; exhaustive search
+//! 167–182 GFLOP/s (41–45 ms), 78–84 % of that ceiling; relaxation (30
+//! sweeps) 0.31 s; synthesis 0.97 s exhaustive, 0.99 s PCA + kd-tree,
+//! 0.64 s TSVQ.
 //!
 //! Run with `cargo bench --bench wei_levoy`; keep a baseline with
 //! `cargo bench --bench wei_levoy -- --save-baseline main` and compare a
@@ -241,8 +243,37 @@ fn bench_exhaustive_search(c: &mut Criterion) {
     group.finish();
 }
 
+/// The machine's single-precision limit as a large GEMM reaches it (faer,
+/// all cores): the ceiling the exhaustive search is compared against.
+fn bench_sgemm_peak(c: &mut Criterion) {
+    use faer::linalg::matmul::matmul;
+    use faer::{Accum, Mat, Par};
+    let n = 2048usize;
+    let a = Mat::<f32>::from_fn(n, n, |i, j| ((i * 7 + j * 13) % 17) as f32 * 0.01);
+    let b = Mat::<f32>::from_fn(n, n, |i, j| ((i * 5 + j * 3) % 11) as f32 * 0.01);
+    let mut dst = Mat::<f32>::zeros(n, n);
+    let mut group = c.benchmark_group("sgemm_peak");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements((2 * n * n * n) as u64));
+    group.bench_function(BenchmarkId::new("faer_f32", n), |bch| {
+        bch.iter(|| {
+            matmul(
+                dst.as_mut(),
+                Accum::Replace,
+                a.as_ref(),
+                b.as_ref(),
+                1.0f32,
+                Par::rayon(0),
+            );
+            black_box(dst[(0, 0)])
+        })
+    });
+    group.finish();
+}
+
 criterion_group!(
     benches,
+    bench_sgemm_peak,
     bench_exhaustive_search,
     bench_relax,
     bench_synthesis

@@ -630,6 +630,12 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
             "validator errors: {}",
             serde_json::to_string_pretty(&issues["messages"]).unwrap()
         );
+        assert_eq!(
+            issues["numWarnings"],
+            0,
+            "validator warnings: {}",
+            serde_json::to_string_pretty(&issues["messages"]).unwrap()
+        );
         eprintln!(
             "gltf-validator: {} errors, {} warnings",
             issues["numErrors"], issues["numWarnings"]

@@ -292,7 +292,19 @@ fn teapot_with_a_non_manifold_vertex_does_not_panic() {
             (info.vertices as f64 - target).abs() <= 0.05 * target,
             "teapot level {l}: count"
         );
+        if l == 0 {
+            let cv = edge_cv(&level.mesh);
+            assert!(cv <= 0.25, "teapot level 0: edge CV {cv:.3} > 0.25");
+        }
     }
+}
+
+#[test]
+fn fandisk_and_nut_reach_the_edge_length_bound() {
+    // Sharp feature lines (fandisk) and a genus-1 PLY (nut): the remaining
+    // closed shared meshes, under the same checks as the bunny.
+    retile_and_check("fandisk.off", &shared_mesh("fandisk.off"), 12_288);
+    retile_and_check("nut.ply", &shared_mesh("nut.ply"), 6_144);
 }
 
 #[test]

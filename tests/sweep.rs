@@ -481,4 +481,13 @@ fn a_run_over_the_timeout_is_killed_and_reported() {
     let (code, _, stderr) = s.run(&["--grid", "seed=1,2", "--timeout", "0"]);
     assert_eq!(code, 2, "{stderr}");
     assert!(stderr.contains("--timeout: 0 is not allowed"), "{stderr}");
+    // Too long for a Duration: refused, not a panic.
+    for t in ["1e300", "1e20"] {
+        let (code, _, stderr) = s.run(&["--grid", "seed=1,2", "--timeout", t, "--dry-run"]);
+        assert_eq!(code, 2, "{t}: {stderr}");
+        assert!(
+            stderr.contains("--timeout") && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+    }
 }

@@ -30,6 +30,9 @@ pub mod summary;
 pub use execute::{Outcome, RunStatus};
 pub use plan::{GridAxis, PlannedRun, Shard, parse_grid};
 
+/// Longest `--timeout` accepted (about 31 700 years), far inside `Duration`.
+const MAX_TIMEOUT_SECONDS: f64 = 1e12;
+
 use crate::config::{ConfigError, ConfigSource};
 use crate::output::OutputError;
 use crate::pipeline::Pipeline;
@@ -233,11 +236,15 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
     }
     let timeout = match opts.timeout {
         None => None,
-        Some(t) if t.is_finite() && t > 0.0 => Some(Duration::from_secs_f64(t)),
+        Some(t) if t.is_finite() && t > 0.0 && t <= MAX_TIMEOUT_SECONDS => {
+            Some(Duration::from_secs_f64(t))
+        }
         Some(t) => {
             return Err(SweepError::Option {
                 flag: "--timeout".into(),
-                message: format!("{t} is not allowed; allowed: seconds > 0"),
+                message: format!(
+                    "{t} is not allowed; allowed: seconds in (0, {MAX_TIMEOUT_SECONDS:e}]"
+                ),
             });
         }
     };
