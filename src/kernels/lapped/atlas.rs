@@ -109,15 +109,16 @@ pub fn composite_atlas(
 }
 
 /// Builds the atlas of a lapped texture: charts, packing, compositing.
-/// `None` when the charts cannot be packed into the atlas size.
+/// Errs with the UV atlas's message (e.g. the charts do not fit the size).
 pub fn build_atlas(
     mesh: &TriMesh,
     coverage: &Coverage,
     textures: &[TexturePatch],
     settings: &AtlasSettings,
-) -> Option<Atlas> {
+) -> Result<Atlas, String> {
     let _span = tracing::info_span!("build_atlas").entered();
-    let uv = crate::kernels::atlas::build_uv_atlas(&mesh.positions, &mesh.tris, settings).ok()?;
+    let uv = crate::kernels::atlas::build_uv_atlas(&mesh.positions, &mesh.tris, settings)
+        .map_err(|e| e.to_string())?;
     let (charts, corner_uvs, texels_per_unit) = (uv.charts, uv.corner_uvs, uv.texels_per_unit);
     let image = composite_atlas(
         &corner_uvs,
@@ -127,7 +128,7 @@ pub fn build_atlas(
         settings.padding_px,
     );
     let area: f32 = corner_uvs.iter().map(|t| 0.5 * signed_area2(t).abs()).sum();
-    Some(Atlas {
+    Ok(Atlas {
         charts,
         corner_uvs,
         texels_per_unit,

@@ -504,7 +504,7 @@ impl Stage for LappedPaste {
                     padding_px: settings.atlas_padding,
                 };
                 match build_atlas(&tri, &out.coverage, &textures, &atlas_settings) {
-                    Some(atlas) => {
+                    Ok(atlas) => {
                         metrics.record(ctx.index, "atlas_charts", atlas.charts.count);
                         metrics.record(ctx.index, "atlas_fill", atlas.fill);
                         metrics.record(ctx.index, "atlas_texels_per_unit", atlas.texels_per_unit);
@@ -513,10 +513,10 @@ impl Stage for LappedPaste {
                             image: atlas.image,
                         });
                     }
-                    None => metrics.record(
+                    Err(reason) => metrics.record(
                         ctx.index,
                         "atlas",
-                        "skipped: the chart gutters alone do not fit; raise atlas_size or lower atlas_padding",
+                        format!("skipped: {reason}"),
                     ),
                 }
             }
