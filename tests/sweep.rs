@@ -284,6 +284,12 @@ fn shards_one_and_two_of_two_cover_the_grid_exactly_once_and_merge_their_summary
         before
     );
     assert!(s.out.join("index.html").is_file());
+    // A folder that holds no sweep is refused, and nothing is written there.
+    let empty = tempfile::tempdir().unwrap();
+    let (code, _, stderr) = run_cli(&["sweep", "--summarise", empty.path().to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("holds no sweep"), "{stderr}");
+    assert_eq!(std::fs::read_dir(empty.path()).unwrap().count(), 0);
 }
 
 #[test]

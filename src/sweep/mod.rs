@@ -412,6 +412,15 @@ pub fn summarise(dir: &Path) -> Result<Vec<PathBuf>, SweepError> {
     }
     let rows = summary::collect(dir)?;
     let record = read_record(dir);
+    if rows.is_empty() && record.is_none() {
+        return Err(SweepError::Option {
+            flag: "--summarise".into(),
+            message: format!(
+                "{} holds no sweep (no sweep.json and no run folders with run.json); give the --out folder of a sweep",
+                dir.display()
+            ),
+        });
+    }
     summary::write_all(dir, &rows, record.as_ref())
 }
 
