@@ -621,6 +621,52 @@ fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
     assert!(positions >= asset.mesh.vertex_count() && positions <= asset.mesh.corner_count());
     assert_eq!(prim.indices().unwrap().count(), asset.mesh.corner_count());
 
+    // The tangent frame a viewer uses for the normal map: TANGENT.xyz along
+    // the atlas `u` axis (within 25° on 95% of triangles: tangents are per
+    // vertex, gradients per triangle), perpendicular to the normal, and the bitangent
+    // cross(N, T)·w towards image-up (decreasing `v`) on every triangle.
+    let blob = gltf.blob.as_deref().expect("BIN chunk");
+    let reader = prim.reader(|_| Some(blob));
+    let p: Vec<Vec3> = reader.read_positions().unwrap().map(Vec3::from).collect();
+    let n: Vec<Vec3> = reader.read_normals().unwrap().map(Vec3::from).collect();
+    let t: Vec<[f32; 4]> = reader.read_tangents().expect("TANGENT").collect();
+    let uv: Vec<Vec2> = reader
+        .read_tex_coords(0)
+        .unwrap()
+        .into_f32()
+        .map(Vec2::from)
+        .collect();
+    let idx: Vec<u32> = reader.read_indices().unwrap().into_u32().collect();
+    let (mut along_u, mut up, mut tris) = (0usize, 0usize, 0usize);
+    for tri in idx.chunks_exact(3) {
+        let [a, b, c] = [tri[0], tri[1], tri[2]].map(|i| i as usize);
+        let (e1, e2) = (p[b] - p[a], p[c] - p[a]);
+        let (d1, d2) = (uv[b] - uv[a], uv[c] - uv[a]);
+        let det = d1.x * d2.y - d2.x * d1.y;
+        if det.abs() < 1e-12 {
+            continue;
+        }
+        // Surface directions of growing u and growing v on this triangle.
+        let du = (e1 * d2.y - e2 * d1.y) / det;
+        let dv = (e2 * d1.x - e1 * d2.x) / det;
+        tris += 1;
+        let tv = Vec3::new(t[a][0], t[a][1], t[a][2]);
+        assert!((t[a][3].abs() - 1.0).abs() < 1e-6, "handedness ±1");
+        assert!(tv.dot(n[a]).abs() < 1e-3, "tangent ⟂ normal");
+        if tv.dot(du.normalize_or_zero()) > 0.9 {
+            along_u += 1;
+        }
+        if (n[a].cross(tv) * t[a][3]).dot(dv) < 0.0 {
+            up += 1;
+        }
+    }
+    assert!(tris > 1000);
+    assert!(
+        along_u as f64 >= 0.95 * tris as f64,
+        "tangent along u on {along_u} of {tris} triangles"
+    );
+    assert_eq!(up, tris, "bitangent towards image-up on every triangle");
+
     // The Khronos validator.
     if let Some(report) = khronos_validate(&bytes) {
         let issues = &report["issues"];
