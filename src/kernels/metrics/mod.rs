@@ -15,6 +15,7 @@ mod energy;
 mod histogram;
 mod nearest;
 pub mod quality;
+pub mod surface_quality;
 
 pub use super::surface_sample::SurfaceSignal;
 pub use energy::{image_texture_energy, surface_texture_energy};
