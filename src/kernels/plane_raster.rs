@@ -5,9 +5,15 @@
 //! pastes) through it, so every method's result becomes an image.
 //!
 //! Grid convention: pixel `(i, j)` (column `i`, row `j`, row 0 at the top)
-//! has its centre at `x = min.x + (i + 0.5) / width · (max.x − min.x)`,
-//! `y = max.y − (j + 0.5) / height · (max.y − min.y)`: image-up is `+y`, so a
-//! texture synthesised with frames `s = +x`, `t = +y` appears upright.
+//! has its centre at `x = min.x + i / (width − 1) · (max.x − min.x)`,
+//! `y = max.y − j / (height − 1) · (max.y − min.y)`: the pixel centres span
+//! the box from edge to edge, and image-up is `+y`, so a texture synthesised
+//! with frames `s = +x`, `t = +y` appears upright. Centres on the box's
+//! edges rather than half a pixel inside: on an `N × N`-vertex grid of side
+//! `N − 1` every pixel centre is a vertex, so a pixel reads its vertex's
+//! colour, or its vertex's texel centre through the corner UVs, instead of
+//! an average of two vertices or of four texels (which a half-pixel inset
+//! gives, a 2 × 2 blur of every result).
 
 use glam::{Vec2, Vec3};
 
@@ -44,22 +50,35 @@ impl PlaneGrid {
         }
     }
 
-    /// The world xy position of pixel `(i, j)`'s centre.
-    pub fn centre(&self, i: u32, j: u32) -> Vec2 {
-        let e = self.max - self.min;
+    /// Pixel steps across the box (one pixel: the centre of the box).
+    fn steps(&self) -> Vec2 {
         Vec2::new(
-            self.min.x + (i as f32 + 0.5) / self.width as f32 * e.x,
-            self.max.y - (j as f32 + 0.5) / self.height as f32 * e.y,
+            self.width.saturating_sub(1).max(1) as f32,
+            self.height.saturating_sub(1).max(1) as f32,
         )
     }
 
-    /// A world xy point in continuous pixel coordinates (`(0, 0)` = the top-left
-    /// corner of pixel `(0, 0)`).
+    /// The world xy position of pixel `(i, j)`'s centre.
+    pub fn centre(&self, i: u32, j: u32) -> Vec2 {
+        let e = self.max - self.min;
+        let n = self.steps();
+        let (fi, fj) = match (self.width, self.height) {
+            (1, _) | (_, 1) => (0.5 * n.x, 0.5 * n.y),
+            _ => (i as f32, j as f32),
+        };
+        Vec2::new(self.min.x + fi / n.x * e.x, self.max.y - fj / n.y * e.y)
+    }
+
+    /// A world xy point in continuous pixel coordinates (pixel `(i, j)`'s
+    /// centre at `(i + 0.5, j + 0.5)`).
     fn to_pixel(&self, p: Vec2) -> Vec2 {
         let e = (self.max - self.min).max(Vec2::splat(f32::MIN_POSITIVE));
+        let n = self.steps();
+        // One pixel on an axis: its centre is the box's middle.
+        let offset = |size: u32| if size == 1 { 0.0 } else { 0.5 };
         Vec2::new(
-            (p.x - self.min.x) / e.x * self.width as f32,
-            (self.max.y - p.y) / e.y * self.height as f32,
+            (p.x - self.min.x) / e.x * n.x + offset(self.width),
+            (self.max.y - p.y) / e.y * n.y + offset(self.height),
         )
     }
 }

@@ -75,7 +75,7 @@ impl StageSettings for ExportSettings {
             name: "plane_size",
             unit: "pixels",
             range: ParamRange::Int(1, 16384),
-            doc: "[width, height] of plane.png and plane_sources.png (format `plane`); pixel (i, j) samples the mesh's xy bounding box at its centre (i + 0.5, j + 0.5) mapped linearly, so for one exemplar pixel per output pixel make the box plane_size world units at 1 texel per unit; a jump_image result must be this size",
+            doc: "[width, height] of plane.png and plane_sources.png (format `plane`); pixel centres span the mesh's xy bounding box edge to edge (pixel (i, j) at min.x + i/(width−1)·Δx, max.y − j/(height−1)·Δy; row 0 = max y), so for one exemplar pixel per output pixel use a box of (width−1) × (height−1) world units at 1 texel per unit, e.g. a 256 × 256-vertex plane of side 255; a jump_image result must be this size",
         },
         ParamDoc {
             name: "name",
