@@ -82,7 +82,12 @@ fn run_small(method: &str, out: &Path, extra: &[&str]) -> PathBuf {
 }
 
 /// `plane.png` as 8-bit RGB and `plane_sources.png` as 16-bit RGB.
-fn read_outputs(dir: &Path) -> (image::RgbImage, image::ImageBuffer<image::Rgb<u16>, Vec<u16>>) {
+fn read_outputs(
+    dir: &Path,
+) -> (
+    image::RgbImage,
+    image::ImageBuffer<image::Rgb<u16>, Vec<u16>>,
+) {
     let plane = image::open(dir.join("plane.png")).expect("plane.png");
     let sources = image::open(dir.join("plane_sources.png")).expect("plane_sources.png");
     assert!(
@@ -121,10 +126,17 @@ fn every_plane_config_writes_plane_png_and_sources_of_the_requested_size() {
         let out = run_small(method, &dir.path().join(method), &[]);
         let (plane, sources) = read_outputs(&out);
         assert_eq!(plane.dimensions(), (64, 64), "{method}: plane.png size");
-        assert_eq!(sources.dimensions(), (64, 64), "{method}: plane_sources.png size");
+        assert_eq!(
+            sources.dimensions(),
+            (64, 64),
+            "{method}: plane_sources.png size"
+        );
         // The source map is inside the 128² exemplar wherever it is known.
         for s in sources.pixels().filter(|s| s[2] == u16::MAX) {
-            assert!(s[0] < 128 && s[1] < 128, "{method}: source {s:?} outside the exemplar");
+            assert!(
+                s[0] < 128 && s[1] < 128,
+                "{method}: source {s:?} outside the exemplar"
+            );
         }
         // Tolerances (of 255, every channel), each with the reason:
         // - jump_pixel, jump_patch copy exemplar pixels: exact;
@@ -149,7 +161,11 @@ fn every_plane_config_writes_plane_png_and_sources_of_the_requested_size() {
             100.0 * close,
             100.0 * want
         );
-        assert!(known >= 0.95, "{method}: only {:.1} % of pixels have a source", 100.0 * known);
+        assert!(
+            known >= 0.95,
+            "{method}: only {:.1} % of pixels have a source",
+            100.0 * known
+        );
     }
 }
 
@@ -187,7 +203,9 @@ fn vertex_colours_that_are_a_smooth_function_of_position_are_reproduced_at_pixel
             let y = 1.0 - 2.0 * j as f32 / 39.0;
             let want = f(x, y);
             let got = plane.image.pixel(i, j);
-            worst_linear = worst_linear.max((got[0] - want[0]).abs()).max((got[1] - want[1]).abs());
+            worst_linear = worst_linear
+                .max((got[0] - want[0]).abs())
+                .max((got[1] - want[1]).abs());
             worst_smooth = worst_smooth.max((got[2] - want[2]).abs());
         }
     }
@@ -197,7 +215,10 @@ fn vertex_colours_that_are_a_smooth_function_of_position_are_reproduced_at_pixel
     assert!(worst_linear < 1e-4, "linear channels off by {worst_linear}");
     let h = 2.0f32 / 32.0 * 1.25;
     let bound = h * h * 0.3 * 1.5 * 1.5 * 2.0 / 2.0;
-    assert!(worst_smooth < bound, "smooth channel off by {worst_smooth}, bound {bound}");
+    assert!(
+        worst_smooth < bound,
+        "smooth channel off by {worst_smooth}, bound {bound}"
+    );
 }
 
 #[test]
@@ -217,10 +238,22 @@ fn plane_on_a_non_planar_mesh_is_refused_before_the_run_naming_the_mesh() {
         "input.mesh=builtin:icosphere",
     ]);
     assert_eq!(code, 2, "{stderr}");
-    for needle in ["builtin:icosphere", "flat in the xy plane", "z spans", "allowed"] {
-        assert!(stderr.contains(needle), "stderr should name {needle:?}: {stderr}");
+    for needle in [
+        "builtin:icosphere",
+        "flat in the xy plane",
+        "z spans",
+        "allowed",
+    ] {
+        assert!(
+            stderr.contains(needle),
+            "stderr should name {needle:?}: {stderr}"
+        );
     }
-    assert!(files_under(&out).is_empty(), "nothing written: {:?}", files_under(&out));
+    assert!(
+        files_under(&out).is_empty(),
+        "nothing written: {:?}",
+        files_under(&out)
+    );
 
     // A `plane` request with no result to draw is a config error.
     let cfg = dir.path().join("nothing.toml");
@@ -229,9 +262,13 @@ fn plane_on_a_non_planar_mesh_is_refused_before_the_run_naming_the_mesh() {
         "[input]\nmesh = \"builtin:plane\"\nexemplar = \"builtin:bricks\"\n[[stage]]\nkind = \"export\"\nformats = [\"plane\"]\n",
     )
     .unwrap();
-    let (code, _, stderr) = run_cli(&["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let (code, _, stderr) =
+        run_cli(&["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 2, "{stderr}");
-    assert!(stderr.contains("a result to draw for format `plane`"), "{stderr}");
+    assert!(
+        stderr.contains("a result to draw for format `plane`"),
+        "{stderr}"
+    );
     assert!(files_under(&out).is_empty());
 }
 

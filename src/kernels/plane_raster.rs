@@ -71,7 +71,7 @@ impl PlaneGrid {
 
     /// A world xy point in continuous pixel coordinates (pixel `(i, j)`'s
     /// centre at `(i + 0.5, j + 0.5)`).
-    fn to_pixel(&self, p: Vec2) -> Vec2 {
+    fn pixel_of(&self, p: Vec2) -> Vec2 {
         let e = (self.max - self.min).max(Vec2::splat(f32::MIN_POSITIVE));
         let n = self.steps();
         // One pixel on an axis: its centre is the box's middle.
@@ -105,7 +105,7 @@ pub fn check_planar_xy(positions: &[Vec3]) -> Result<(), String> {
     }
     let e = hi - lo;
     let extent = e.x.min(e.y);
-    if !(extent > 0.0) || !extent.is_finite() {
+    if extent.is_nan() || extent <= 0.0 || !extent.is_finite() {
         return Err(format!(
             "its xy bounding box is degenerate ({} × {} world units)",
             e.x, e.y
@@ -140,7 +140,11 @@ pub fn rasterise_xy(
     for (t, tri) in triangles.iter().enumerate() {
         let Some(corners) = tri
             .iter()
-            .map(|&v| positions.get(v as usize).map(|p| grid.to_pixel(p.truncate())))
+            .map(|&v| {
+                positions
+                    .get(v as usize)
+                    .map(|p| grid.pixel_of(p.truncate()))
+            })
             .collect::<Option<Vec<Vec2>>>()
         else {
             continue;

@@ -76,11 +76,8 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     files.push(path);
                     let path = dir.join("plane_sources.png");
                     let pixels = super::plane_source_pixels(plane);
-                    let bytes = super::encode_png_rgb16(
-                        plane.image.width,
-                        plane.image.height,
-                        &pixels,
-                    )?;
+                    let bytes =
+                        super::encode_png_rgb16(plane.image.width, plane.image.height, &pixels)?;
                     super::write_bytes_atomic(&path, &bytes)?;
                     files.push(path);
                 }

@@ -23,7 +23,10 @@ pub const PLANE_RESULTS: [Datum; 4] = [
 ///
 /// # Errors
 /// [`PipelineError::Stage`] of the requesting `export` stage.
-pub fn check_plane_requests(pipeline: &Pipeline, input_mesh: &PolyMesh) -> Result<(), PipelineError> {
+pub fn check_plane_requests(
+    pipeline: &Pipeline,
+    input_mesh: &PolyMesh,
+) -> Result<(), PipelineError> {
     let mut what = match &pipeline.input.mesh {
         Some(name) => format!("the input mesh `{name}`"),
         None => "the input (no mesh)".to_string(),
@@ -57,10 +60,10 @@ pub fn check_plane_requests(pipeline: &Pipeline, input_mesh: &PolyMesh) -> Resul
                     if let Err(reason) = &planar {
                         return Err(refuse(planar_message(&what, reason)));
                     }
-                } else if let Some((w, h)) = image {
-                    if (w, h) != (width, height) {
-                        return Err(refuse(size_message(w, h, [width, height])));
-                    }
+                } else if let Some((w, h)) = image
+                    && (w, h) != (width, height)
+                {
+                    return Err(refuse(size_message(w, h, [width, height])));
                 }
             }
         }
