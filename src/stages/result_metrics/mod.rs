@@ -15,6 +15,7 @@ use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality};
 use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
 };
+use crate::kernels::metrics::{SourceMap, image_quality};
 use crate::kernels::surface_sample::CornerFn;
 use crate::mesh::Topology;
 use crate::stages::lapped_paste::components::{
@@ -57,8 +58,12 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
            mut metrics: ResMut<Metrics>,
            meshes: ResultQuery,
            pastes: PasteQuery,
-           patch_textures: Option<Res<TexturePatches>>| {
+           patch_textures: Option<Res<TexturePatches>>,
+           plane: Option<Res<PlaneImage>>| {
         let _span = tracing::info_span!("result_metrics").entered();
+        if let Some(plane) = plane.as_deref() {
+            plane_quality(plane, &exemplar.image, &settings, &mut metrics);
+        }
         let Ok((geometry, frames, colours, uvs, sources)) = meshes.get(active.0) else {
             return;
         };
@@ -221,4 +226,56 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
         }
     })
     .into_configs()
+}
+
+/// Every image measure of the planar result (`plane.png`) against the
+/// exemplar, under `result.quality.plane` (see docs/metrics.md).
+fn plane_quality(
+    plane: &PlaneImage,
+    exemplar: &Image,
+    settings: &EnergySettings,
+    metrics: &mut Metrics,
+) {
+    let n = settings.neighbourhood;
+    let rgb = to_rgb(exemplar);
+    let img = &plane.image;
+    if img.width < n || img.height < n || rgb.width < n || rgb.height < n {
+        metrics.result.insert(
+            "plane".into(),
+            serde_json::Value::String(format!(
+                "skipped: image or exemplar smaller than the {n}x{n} metric neighbourhood"
+            )),
+        );
+        return;
+    }
+    let sources = plane.sources.as_ref().map(|t| SourceMap {
+        width: img.width,
+        height: img.height,
+        texels: t.clone(),
+    });
+    let q = image_quality(img, &rgb, sources.as_ref(), settings);
+    metrics
+        .result
+        .insert("plane".into(), serde_json::to_value(q).unwrap_or_default());
+}
+
+/// The exemplar as RGB (grey replicated, alpha and extra channels dropped),
+/// as the plane image stores it.
+fn to_rgb(img: &Image) -> Image {
+    let ch = img.channels as usize;
+    if ch == 3 {
+        return img.clone();
+    }
+    let data = img
+        .data
+        .chunks_exact(ch.max(1))
+        .flat_map(|p| {
+            if ch >= 3 {
+                [p[0], p[1], p[2]]
+            } else {
+                [p[0]; 3]
+            }
+        })
+        .collect();
+    Image::from_data(img.width, img.height, 3, data).unwrap_or_else(|| img.clone())
 }
