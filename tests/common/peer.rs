@@ -18,8 +18,8 @@
 //! only `max_thread_count` does) and the result depends on the scheduling:
 //! measured on a 64² stones crop → 96², seed 1 (`report_thread_count_dependence`),
 //! about 12 % of the pixels differ between 1 and 2 threads and about 10 %
-//! between two 2-thread runs. Gates must
-//! therefore compute the peer at one thread.
+//! between two 2-thread runs. Gates must therefore compute the peer at one
+//! thread.
 
 use std::time::Instant;
 
