@@ -394,3 +394,70 @@ fn textured_cylinder_has_low_energy() {
     println!("cylinder turned frames {e_turned:?}");
     assert!(e_turned.mean > 3.0 * e.mean, "{e_turned:?} vs {e:?}");
 }
+
+/// The exemplar blurred by the binomial 5-tap kernel (σ ≈ 1 px), clamped.
+fn blurred(img: &Image) -> Image {
+    surfsynth::image::pyramid::blur_binomial(img, 1, Wrap::Clamp)
+}
+
+#[test]
+fn surface_quality_on_a_flat_grid_agrees_with_the_image_measures() {
+    use surfsynth::kernels::metrics::surface_quality::{SurfaceResult, surface_quality};
+    use surfsynth::kernels::metrics::{completeness, sharpness, structure_distance};
+    let ex = texture("planks");
+    let mesh = grid(ex.width, ex.height);
+    let topo = Topology::build(&mesh);
+    let frames = plane_frames(&mesh);
+    let settings = EnergySettings {
+        samples: 2000,
+        seed: 5,
+        ..Default::default()
+    };
+    let soft = blurred(&ex);
+    // Vertex (x, y) of the grid copies exemplar pixel (x, y).
+    let sources: Vec<Vec2> = (0..ex.width * ex.height)
+        .map(|i| Vec2::new((i % ex.width) as f32 + 0.5, (i / ex.width) as f32 + 0.5))
+        .collect();
+    let measure = |img: &Image| {
+        let signal = SurfaceSignal::VertexColours {
+            values: &img.data,
+            channels: 3,
+        };
+        let r = SurfaceResult {
+            mesh: &mesh,
+            topo: &topo,
+            frames: &frames,
+            spacing: 1.0,
+            signal: &signal,
+        };
+        surface_quality(&r, &ex, &settings, Some(&sources))
+    };
+    let (copy, soft_q) = (measure(&ex), measure(&soft));
+    println!("copy {copy:?}\nblurred {soft_q:?}");
+    // A verbatim copy: complete, as sharp as the exemplar, same structure,
+    // one copied region covering the exemplar.
+    assert!(copy.completeness < 2e-3, "{copy:?}");
+    assert!((copy.sharpness - 1.0).abs() < 0.02, "{copy:?}");
+    assert!(copy.structure < 0.05, "{copy:?}");
+    let v = copy.verbatim.unwrap();
+    assert!(
+        v.source_coverage > 0.99 && v.mean_region_fraction > 0.9,
+        "{v:?}"
+    );
+    // The blurred copy: the surface sees the blur as the image measures do
+    // (sharpness within 10 %, completeness and structure worse than the copy).
+    let image_sharp = sharpness(&soft, &ex);
+    assert!(
+        (soft_q.sharpness / image_sharp - 1.0).abs() < 0.1,
+        "surface {} vs image {image_sharp}",
+        soft_q.sharpness
+    );
+    assert!(soft_q.sharpness < 0.8 * copy.sharpness);
+    assert!(soft_q.completeness > 2.0 * copy.completeness.max(1e-4));
+    assert!(soft_q.structure > copy.structure + 0.05);
+    println!(
+        "image: completeness {} structure {}",
+        completeness(&soft, &ex, 7),
+        structure_distance(&soft, &ex)
+    );
+}

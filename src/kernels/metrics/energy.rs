@@ -16,7 +16,7 @@ use crate::mesh::{PolyMesh, Topology};
 /// Picks `samples` of `count` locations: all of them in order when
 /// `samples >= count`, else uniform draws (with replacement) from a PCG
 /// stream seeded with `seed`.
-fn sample_indices(count: usize, samples: usize, seed: u64) -> Vec<usize> {
+pub(super) fn sample_indices(count: usize, samples: usize, seed: u64) -> Vec<usize> {
     if samples >= count {
         return (0..count).collect();
     }

@@ -7,15 +7,24 @@
 //!   window of the output looks like some window of the exemplar.
 //! - [`histogram_wasserstein`]: per-channel 1-D Wasserstein-1 distance of the
 //!   value distributions, which catches colour drift the energy forgives.
+//! - [`quality`]: completeness (missing content), sharpness (blur), structure
+//!   (orientation/scale energy), verbatim copying (tiling, repeats), and
+//!   [`image_quality`], all of them for one result image.
 
 mod energy;
 mod histogram;
 mod nearest;
+pub mod quality;
+pub mod surface_quality;
 
 pub use super::surface_sample::SurfaceSignal;
 pub use energy::{image_texture_energy, surface_texture_energy};
 pub use histogram::{histogram_wasserstein, histogram_wasserstein_mean};
 pub use nearest::{ExemplarNeighbourhoods, QueryScratch};
+pub use quality::{
+    ImageQuality, SourceMap, VerbatimStats, completeness, image_quality, sharpness,
+    structure_distance, verbatim_copying,
+};
 
 /// Settings of the texture energy (the `[metrics]` options of a config).
 #[derive(Clone, Debug, PartialEq, serde::Deserialize)]

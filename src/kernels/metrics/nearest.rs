@@ -23,6 +23,11 @@ pub struct ExemplarNeighbourhoods {
     channels: usize,
 }
 
+/// Value of the padding columns of [`ExemplarNeighbourhoods::interior`]: a
+/// window touching it is at squared distance ≥ 10⁴ per value from any query
+/// in `[0, 1]`, so it never wins.
+const PAD: f32 = 100.0;
+
 /// One term of a query: plane offset relative to the window origin, and value.
 #[derive(Clone, Copy, Debug)]
 struct Tap {
@@ -64,6 +69,43 @@ impl ExemplarNeighbourhoods {
             pw,
             ph,
             height: h,
+            blocks: w16 / 16,
+            n,
+            channels,
+        }
+    }
+
+    /// Prepares the `n`×`n` windows of `image` that lie wholly inside it (no
+    /// wrap-around): `(w − n + 1) × (h − n + 1)` positions. Used where the
+    /// searched image is a synthesis result, whose opposite borders do not
+    /// meet. Padding positions hold a value far outside `[0, 1]` so they are
+    /// never the nearest (queries are assumed to have values in `[0, 1]`).
+    ///
+    /// Preconditions: `1 <= n <= min(width, height)`.
+    pub fn interior(image: &Image, n: u32) -> Self {
+        let n = n.max(1) as usize;
+        let (w, h) = (image.width as usize, image.height as usize);
+        assert!(n <= w && n <= h, "window larger than the image");
+        let channels = image.channels as usize;
+        let cols = w - n + 1;
+        let w16 = cols.div_ceil(16) * 16;
+        let pw = w16 + n - 1;
+        let ph = h;
+        let plane = pw * ph;
+        let mut planes = vec![PAD; plane * channels];
+        for y in 0..h {
+            for x in 0..w {
+                let px = image.pixel(x as u32, y as u32);
+                for (c, &v) in px.iter().enumerate() {
+                    planes[c * plane + y * pw + x] = v;
+                }
+            }
+        }
+        Self {
+            planes,
+            pw,
+            ph,
+            height: h - n + 1,
             blocks: w16 / 16,
             n,
             channels,
@@ -238,6 +280,46 @@ mod tests {
                 }
             }
             assert_eq!(search.nearest_sq_distance(&q, None, &mut scratch), 0.0);
+        }
+    }
+
+    /// Scalar search over the windows wholly inside the image.
+    fn brute_interior(img: &Image, n: usize, query: &[f32]) -> f32 {
+        let ch = img.channels as usize;
+        let mut best = f32::INFINITY;
+        for y in 0..=(img.height as usize - n) {
+            for x in 0..=(img.width as usize - n) {
+                let mut d = 0.0;
+                for dy in 0..n {
+                    for dx in 0..n {
+                        let p = img.pixel((x + dx) as u32, (y + dy) as u32);
+                        for c in 0..ch {
+                            let e = p[c] - query[(dy * n + dx) * ch + c];
+                            d += e * e;
+                        }
+                    }
+                }
+                best = best.min(d);
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn interior_windows_match_brute_force_and_never_wrap() {
+        for (w, h, ch, n) in [(23u32, 9u32, 3u32, 5usize), (17, 17, 1, 3), (7, 8, 2, 7)] {
+            let img = Image::from_data(w, h, ch, pseudo_random((w * h * ch) as usize, h)).unwrap();
+            let search = ExemplarNeighbourhoods::interior(&img, n as u32);
+            let mut scratch = QueryScratch::default();
+            for k in 0..5 {
+                let q = pseudo_random(n * n * ch as usize, 200 + k);
+                let fast = search.nearest_sq_distance(&q, None, &mut scratch);
+                let slow = brute_interior(&img, n, &q);
+                assert!(
+                    (fast - slow).abs() <= 1e-4 * slow.max(1.0),
+                    "{w}x{h}x{ch} n{n}: {fast} vs {slow}"
+                );
+            }
         }
     }
 }

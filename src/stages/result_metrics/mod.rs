@@ -11,6 +11,7 @@
 use crate::image::Image;
 use crate::kernels::frames::frames_from_global_direction;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
+use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality};
 use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
 };
@@ -32,6 +33,7 @@ type ResultQuery<'w, 's> = Query<
         Option<&'static Frames>,
         Option<&'static VertexColours>,
         Option<&'static CornerUvs>,
+        Option<&'static SourceTexels>,
     ),
 >;
 
@@ -57,7 +59,7 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
            pastes: PasteQuery,
            patch_textures: Option<Res<TexturePatches>>| {
         let _span = tracing::info_span!("result_metrics").entered();
-        let Ok((geometry, frames, colours, uvs)) = meshes.get(active.0) else {
+        let Ok((geometry, frames, colours, uvs, sources)) = meshes.get(active.0) else {
             return;
         };
         let mesh = &geometry.0;
@@ -154,6 +156,41 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                 "neighbourhood": n, "spacing_world_units": spacing.0,
             }),
         );
+        // The measures that see what the energy forgives (kernels/metrics).
+        let sources = sources
+            .map(|s| &s.0[..])
+            .filter(|s| s.len() == mesh.vertex_count());
+        let q = surface_quality(
+            &SurfaceResult {
+                mesh,
+                topo: &topo,
+                frames,
+                spacing: spacing.0,
+                signal: &signal,
+            },
+            &exemplar.image,
+            &settings,
+            sources,
+        );
+        let json = |v: f32| serde_json::json!(if v.is_finite() { Some(v) } else { None });
+        metrics.result.insert(
+            "coherence".into(),
+            serde_json::json!({ "mean": stats.mean, "p90": stats.p90 }),
+        );
+        metrics
+            .result
+            .insert("completeness".into(), json(q.completeness));
+        metrics.result.insert("sharpness".into(), json(q.sharpness));
+        metrics.result.insert("structure".into(), json(q.structure));
+        metrics.result.insert(
+            "templates".into(),
+            serde_json::json!({ "small": q.templates, "structure": q.structure_templates }),
+        );
+        if let Some(v) = q.verbatim {
+            metrics
+                .result
+                .insert("verbatim".into(), serde_json::json!(v));
+        }
         let values = match (colours, &composite) {
             (Some(c), _) => Some((c.values.clone(), c.channels)),
             (None, Some(c)) => {
@@ -173,9 +210,13 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             );
             if let Some(img) = as_image.filter(|i| i.width > 0) {
                 let w = histogram_wasserstein(&img, &exemplar.image);
+                let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
                 metrics
                     .result
                     .insert("histogram_wasserstein".into(), serde_json::json!(w));
+                metrics
+                    .result
+                    .insert("histogram".into(), serde_json::json!(mean));
             }
         }
     })

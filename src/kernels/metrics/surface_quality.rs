@@ -1,0 +1,387 @@
+//! The quality measures of [`super::quality`] on a surface: completeness,
+//! sharpness and structure from tangent-plane resampled templates (as the
+//! surface texture energy), verbatim copying from per-vertex source texels
+//! over mesh edges.
+//!
+//! Templates are `n`×`n` (completeness, sharpness; `n` the metric
+//! neighbourhood) or [`STRUCTURE_TEMPLATE`]-wide (structure) grids of points
+//! one exemplar pixel apart in each sampled vertex's frame, so every measure
+//! is in the same units as on an image. Only templates the faces cover
+//! wholly (completeness, sharpness) or to [`STRUCTURE_MIN_COVERAGE`]
+//! (structure) count, so boundaries and holes do not read as blur.
+
+use rayon::prelude::*;
+
+use super::energy::sample_indices;
+use super::quality::{
+    COMPLETENESS_STRIDE, VerbatimStats, luminance, mean_gradient, normalised_l1,
+    structure_features, structure_scales,
+};
+use super::{EnergySettings, SurfaceSignal};
+use crate::image::Image;
+use crate::kernels::frames::TangentFrame;
+use crate::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+use crate::mesh::{PolyMesh, Topology};
+
+/// Side of the structure templates (points one exemplar pixel apart), or the
+/// exemplar's smaller side when that is less.
+pub const STRUCTURE_TEMPLATE: u32 = 32;
+
+/// Smallest covered fraction of a structure template (uncovered points take
+/// the exemplar's mean colour).
+pub const STRUCTURE_MIN_COVERAGE: f32 = 0.9;
+
+/// Most structure templates resampled (they are 16–64× larger than the
+/// energy's).
+pub const STRUCTURE_SAMPLES: usize = 256;
+
+/// Quality measures of a surface result (see [`super::ImageQuality`] for
+/// their meaning and units). A measure is NaN when no template qualified.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct SurfaceQuality {
+    /// Mean over exemplar windows (stride [`COMPLETENESS_STRIDE`]) of the
+    /// squared distance per value to the nearest resampled result template
+    /// among the sampled vertices. With fewer candidate templates than an
+    /// image has windows it reads higher than on an image: compare surface
+    /// results at equal `samples`.
+    pub completeness: f32,
+    /// Mean Sobel gradient magnitude of the resampled templates' luminance
+    /// over the exemplar's (1 = as sharp).
+    pub sharpness: f32,
+    /// Structure distance between the resampled templates' and the exemplar
+    /// windows' orientation/scale energy, in `[0, 1]`.
+    pub structure: f32,
+    /// Templates that entered completeness and sharpness / structure.
+    pub templates: usize,
+    pub structure_templates: usize,
+    /// Verbatim copying from the per-vertex source texels, when known.
+    pub verbatim: Option<VerbatimStats>,
+}
+
+/// Inputs shared by the surface measures: the mesh with its topology, a frame
+/// per vertex, the world distance of one exemplar pixel, and the signal.
+#[derive(Clone, Copy)]
+pub struct SurfaceResult<'a> {
+    pub mesh: &'a PolyMesh,
+    pub topo: &'a Topology,
+    pub frames: &'a [TangentFrame],
+    /// World units per exemplar pixel at the synthesis scale.
+    pub spacing: f32,
+    pub signal: &'a SurfaceSignal<'a>,
+}
+
+/// Resamples `size`×`size` templates at `picks`, keeping those covered at
+/// least `min_cover` (fraction); returns them flattened.
+fn templates(
+    r: &SurfaceResult,
+    picks: &[u32],
+    size: u32,
+    min_cover: f32,
+    default: &[f32],
+) -> Vec<f32> {
+    let ch = r.signal.channels();
+    let len = (size * size) as usize * ch;
+    let min_covered = ((min_cover * (size * size) as f32).ceil() as usize).max(1);
+    let kept: Vec<Option<Vec<f32>>> = picks
+        .par_iter()
+        .map_init(ResampleScratch::new, |scratch, &v| {
+            let mut out = vec![0.0f32; len];
+            let covered = resample_neighbourhood(
+                r.mesh,
+                r.topo,
+                v,
+                &r.frames[v as usize],
+                r.spacing,
+                size,
+                r.signal,
+                default,
+                &mut out,
+                scratch,
+            );
+            (covered >= min_covered).then_some(out)
+        })
+        .collect();
+    kept.into_iter().flatten().flatten().collect()
+}
+
+/// Every surface measure of a result. Samples the same vertices as the
+/// surface texture energy (`settings.samples` vertices with faces, drawn
+/// with `settings.seed`); `sources` are per-vertex level-0 exemplar pixel
+/// coordinates (NaN where unknown). Deterministic for any number of threads.
+///
+/// Preconditions: as [`super::surface_texture_energy`]; the exemplar is at
+/// least `settings.neighbourhood` pixels on each side.
+pub fn surface_quality(
+    r: &SurfaceResult,
+    exemplar: &Image,
+    settings: &EnergySettings,
+    sources: Option<&[glam::Vec2]>,
+) -> SurfaceQuality {
+    let ch = exemplar.channels as usize;
+    assert_eq!(
+        r.signal.channels(),
+        ch,
+        "signal and exemplar channels differ"
+    );
+    let default = exemplar.mean();
+    let candidates: Vec<u32> = (0..r.mesh.vertex_count() as u32)
+        .filter(|&v| !r.topo.vertex_faces(v).is_empty())
+        .collect();
+    let picks: Vec<u32> = sample_indices(candidates.len(), settings.samples, settings.seed)
+        .into_iter()
+        .map(|k| candidates[k])
+        .collect();
+    let n = settings.neighbourhood;
+    let small = templates(r, &picks, n, 1.0, &default);
+    let count = small.len() / ((n * n) as usize * ch).max(1);
+
+    // Completeness: each exemplar window against every kept template.
+    let completeness = if count == 0 {
+        f32::NAN
+    } else {
+        completeness_against(&small, n as usize, exemplar)
+    };
+
+    // Sharpness: Sobel over each template's interior.
+    let sharpness = if count == 0 {
+        f32::NAN
+    } else {
+        let g_ex = mean_gradient(exemplar);
+        let side = n as usize;
+        let per = side * side * ch;
+        let sum: f64 = (0..count)
+            .map(|t| {
+                let img = Image::from_data(n, n, ch as u32, small[t * per..(t + 1) * per].to_vec())
+                    .expect("template size");
+                mean_gradient(&img) as f64
+            })
+            .sum();
+        if g_ex > 0.0 {
+            (sum / count as f64) as f32 / g_ex
+        } else {
+            f32::NAN
+        }
+    };
+
+    // Structure: larger templates against exemplar windows of the same size.
+    let side = STRUCTURE_TEMPLATE.min(exemplar.width).min(exemplar.height);
+    let spicks: Vec<u32> = picks.iter().take(STRUCTURE_SAMPLES).copied().collect();
+    let large = templates(r, &spicks, side, STRUCTURE_MIN_COVERAGE, &default);
+    let per = (side * side) as usize * ch;
+    let scount = large.len() / per.max(1);
+    let structure = if scount == 0 {
+        f32::NAN
+    } else {
+        let scales = structure_scales((side, side), (side, side));
+        let sum_features = |windows: &mut dyn Iterator<Item = Image>| {
+            let mut acc = vec![0.0f64; 0];
+            for w in windows {
+                let f = structure_features(&luminance(&w), side as usize, side as usize, scales);
+                if acc.is_empty() {
+                    acc = f;
+                } else {
+                    acc.iter_mut().zip(&f).for_each(|(a, b)| *a += b);
+                }
+            }
+            acc
+        };
+        let f_out = sum_features(&mut (0..scount).map(|t| {
+            Image::from_data(
+                side,
+                side,
+                ch as u32,
+                large[t * per..(t + 1) * per].to_vec(),
+            )
+            .expect("template size")
+        }));
+        let step = (side / 2).max(1) as usize;
+        let (ew, eh) = (exemplar.width as usize, exemplar.height as usize);
+        let s = side as usize;
+        let origins: Vec<(usize, usize)> = (0..=eh - s)
+            .step_by(step)
+            .flat_map(|y| (0..=ew - s).step_by(step).map(move |x| (x, y)))
+            .collect();
+        let f_ex = sum_features(&mut origins.iter().map(|&(x0, y0)| {
+            let mut w = Image::new(side, side, ch as u32);
+            for y in 0..s {
+                for x in 0..s {
+                    w.pixel_mut(x as u32, y as u32)
+                        .copy_from_slice(exemplar.pixel((x0 + x) as u32, (y0 + y) as u32));
+                }
+            }
+            w
+        }));
+        normalised_l1(&f_out, &f_ex)
+    };
+
+    let verbatim = sources.map(|s| surface_verbatim(r, s, exemplar.width, exemplar.height));
+    SurfaceQuality {
+        completeness,
+        sharpness,
+        structure,
+        templates: count,
+        structure_templates: scount,
+        verbatim,
+    }
+}
+
+/// Mean over the exemplar's `n`×`n` windows (stride [`COMPLETENESS_STRIDE`])
+/// of the smallest squared distance per value to any of `templates` (each
+/// `n·n·channels` values, the exemplar's layout). Exhaustive with a partial
+/// distance exit per row; parallel over exemplar windows.
+fn completeness_against(templates: &[f32], n: usize, exemplar: &Image) -> f32 {
+    let ch = exemplar.channels as usize;
+    let per = n * n * ch;
+    let count = templates.len() / per;
+    let stride = COMPLETENESS_STRIDE as usize;
+    let origins: Vec<(usize, usize)> = (0..=exemplar.height as usize - n)
+        .step_by(stride)
+        .flat_map(|y| {
+            (0..=exemplar.width as usize - n)
+                .step_by(stride)
+                .map(move |x| (x, y))
+        })
+        .collect();
+    let values: Vec<f64> = origins
+        .par_iter()
+        .map_init(
+            || vec![0.0f32; per],
+            |query, &(x0, y0)| {
+                for dy in 0..n {
+                    for dx in 0..n {
+                        let p = exemplar.pixel((x0 + dx) as u32, (y0 + dy) as u32);
+                        query[(dy * n + dx) * ch..][..ch].copy_from_slice(p);
+                    }
+                }
+                let row = n * ch;
+                let mut best = f32::INFINITY;
+                for t in 0..count {
+                    let cand = &templates[t * per..(t + 1) * per];
+                    let mut d = 0.0f32;
+                    for r in 0..n {
+                        let (a, b) = (
+                            &query[r * row..(r + 1) * row],
+                            &cand[r * row..(r + 1) * row],
+                        );
+                        d += a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>();
+                        if d >= best {
+                            break;
+                        }
+                    }
+                    best = best.min(d);
+                }
+                best as f64
+            },
+        )
+        .collect();
+    (values.iter().sum::<f64>() / values.len().max(1) as f64 / per as f64) as f32
+}
+
+/// Verbatim copying on a surface: vertices `a`, `b` joined by an edge belong
+/// to one copied region when their sources differ by the edge's texel offset
+/// (the mean of both endpoint frames' offsets at `1 / spacing` pixels per
+/// unit) within `max(0.5, 0.1 · |offset|)` pixels per axis, toroidally.
+/// Region areas are the vertices' areas (a third of each incident
+/// triangle's, fan-triangulated) in exemplar pixels²; coverage counts the
+/// exemplar pixels some vertex's source lies in; repeats count, per exemplar
+/// pixel, the distinct large regions (over a third of the exemplar) copying
+/// it.
+pub fn surface_verbatim(
+    r: &SurfaceResult,
+    sources: &[glam::Vec2],
+    ex_width: u32,
+    ex_height: u32,
+) -> VerbatimStats {
+    let nv = r.mesh.vertex_count();
+    assert_eq!(sources.len(), nv, "one source per vertex");
+    let (ew, eh) = (ex_width.max(1) as f32, ex_height.max(1) as f32);
+    let ex_area = (ex_width.max(1) * ex_height.max(1)) as usize;
+    let scale = 1.0 / r.spacing;
+    let known = |s: glam::Vec2| s.x.is_finite() && s.y.is_finite();
+    let wrap = |d: f32, size: f32| d - size * (d / size).round();
+    let mut parent: Vec<u32> = (0..nv as u32).collect();
+    fn root(parent: &mut [u32], mut i: u32) -> u32 {
+        while parent[i as usize] != i {
+            let p = parent[parent[i as usize] as usize];
+            parent[i as usize] = p;
+            i = p;
+        }
+        i
+    }
+    for &[a, b] in &r.topo.edges {
+        let (sa, sb) = (sources[a as usize], sources[b as usize]);
+        if !known(sa) || !known(sb) {
+            continue;
+        }
+        let d = r.mesh.positions[b as usize] - r.mesh.positions[a as usize];
+        let e = 0.5
+            * (r.frames[a as usize].texel_offset(d, scale)
+                + r.frames[b as usize].texel_offset(d, scale));
+        let tol = (0.1 * e.length()).max(0.5);
+        if (wrap(sb.x - sa.x, ew) - e.x).abs() <= tol && (wrap(sb.y - sa.y, eh) - e.y).abs() <= tol
+        {
+            let (ra, rb) = (root(&mut parent, a), root(&mut parent, b));
+            parent[ra.max(rb) as usize] = ra.min(rb);
+        }
+    }
+    // Vertex areas in exemplar pixels².
+    let mut varea = vec![0.0f64; nv];
+    for f in 0..r.mesh.face_count() {
+        let face = r.mesh.face(f);
+        for k in 1..face.len().saturating_sub(1) {
+            let (a, b, c) = (face[0] as usize, face[k] as usize, face[k + 1] as usize);
+            let p = &r.mesh.positions;
+            let area =
+                0.5 * (p[b] - p[a]).cross(p[c] - p[a]).length() as f64 * (scale * scale) as f64;
+            for v in [a, b, c] {
+                varea[v] += area / 3.0;
+            }
+        }
+    }
+    let texel = |s: glam::Vec2| {
+        let x = (s.x.floor() as i64).rem_euclid(ex_width.max(1) as i64) as usize;
+        let y = (s.y.floor() as i64).rem_euclid(ex_height.max(1) as i64) as usize;
+        y * ex_width.max(1) as usize + x
+    };
+    let mut area = vec![0.0f64; nv];
+    let mut roots = vec![u32::MAX; nv];
+    let mut used = vec![false; ex_area];
+    for v in 0..nv {
+        if !known(sources[v]) || r.topo.vertex_faces(v as u32).is_empty() {
+            continue;
+        }
+        let rt = root(&mut parent, v as u32);
+        roots[v] = rt;
+        area[rt as usize] += varea[v];
+        used[texel(sources[v])] = true;
+    }
+    let (mut sum, mut sum_sq, mut largest) = (0.0f64, 0.0f64, 0.0f64);
+    for &a in area.iter().filter(|&&a| a > 0.0) {
+        sum += a;
+        sum_sq += a * a;
+        largest = largest.max(a);
+    }
+    let large = ex_area as f64 / 3.0;
+    let mut repeats = vec![0u32; ex_area];
+    let mut last = vec![u32::MAX; ex_area];
+    let mut most = 0;
+    for v in 0..nv {
+        if roots[v] == u32::MAX || area[roots[v] as usize] < large {
+            continue;
+        }
+        let e = texel(sources[v]);
+        if last[e] != roots[v] {
+            last[e] = roots[v];
+            repeats[e] += 1;
+            most = most.max(repeats[e]);
+        }
+    }
+    let mean = if sum > 0.0 { sum_sq / sum } else { 0.0 };
+    VerbatimStats {
+        source_coverage: used.iter().filter(|&&u| u).count() as f32 / ex_area as f32,
+        mean_region_area: mean as f32,
+        mean_region_fraction: (mean / ex_area as f64) as f32,
+        largest_region: largest.round() as u32,
+        large_region_repeats: most,
+    }
+}
