@@ -26,7 +26,7 @@ use std::time::Instant;
 use surfsynth::image::Image;
 use texture_synthesis as ts;
 
-pub use shim::SourceMap;
+pub use surfsynth::kernels::metrics::SourceMap;
 
 /// Embark's result, in our types.
 #[derive(Clone, Debug)]
@@ -139,17 +139,5 @@ fn parse_transform(transform: &ts::CoordinateTransform, width: u32, height: u32)
         width,
         height,
         texels,
-    }
-}
-
-/// Temporary stand-in for `surfsynth::kernels::metrics::SourceMap` until the
-/// metrics land on this branch.
-mod shim {
-    /// Exemplar pixel coordinates per output pixel (index + 0.5), NaN where unknown.
-    #[derive(Clone, Debug)]
-    pub struct SourceMap {
-        pub width: u32,
-        pub height: u32,
-        pub texels: Vec<[f32; 2]>,
     }
 }
