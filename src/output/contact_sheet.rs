@@ -73,7 +73,8 @@ pub struct ContactSheet {
 }
 
 /// Lays `tiles` out left to right: each scaled to a common height, its label
-/// under it; a slot is as wide as the wider of its picture and its label.
+/// under it; a slot is as wide as the wider of its picture and its label
+/// (plus a glyph's width of margin on either side of the label).
 /// An empty `tiles` gives a sheet of only the margins.
 pub fn contact_sheet(tiles: &[SheetTile<'_>], layout: &SheetLayout) -> ContactSheet {
     let scale = layout.font_scale.max(1);
@@ -87,6 +88,8 @@ pub fn contact_sheet(tiles: &[SheetTile<'_>], layout: &SheetLayout) -> ContactSh
         .map(|t| scale_to_height(&to_rgb(t.image), height))
         .collect();
     let line_height = (GLYPH_HEIGHT + 2) * scale;
+    // A glyph's width of space on either side keeps neighbouring labels apart.
+    let label_margin = 2 * GLYPH_WIDTH * scale;
     let label_height = tiles
         .iter()
         .map(|t| t.label.lines().count().max(1) as u32 * line_height)
@@ -95,7 +98,7 @@ pub fn contact_sheet(tiles: &[SheetTile<'_>], layout: &SheetLayout) -> ContactSh
     let slot_widths: Vec<u32> = tiles
         .iter()
         .zip(&pictures)
-        .map(|(t, p)| p.width.max(text_width(t.label, scale)))
+        .map(|(t, p)| p.width.max(text_width(t.label, scale) + label_margin))
         .collect();
     let width = gap + slot_widths.iter().map(|w| w + gap).sum::<u32>();
     let sheet_height = gap + height + gap / 2 + label_height + gap / 2;
@@ -328,7 +331,7 @@ mod tests {
             "8² scaled to the tallest height"
         );
         assert_eq!((sheet.tiles[1].width, sheet.tiles[1].height), (40, 20));
-        assert_eq!(sheet.labels[0].width, text_width(label, 2));
+        assert_eq!(sheet.labels[0].width, text_width(label, 2) + 2 * 5 * 2);
         // Nearest neighbour: the scaled tile's pixels are pixels of the original.
         let r = sheet.tiles[0];
         for y in 0..r.height {
