@@ -12,7 +12,8 @@
 //! one thread and on all cores, whether the two results are identical, and a
 //! second table of every metric as a ratio to the peer's on that texture),
 //! `quality.csv` (the same, one row per texture × method) and
-//! `sheet_<texture>.png` (exemplar | peer | every method, labelled). The run
+//! `sheet_<texture>.png` (exemplar at its true scale | peer | every method,
+//! labelled). The run
 //! folders of the methods are kept in `target/quality/runs/`.
 //!
 //! Environment knobs:
@@ -417,13 +418,16 @@ fn read_sources(path: &Path, size: u32) -> Result<Option<SourceMap>, String> {
     }))
 }
 
+/// One thread setting's wall and CPU seconds, or why it failed.
+type Timing = Result<(f64, Option<f64>), String>;
+
 /// One texture × method row.
 struct Row {
     texture: String,
     method: String,
     quality: Result<ImageQuality, String>,
     /// Per thread setting: the wall and CPU seconds, or the error.
-    times: Vec<(Threads, Result<(f64, Option<f64>), String>)>,
+    times: Vec<(Threads, Timing)>,
     /// Whether every thread setting gave the same image (None: fewer than two results).
     identical: Option<bool>,
 }
@@ -438,7 +442,7 @@ fn fmt_metric(v: f32) -> String {
     }
 }
 
-fn fmt_time(t: &Result<(f64, Option<f64>), String>) -> (String, String) {
+fn fmt_time(t: &Timing) -> (String, String) {
     match t {
         Ok((wall, cpu)) => (
             format!("{wall:.2}"),
@@ -606,6 +610,28 @@ fn csv(rows: &[Row], knobs: &Knobs) -> String {
     out
 }
 
+/// The exemplar centred on a `size`² tile of the sheet's background, so it
+/// shows at the scale of the results (one exemplar pixel per output pixel)
+/// rather than magnified to the tiles' height; a larger exemplar is left
+/// as it is (the sheet scales it).
+fn at_true_scale(exemplar: &Image, size: u32) -> Image {
+    if exemplar.width > size || exemplar.height > size {
+        return exemplar.clone();
+    }
+    let mut tile = Image::new(size, size, 3);
+    for px in tile.data.chunks_exact_mut(3) {
+        px.copy_from_slice(&SheetLayout::default().background);
+    }
+    let (x0, y0) = ((size - exemplar.width) / 2, (size - exemplar.height) / 2);
+    for y in 0..exemplar.height {
+        for x in 0..exemplar.width {
+            tile.pixel_mut(x0 + x, y0 + y)
+                .copy_from_slice(exemplar.pixel(x, y));
+        }
+    }
+    tile
+}
+
 /// A grey placeholder tile for a method without a result.
 fn placeholder(size: u32) -> Image {
     let mut img = Image::new(size, size, 3);
@@ -651,7 +677,10 @@ fn main() {
             }
         };
         let exemplar_path = path.canonicalize().unwrap_or_else(|_| path.clone());
-        let mut sheet: Vec<(String, Image)> = vec![("exemplar".into(), exemplar.clone())];
+        let mut sheet: Vec<(String, Image)> = vec![(
+            "exemplar (1:1)".into(),
+            at_true_scale(&exemplar, knobs.size),
+        )];
         for method in &knobs.methods {
             let mut first: Option<Outcome> = None;
             let mut times = Vec::new();
