@@ -15,6 +15,7 @@ pub mod lapped;
 pub mod max_flow;
 pub mod metrics;
 pub mod orientation_field;
+pub mod plane_raster;
 pub mod relax_orientation;
 pub mod retile;
 pub mod sqrt2;

@@ -69,6 +69,19 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     files.extend(write_pastes(dir, &job.stem, &job.mesh, pastes)?);
                 }
             }
+            "plane" => {
+                if let Some(plane) = &job.plane {
+                    let path = dir.join("plane.png");
+                    write_png(&path, &plane.image)?;
+                    files.push(path);
+                    let path = dir.join("plane_sources.png");
+                    let pixels = super::plane_source_pixels(plane);
+                    let bytes =
+                        super::encode_png_rgb16(plane.image.width, plane.image.height, &pixels)?;
+                    super::write_bytes_atomic(&path, &bytes)?;
+                    files.push(path);
+                }
+            }
             "preview" => {
                 files.extend(super::render::write_previews(
                     dir,

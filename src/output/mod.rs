@@ -91,3 +91,43 @@ pub fn write_png(path: &Path, img: &crate::image::Image) -> Result<(), OutputErr
     let bytes = encode_png(img)?;
     write_bytes_atomic(path, &bytes)
 }
+
+/// Encodes 16-bit RGB PNG bytes from `width × height` pixels of three `u16`
+/// values each (row-major).
+pub fn encode_png_rgb16(width: u32, height: u32, rgb: &[[u16; 3]]) -> Result<Vec<u8>, OutputError> {
+    use image::ImageEncoder;
+    // PNG stores 16-bit samples big-endian; the encoder takes native-endian bytes.
+    let bytes: Vec<u8> = rgb
+        .iter()
+        .flat_map(|px| px.iter().flat_map(|v| v.to_ne_bytes()))
+        .collect();
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(&bytes, width, height, image::ExtendedColorType::Rgb16)
+        .map_err(|e| OutputError::Encode {
+            what: "16-bit PNG".into(),
+            message: e.to_string(),
+        })?;
+    Ok(out)
+}
+
+/// The source map of a plane image as 16-bit RGB pixels: R, G = the exemplar
+/// pixel index `x`, `y` (`floor` of the source coordinate), B = 65535 where
+/// the source is known, all 0 where not (or when the result has no sources).
+pub fn plane_source_pixels(plane: &crate::stages::world::PlaneImage) -> Vec<[u16; 3]> {
+    let n = plane.image.pixel_count();
+    match &plane.sources {
+        Some(s) => s
+            .iter()
+            .map(|p| {
+                if p[0].is_finite() && p[1].is_finite() {
+                    let q = |v: f32| v.floor().clamp(0.0, 65535.0) as u16;
+                    [q(p[0]), q(p[1]), u16::MAX]
+                } else {
+                    [0; 3]
+                }
+            })
+            .collect(),
+        None => vec![[0; 3]; n],
+    }
+}

@@ -8,13 +8,14 @@
 
 mod error;
 mod input;
+pub mod plane_check;
 pub mod registry;
 mod report;
 mod run;
 
 pub use error::PipelineError;
 pub use input::{LoadedInput, load_input};
-pub use registry::{Datum, Stage, StageCtx, StageInfo, StagePlan, registry};
+pub use registry::{Datum, PlaneRole, Stage, StageCtx, StageInfo, StagePlan, registry};
 pub use report::{describe_stages, format_report};
 pub use run::{
     RunOptions, RunReport, StageSet, build_schedule, peak_rss_bytes, run, run_in_world, setup_world,
@@ -158,6 +159,20 @@ impl Pipeline {
                         },
                     });
                 }
+            }
+            if matches!(plan.plane_role(), registry::PlaneRole::Request { .. })
+                && !plane_check::PLANE_RESULTS
+                    .iter()
+                    .any(|d| available.contains(d))
+            {
+                return Err(ConfigError::MissingInput {
+                    file: file.clone(),
+                    line: kind_line,
+                    index,
+                    kind,
+                    needs: "a result to draw for format `plane` (vertex colours, per-corner texture coordinates, lapped pastes or a synthesised image)".into(),
+                    hint: "add a synthesis stage (`init_colours`, `match`, `graph_match`, `jump_surface`, `lapped_paste` or `jump_image`) before it".into(),
+                });
             }
             available.extend(plan.produces());
             stages.push(plan);

@@ -24,6 +24,8 @@ pub enum Datum {
     Patches,
     /// A per-face tangent field (lapped textures).
     FaceField,
+    /// A synthesised image (`jump_image`).
+    Image,
 }
 
 impl Datum {
@@ -38,6 +40,7 @@ impl Datum {
             Datum::JumpMap => "a jump map",
             Datum::Patches => "lapped-texture pastes",
             Datum::FaceField => "a per-face tangent field",
+            Datum::Image => "a synthesised image",
         }
     }
 
@@ -52,6 +55,37 @@ impl Datum {
             .map(|s| s.kind)
             .collect()
     }
+}
+
+/// What a stage means for the planar image output (`export` format
+/// `plane`), so that a request it cannot satisfy is refused before the run.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum PlaneRole {
+    /// Leaves the active mesh's shape alone (most stages).
+    Keeps,
+    /// Makes a new active mesh: `planar` when it is flat in xy; `what` names it.
+    ReplacesMesh {
+        /// Whether the new mesh lies flat in the xy plane.
+        planar: bool,
+        /// The mesh, for messages (`builtin plane`).
+        what: String,
+    },
+    /// Moves vertices out of their plane (displacement).
+    DeformsMesh,
+    /// Synthesises an image of this size directly (`jump_image`).
+    Image {
+        /// Pixels.
+        width: u32,
+        /// Pixels.
+        height: u32,
+    },
+    /// Asks for a plane image of this size (`export` with format `plane`).
+    Request {
+        /// Pixels.
+        width: u32,
+        /// Pixels.
+        height: u32,
+    },
 }
 
 /// Context handed to a stage when it builds its systems.
@@ -77,6 +111,10 @@ pub trait Stage: 'static {
     fn produces(settings: &Self::Settings) -> Vec<Datum>;
     /// Its systems, run in order inside the stage's system set.
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem>;
+    /// What it means for the planar image output (default: keeps the mesh).
+    fn plane_role(_settings: &Self::Settings) -> PlaneRole {
+        PlaneRole::Keeps
+    }
 }
 
 /// A configured stage, type-erased.
@@ -91,6 +129,8 @@ pub trait StagePlan: Send + Sync {
     fn resolved(&self) -> toml::Table;
     /// Its systems.
     fn systems(&self, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem>;
+    /// What it means for the planar image output.
+    fn plane_role(&self) -> PlaneRole;
 }
 
 struct Plan<S: Stage>(S::Settings);
@@ -110,6 +150,9 @@ impl<S: Stage> StagePlan for Plan<S> {
     }
     fn systems(&self, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         S::systems(self.0.clone(), ctx)
+    }
+    fn plane_role(&self) -> PlaneRole {
+        S::plane_role(&self.0)
     }
 }
 

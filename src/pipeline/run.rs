@@ -131,6 +131,7 @@ pub fn run_in_world(
     world: &mut World,
     input: LoadedInput,
 ) -> Result<(), PipelineError> {
+    super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
     setup_world(pipeline, world, input);
     let mut schedule = build_schedule(pipeline);
     schedule.run(world);

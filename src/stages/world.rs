@@ -210,6 +210,58 @@ pub struct ExportJob {
     /// the input mesh, its vertex colours and its preview renders, written as
     /// `<stem>_original.ply` and `original_preview_*.png`.
     pub original: Option<(PolyMesh, VertexColours, Vec<Image>)>,
+    /// The result as a planar image (format `plane`), written as `plane.png`
+    /// and `plane_sources.png`.
+    pub plane: Option<PlaneImage>,
+}
+
+/// The result as an image (the `export` format `plane`): the active result
+/// sampled at one pixel per pixel over the xy bounding box of a mesh that is
+/// flat in xy, or a `jump_image` result itself. Inserted by the `export`
+/// stage (its position in the config, before the result metrics run) when
+/// its `formats` include `plane`; absent otherwise.
+///
+/// - Pixel `(i, j)` (column `i`, row `j`, row 0 at the top) samples the xy
+///   point `(min.x + i / (width − 1) · Δx, max.y − j / (height − 1) · Δy)`
+///   of the mesh's xy bounding box (pixel centres span the box edge to
+///   edge): image-up is `+y` (`kernels::plane_raster`). On the configs'
+///   `N × N`-vertex planes of side `N − 1` every pixel centre is a vertex.
+/// - Vertex colours are interpolated barycentrically on the triangle that
+///   contains the pixel centre; per-corner UVs are blended 3 ways as the
+///   preview renderer does (or read directly without blend layers); lapped
+///   pastes are composited in paste order over the exemplar's mean colour.
+/// - Pixels outside every triangle are black, with unknown sources.
+#[derive(Resource, Clone, Debug)]
+pub struct PlaneImage {
+    /// RGB, f32, nominally in `[0, 1]` (grey exemplars replicated, alpha and
+    /// extra channels dropped); `width × height` of the export's `plane_size`.
+    pub image: Image,
+    /// Per pixel (row-major, as `image`), the exemplar pixel the colour was
+    /// copied from: level-0 exemplar pixel coordinates `x, y`, always an
+    /// integer index `+ 0.5`, wrapped into `[0, width) × [0, height)` of the
+    /// exemplar; `[NaN, NaN]` where unknown (outside the mesh, under no
+    /// opaque paste). Vertex colours take the source of the vertex with the
+    /// largest barycentric weight (sources are not interpolated); corner UVs
+    /// the dominant blend layer's interpolated UV; lapped pastes the topmost
+    /// paste with alpha ≥ 0.5 (its patch UV plus the texture patch's exemplar
+    /// origin); `jump_image` its exact source map. `None` when the result
+    /// records no sources (vertex colours without `SourceTexels`).
+    pub sources: Option<Vec<[f32; 2]>>,
+    /// The exemplar's width and height in pixels (the range of `sources`).
+    pub exemplar_size: [u32; 2],
+}
+
+/// A synthesised image (`jump_image`): the image at one exemplar pixel per
+/// pixel and, per pixel, its source in exemplar pixel coordinates (as the
+/// method returns them: integer indices for pixel and patch synthesis,
+/// continuous for controlled synthesis). The `export` format `plane` writes
+/// it when the active mesh carries no result.
+#[derive(Resource, Clone, Debug)]
+pub struct SynthesisedImage {
+    /// The image, the exemplar's channel count.
+    pub image: Image,
+    /// Row-major per-pixel source coordinates.
+    pub sources: Vec<[f32; 2]>,
 }
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),

@@ -186,6 +186,12 @@ impl Stage for BuiltinPyramid {
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::MeshPyramid]
     }
+    fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
+        crate::pipeline::PlaneRole::ReplacesMesh {
+            planar: settings.mesh == "plane",
+            what: format!("the builtin_pyramid mesh `{}`", settings.mesh),
+        }
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,
                mut metrics: ResMut<Metrics>,

@@ -124,6 +124,9 @@ impl Stage for Displace {
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         Vec::new()
     }
+    fn plane_role(_: &Self::Settings) -> crate::pipeline::PlaneRole {
+        crate::pipeline::PlaneRole::DeformsMesh
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,

@@ -12,6 +12,8 @@ use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use serde::{Deserialize, Serialize};
 
+pub mod plane;
+
 /// Settings of `export`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -24,6 +26,8 @@ pub struct ExportSettings {
     pub name: String,
     /// Side of the baked atlas texture, pixels.
     pub bake_size: u32,
+    /// Width and height of `plane.png` (format `plane`), pixels.
+    pub plane_size: [u32; 2],
 }
 
 impl Default for ExportSettings {
@@ -33,6 +37,7 @@ impl Default for ExportSettings {
             preview_size: 512,
             name: "result".into(),
             bake_size: 1024,
+            plane_size: [256, 256],
         }
     }
 }
@@ -50,8 +55,9 @@ impl StageSettings for ExportSettings {
                 "pastes",
                 "glb",
                 "baked_obj",
+                "plane",
             ]),
-            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs",
+            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs; plane: the result as an image, plane.png (8-bit RGB, plane_size) sampled over the xy bounding box of a mesh flat in xy (row 0 = max y, so image-up is +y) or a jump_image result as it is, plus plane_sources.png (16-bit RGB: R, G = the exemplar pixel x, y each pixel was copied from, B = 65535 where known, else 0)",
         },
         ParamDoc {
             name: "preview_size",
@@ -64,6 +70,12 @@ impl StageSettings for ExportSettings {
             unit: "pixels",
             range: ParamRange::Int(64, 16384),
             doc: "side of the baked atlas texture (format `baked`)",
+        },
+        ParamDoc {
+            name: "plane_size",
+            unit: "pixels",
+            range: ParamRange::Int(1, 16384),
+            doc: "[width, height] of plane.png and plane_sources.png (format `plane`); pixel centres span the mesh's xy bounding box edge to edge (pixel (i, j) at min.x + i/(width−1)·Δx, max.y − j/(height−1)·Δy; row 0 = max y), so for one exemplar pixel per output pixel use a box of (width−1) × (height−1) world units at 1 texel per unit, e.g. a 256 × 256-vertex plane of side 255; a jump_image result must be this size",
         },
         ParamDoc {
             name: "name",
@@ -130,6 +142,7 @@ type ExportQuery<'w, 's> = Query<
         Option<&'static CornerUvs>,
         Option<&'static BlendUvs>,
         Option<&'static AtlasTexture>,
+        Option<&'static SourceTexels>,
     ),
 >;
 
@@ -149,8 +162,19 @@ impl Stage for Export {
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![]
     }
+    fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
+        if settings.formats.iter().any(|f| f == "plane") {
+            crate::pipeline::PlaneRole::Request {
+                width: settings.plane_size[0],
+                height: settings.plane_size[1],
+            }
+        } else {
+            crate::pipeline::PlaneRole::Keeps
+        }
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |active: Res<ActiveMesh>,
+        (move |mut commands: Commands,
+               active: Res<ActiveMesh>,
                baked_asset: Option<Res<BakedAsset>>,
                mut failure: ResMut<StageFailure>,
                exemplar: Res<Exemplar>,
@@ -158,8 +182,13 @@ impl Stage for Export {
                meshes: ExportQuery,
                pastes: Query<PasteQuery>,
                patch_textures: Option<Res<TexturePatches>>,
+               (patch_origins, synthesised): (
+            Option<Res<TexturePatchOrigins>>,
+            Option<Res<SynthesisedImage>>,
+        ),
                originals: Query<(Entity, &Geometry, &VertexColours), With<SourceMesh>>| {
-            let Ok((geometry, colours, uvs, blend, atlas)) = meshes.get(active.0) else {
+            let Ok((geometry, colours, uvs, blend, atlas, source_texels)) = meshes.get(active.0)
+            else {
                 return;
             };
             // The `bake` stage's asset (formats glb, baked_obj).
@@ -188,6 +217,71 @@ impl Stage for Export {
                 && lapped
                     .iter()
                     .all(|p| (p.2.0 as usize) < patch_textures.len());
+            let plane_image = if settings.formats.iter().any(|f| f == "plane") {
+                let _span = tracing::info_span!("plane_image").entered();
+                let ex = &exemplar.image;
+                let ex_size = [ex.width, ex.height];
+                let records: Vec<crate::kernels::lapped::composite::PasteRecord> = lapped
+                    .iter()
+                    .map(|p| crate::kernels::lapped::composite::PasteRecord {
+                        texture: p.2.0,
+                        faces: &p.3.0,
+                        uvs: &p.4.0,
+                    })
+                    .collect();
+                let background = plane::to_rgb(&ex.mean());
+                let signal = match (uvs, colours) {
+                    (Some(u), _) => Some(Ok(plane::PlaneSignal::Uvs {
+                        uvs: &u.0,
+                        blend: blend
+                            .map(|b| b.0.as_slice())
+                            .filter(|b| b.len() == mesh.triangulate_corners().0.len()),
+                        texture: ex,
+                        wrap: exemplar.wrap,
+                    })),
+                    (None, Some(c)) => Some(Ok(plane::PlaneSignal::Colours {
+                        values: &c.values,
+                        channels: c.channels,
+                        sources: source_texels
+                            .map(|s| s.0.as_slice())
+                            .filter(|s| s.len() == mesh.vertex_count()),
+                    })),
+                    (None, None) if lapped_ok => Some(
+                        crate::kernels::lapped::composite::LappedComposite::new(
+                            mesh,
+                            &records,
+                            patch_textures,
+                            &background,
+                        )
+                        .map(|composite| plane::PlaneSignal::Lapped {
+                            composite,
+                            textures: patch_textures,
+                            origins: patch_origins.as_deref().map(|o| o.0.as_slice()).unwrap_or(&[]),
+                        }),
+                    ),
+                    (None, None) => None,
+                };
+                let result = match (signal, synthesised.as_deref()) {
+                    (Some(Ok(signal)), _) => {
+                        plane::plane_from_surface(mesh, &signal, settings.plane_size, ex_size)
+                    }
+                    (Some(Err(e)), _) => Err(format!("format `plane`: the lapped pastes: {e}")),
+                    (None, Some(img)) => plane::plane_from_image(img, settings.plane_size, ex_size),
+                    (None, None) => Err("format `plane` needs a result: vertex colours, per-corner texture coordinates, lapped pastes or a `jump_image`; none exists".into()),
+                };
+                match result {
+                    Ok(p) => Some(p),
+                    Err(e) => {
+                        fail(&mut failure, ctx.index, Self::KIND, e);
+                        return;
+                    }
+                }
+            } else {
+                None
+            };
+            if let Some(p) = &plane_image {
+                commands.insert_resource(p.clone());
+            }
             let mut images = std::mem::take(&mut job.images);
             let previews = if settings.formats.iter().any(|f| f == "preview") {
                 let _span = tracing::info_span!("render_previews").entered();
@@ -313,6 +407,7 @@ impl Stage for Export {
                     .filter(|_| wants_asset)
                     .cloned(),
                 original,
+                plane: plane_image,
             };
         })
         .into_configs()

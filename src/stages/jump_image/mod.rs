@@ -194,10 +194,17 @@ impl Stage for JumpImage {
         vec![Datum::JumpMap]
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
-        vec![]
+        vec![Datum::Image]
+    }
+    fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
+        crate::pipeline::PlaneRole::Image {
+            width: settings.width,
+            height: settings.height,
+        }
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |exemplar: Res<Exemplar>,
+        (move |mut commands: Commands,
+               exemplar: Res<Exemplar>,
                map: Res<ExemplarJumpMap>,
                seed: Res<RunSeed>,
                mut job: ResMut<ExportJob>,
@@ -307,6 +314,10 @@ impl Stage for JumpImage {
                 );
             }
             let src_img = source_image(image.width, image.height, &sources, ex.width, ex.height);
+            commands.insert_resource(SynthesisedImage {
+                image: image.clone(),
+                sources,
+            });
             let name = &settings.name;
             job.images
                 .push((format!("{name}_sources.png"), src_img.clone()));

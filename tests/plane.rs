@@ -1,0 +1,285 @@
+//! The planar benchmark (`configs/plane/*.toml`) and the `plane` export
+//! format: every method's result as an image, with its source map.
+//!
+//! The configs run through the CLI at 64 × 64 (their 256 × 256 default is
+//! the benchmark; the sizes here keep the file fast) on the shared stones
+//! photo.
+
+mod common;
+use common::*;
+use std::path::{Path, PathBuf};
+use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
+use surfsynth::stages::export::plane::{PlaneSignal, plane_from_surface};
+
+const STONES: &str = "textures/stones.png";
+
+/// `--set` overrides that shrink each config to a 64 × 64 plane image at one
+/// exemplar pixel per pixel.
+fn small(method: &str) -> Vec<String> {
+    let v: &[&str] = match method {
+        "jump_pixel" | "jump_patch" => &[
+            "stage.2.width=64",
+            "stage.2.height=64",
+            "stage.3.plane_size=[64,64]",
+        ],
+        "jump_surface" => &[
+            "input.mesh_options.resolution=[64,64]",
+            "input.mesh_options.size=63.0",
+            "stage.4.plane_size=[64,64]",
+        ],
+        "lapped" => &[
+            "input.mesh_options.resolution=[17,17]",
+            "input.mesh_options.size=63.0",
+            "stage.3.plane_size=[64,64]",
+        ],
+        "wei_levoy" => &[
+            "stage.1.resolution=[64,64]",
+            "stage.1.size=63.0",
+            "stage.5.plane_size=[64,64]",
+        ],
+        // 6 x 6 vertices refined to ≥ 4096 (about one per pixel).
+        _ => &[
+            "input.mesh_options.resolution=[6,6]",
+            "input.mesh_options.size=63.0",
+            "stage.1.target_vertices=4096",
+            "stage.4.plane_size=[64,64]",
+        ],
+    };
+    v.iter().map(|s| s.to_string()).collect()
+}
+
+const METHODS: [&str; 7] = [
+    "jump_pixel",
+    "jump_patch",
+    "jump_surface",
+    "lapped",
+    "wei_levoy",
+    "bangay_morkel",
+    "bangay_morkel_graph_cut",
+];
+
+/// Runs `configs/plane/METHOD.toml` small on stones into `out`; returns the folder.
+fn run_small(method: &str, out: &Path, extra: &[&str]) -> PathBuf {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/plane/{method}.toml"));
+    let exemplar = format!("input.exemplar={}", shared(STONES).display());
+    let mut args: Vec<String> = vec![
+        "run".into(),
+        config.display().to_string(),
+        "--out".into(),
+        out.display().to_string(),
+        "--set".into(),
+        exemplar,
+    ];
+    for s in small(method) {
+        args.push("--set".into());
+        args.push(s);
+    }
+    args.extend(extra.iter().map(|s| s.to_string()));
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (code, _, stderr) = run_cli(&refs);
+    assert_eq!(code, 0, "{method}: {stderr}");
+    out.to_path_buf()
+}
+
+/// `plane.png` as 8-bit RGB and `plane_sources.png` as 16-bit RGB.
+fn read_outputs(
+    dir: &Path,
+) -> (
+    image::RgbImage,
+    image::ImageBuffer<image::Rgb<u16>, Vec<u16>>,
+) {
+    let plane = image::open(dir.join("plane.png")).expect("plane.png");
+    let sources = image::open(dir.join("plane_sources.png")).expect("plane_sources.png");
+    assert!(
+        matches!(sources, image::DynamicImage::ImageRgb16(_)),
+        "plane_sources.png is 16-bit RGB, got {:?}",
+        sources.color()
+    );
+    (plane.to_rgb8(), sources.to_rgb16())
+}
+
+/// Fraction of pixels with a known source whose exemplar pixel at that source
+/// is within `tol` (of 255, every channel) of the plane pixel; and the
+/// fraction of pixels with a known source.
+fn agreement(dir: &Path, tol: u8) -> (f64, f64) {
+    let exemplar = image::open(shared(STONES)).unwrap().to_rgb8();
+    let (plane, sources) = read_outputs(dir);
+    let (mut known, mut close) = (0usize, 0usize);
+    for (p, s) in plane.pixels().zip(sources.pixels()) {
+        if s[2] != u16::MAX {
+            continue;
+        }
+        known += 1;
+        let e = exemplar.get_pixel(s[0] as u32, s[1] as u32);
+        if (0..3).all(|c| p[c].abs_diff(e[c]) <= tol) {
+            close += 1;
+        }
+    }
+    let n = plane.pixels().len() as f64;
+    (close as f64 / known.max(1) as f64, known as f64 / n)
+}
+
+#[test]
+fn every_plane_config_writes_plane_png_and_sources_of_the_requested_size() {
+    let dir = tempfile::tempdir().unwrap();
+    for method in METHODS {
+        let out = run_small(method, &dir.path().join(method), &[]);
+        let (plane, sources) = read_outputs(&out);
+        assert_eq!(plane.dimensions(), (64, 64), "{method}: plane.png size");
+        assert_eq!(
+            sources.dimensions(),
+            (64, 64),
+            "{method}: plane_sources.png size"
+        );
+        // The source map is inside the 128² exemplar wherever it is known.
+        for s in sources.pixels().filter(|s| s[2] == u16::MAX) {
+            assert!(
+                s[0] < 128 && s[1] < 128,
+                "{method}: source {s:?} outside the exemplar"
+            );
+        }
+        // Tolerances (of 255, every channel), each with the reason:
+        // - jump_pixel, jump_patch copy exemplar pixels: exact;
+        // - Wei–Levoy and Bangay–Morkel copy a texel per vertex, and every
+        //   pixel centre is (close to) a vertex, but Bangay–Morkel's √2
+        //   vertices are not on the pixel grid, so a pixel blends up to three
+        //   vertices: 40 for ≥ 90 %;
+        // - jump_surface addresses are continuous (the exemplar is sampled
+        //   bilinearly between the texel recorded by `floor` and its
+        //   neighbours) and blended 3 ways: 40 for ≥ 90 %;
+        // - lapped pastes composite with alpha over lower pastes: 60 for ≥ 90 %.
+        let (tol, want) = match method {
+            "jump_pixel" | "jump_patch" => (0, 1.0),
+            "wei_levoy" => (0, 0.99),
+            "lapped" => (60, 0.9),
+            _ => (40, 0.9),
+        };
+        let (close, known) = agreement(&out, tol);
+        assert!(
+            close >= want,
+            "{method}: {:.1} % of known pixels within {tol}/255 of their source, want {:.0} %",
+            100.0 * close,
+            100.0 * want
+        );
+        assert!(
+            known >= 0.95,
+            "{method}: only {:.1} % of pixels have a source",
+            100.0 * known
+        );
+    }
+}
+
+#[test]
+fn vertex_colours_that_are_a_smooth_function_of_position_are_reproduced_at_pixel_centres() {
+    // A jittered plane (irregular triangles) of side 2 centred on the origin,
+    // coloured r = linear, g = linear, b = a smooth non-linear function.
+    let opts = BuiltinOptions {
+        resolution: [33, 33],
+        size: 2.0,
+        ..Default::default()
+    };
+    let mesh = builtin_mesh("jittered_plane", &opts).unwrap();
+    let f = |x: f32, y: f32| {
+        [
+            0.5 + 0.25 * x,
+            0.5 - 0.2 * y + 0.1 * x,
+            0.5 + 0.3 * (1.5 * x).sin() * (1.5 * y).cos(),
+        ]
+    };
+    let values: Vec<f32> = mesh.positions.iter().flat_map(|p| f(p.x, p.y)).collect();
+    let signal = PlaneSignal::Colours {
+        values: &values,
+        channels: 3,
+        sources: None,
+    };
+    let plane = plane_from_surface(&mesh, &signal, [50, 40], [8, 8]).unwrap();
+    assert_eq!((plane.image.width, plane.image.height), (50, 40));
+    assert!(plane.sources.is_none(), "no SourceTexels, no sources");
+    // Pixel centres span the box edge to edge, row 0 at max y.
+    let (mut worst_linear, mut worst_smooth) = (0.0f32, 0.0f32);
+    for j in 0..40u32 {
+        for i in 0..50u32 {
+            let x = -1.0 + 2.0 * i as f32 / 49.0;
+            let y = 1.0 - 2.0 * j as f32 / 39.0;
+            let want = f(x, y);
+            let got = plane.image.pixel(i, j);
+            worst_linear = worst_linear
+                .max((got[0] - want[0]).abs())
+                .max((got[1] - want[1]).abs());
+            worst_smooth = worst_smooth.max((got[2] - want[2]).abs());
+        }
+    }
+    // Linear functions interpolate exactly (float rounding only); the
+    // sinusoid's interpolation error is below h² · max|f''| / 2 with
+    // h = 2/32 · 1.25 (jittered cells) and |f''| ≤ 0.3 · 1.5² · 2.
+    assert!(worst_linear < 1e-4, "linear channels off by {worst_linear}");
+    let h = 2.0f32 / 32.0 * 1.25;
+    let bound = h * h * 0.3 * 1.5 * 1.5 * 2.0 / 2.0;
+    assert!(
+        worst_smooth < bound,
+        "smooth channel off by {worst_smooth}, bound {bound}"
+    );
+}
+
+#[test]
+fn plane_on_a_non_planar_mesh_is_refused_before_the_run_naming_the_mesh() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/jump_surface.toml");
+    let out = dir.path().join("out");
+    let exemplar = format!("input.exemplar={}", shared(STONES).display());
+    let (code, _, stderr) = run_cli(&[
+        "run",
+        config.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        &exemplar,
+        "--set",
+        "input.mesh=builtin:icosphere",
+    ]);
+    assert_eq!(code, 2, "{stderr}");
+    for needle in [
+        "builtin:icosphere",
+        "flat in the xy plane",
+        "z spans",
+        "allowed",
+    ] {
+        assert!(
+            stderr.contains(needle),
+            "stderr should name {needle:?}: {stderr}"
+        );
+    }
+    assert!(
+        files_under(&out).is_empty(),
+        "nothing written: {:?}",
+        files_under(&out)
+    );
+
+    // A `plane` request with no result to draw is a config error.
+    let cfg = dir.path().join("nothing.toml");
+    std::fs::write(
+        &cfg,
+        "[input]\nmesh = \"builtin:plane\"\nexemplar = \"builtin:bricks\"\n[[stage]]\nkind = \"export\"\nformats = [\"plane\"]\n",
+    )
+    .unwrap();
+    let (code, _, stderr) =
+        run_cli(&["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("a result to draw for format `plane`"),
+        "{stderr}"
+    );
+    assert!(files_under(&out).is_empty());
+}
+
+#[test]
+fn plane_outputs_are_the_same_bytes_at_one_and_two_threads() {
+    let dir = tempfile::tempdir().unwrap();
+    let one = run_small("wei_levoy", &dir.path().join("t1"), &["--threads", "1"]);
+    let two = run_small("wei_levoy", &dir.path().join("t2"), &["--threads", "2"]);
+    for name in ["plane.png", "plane_sources.png"] {
+        let a = std::fs::read(one.join(name)).unwrap();
+        let b = std::fs::read(two.join(name)).unwrap();
+        assert!(a == b, "{name} differs between 1 and 2 threads");
+    }
+}
