@@ -23,8 +23,10 @@
 //! - `QUALITY_METHODS=peer,jump_pixel,...`: methods to run; default the peer
 //!   and every method of `configs/plane/` below ([`METHODS`]).
 //! - `QUALITY_SIZE=256`: side of the square output, in pixels (default 256).
-//!   For our methods it sets every `width`/`height` pair of the config's
-//!   stages; a result of another size is an error row.
+//!   For our methods it sets the configs' `plane_size`, `width`/`height` and
+//!   plane-mesh size ([`size_overrides`]; exact for the jump-map methods,
+//!   approximate for those on coarse meshes); a result of another size is an
+//!   error row.
 //! - `QUALITY_THREADS=1,all`: thread settings, `all` = every core (default
 //!   both). Our methods run inside a rayon pool of that many threads; the peer
 //!   gets `max_thread_count` (it uses its own threads, not rayon).
@@ -265,20 +267,45 @@ fn run_peer(exemplar: &Image, size: u32, threads: Threads) -> Result<Outcome, St
     })
 }
 
-/// `--set` overrides that make every stage with a `width` and a `height`
-/// produce `size` × `size`.
+/// `--set` overrides for a `size` × `size` result: every stage's
+/// `plane_size` and `width`/`height` pair; a plane mesh's
+/// `input.mesh_options.size` (world units, one exemplar pixel per unit:
+/// `size - 1`) and, where the mesh has one vertex per output pixel (its
+/// resolution equals the plane size), its resolution. Nothing else is scaled
+/// (e.g. coarse base meshes, patch sizes), so sizes other than the configs'
+/// 256 are only exact for the image-space and per-pixel methods.
 fn size_overrides(config_text: &str, size: u32) -> Vec<String> {
     let Ok(table) = config_text.parse::<toml::Table>() else {
         return Vec::new();
     };
-    let Some(stages) = table.get("stage").and_then(|s| s.as_array()) else {
-        return Vec::new();
-    };
     let mut out = Vec::new();
-    for (i, stage) in stages.iter().enumerate() {
+    let mut plane_size = None;
+    let stages = table.get("stage").and_then(|s| s.as_array());
+    for (i, stage) in stages.into_iter().flatten().enumerate() {
+        if let Some(p) = stage.get("plane_size") {
+            plane_size = Some(p.clone());
+            out.push(format!("stage.{}.plane_size=[{size}, {size}]", i + 1));
+        }
         if stage.get("width").is_some() && stage.get("height").is_some() {
             out.push(format!("stage.{}.width={size}", i + 1));
             out.push(format!("stage.{}.height={size}", i + 1));
+        }
+    }
+    let options = table
+        .get("input")
+        .and_then(|i| i.get("mesh_options"))
+        .and_then(|o| o.as_table());
+    if let Some(options) = options {
+        if options.contains_key("size") {
+            out.push(format!("input.mesh_options.size={}.0", size - 1));
+        }
+        if let (Some(r), Some(p)) = (options.get("resolution"), &plane_size)
+            && r.as_array()
+                .map(|a| a.iter().map(|v| v.as_integer()).collect::<Vec<_>>())
+                == p.as_array()
+                    .map(|a| a.iter().map(|v| v.as_integer()).collect())
+        {
+            out.push(format!("input.mesh_options.resolution=[{size}, {size}]"));
         }
     }
     out
@@ -290,20 +317,6 @@ fn method_config(manifest: &Path, method: &str) -> Result<(PathBuf, Vec<String>)
     let plane = manifest.join(format!("configs/plane/{method}.toml"));
     if plane.is_file() {
         return Ok((plane, Vec::new()));
-    }
-    // TEMPORARY, until configs/plane/ lands: the jump-map image config
-    // stands in for the two image-space jump-map methods.
-    if let Some(variant) = method
-        .strip_prefix("jump_")
-        .filter(|v| ["pixel", "patch"].contains(v))
-    {
-        return Ok((
-            manifest.join("configs/01_jump_map_image.toml"),
-            vec![
-                "stage.2.name=plane".into(),
-                format!("stage.2.method={variant}"),
-            ],
-        ));
     }
     Err(format!(
         "configs/plane/{method}.toml does not exist (yet) on this branch"
