@@ -1,9 +1,12 @@
-//! Exporters: meshes (PLY, OBJ+MTL+PNG), images, the preview renderer, metrics.
+//! Exporters: meshes (PLY, OBJ+MTL+PNG), images, the preview renderer, metrics,
+//! contact sheets.
 //!
 //! Architecture invariant: every file is written through [`write_atomic`], to a
 //! temporary name in the destination folder and renamed, so a failed run never
 //! leaves a half-written file that looks complete.
 
+mod bitmap_font;
+pub mod contact_sheet;
 mod error;
 pub mod export;
 pub mod gltf;
