@@ -371,46 +371,25 @@ const GATE_R_SCALE: f32 = 64.0;
 const GATE_SIDE: u32 = 63;
 
 /// The finest planar result as a [`GATE_SIDE`]² image at one exemplar texel
-/// per pixel: its vertex colours resampled (linearly over the faces) at the
-/// template points around the vertex nearest the square's centre, spacing
-/// `1 / GATE_R_SCALE`. The √2 steps smooth the interior vertices and never
-/// refine the boundary, so the finest vertices are near but not on a
-/// lattice: they are not an image by themselves. No source map: sources
-/// interpolated across copied regions would be meaningless (the gate does
-/// not use them).
+/// per pixel, resampled around the square's centre
+/// (`tests/common/gates.rs`, `plane_image`). The √2 steps smooth the
+/// interior vertices and never refine the boundary, so the finest vertices
+/// are near but not on a lattice: they are not an image by themselves. No
+/// source map: sources interpolated across copied regions would mean
+/// nothing (the gate does not use them).
 fn plane_image(mesh: &PolyMesh, st: &SynthesisState) -> Image {
-    use surfsynth::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
-    let centre = (0..mesh.vertex_count())
-        .min_by(|&a, &b| {
-            let d = |v: usize| (mesh.positions[v] - Vec3::new(0.5, 0.5, 0.0)).length();
-            d(a).total_cmp(&d(b))
-        })
-        .expect("vertices");
-    let topo = Topology::build(mesh);
-    let ch = st.channels;
     let signal = SurfaceSignal::VertexColours {
         values: &st.colours,
-        channels: ch,
+        channels: st.channels,
     };
-    let mut out = vec![0.0; (GATE_SIDE * GATE_SIDE) as usize * ch];
-    let covered = resample_neighbourhood(
+    common::gates::plane_image(
         mesh,
-        &topo,
-        centre as u32,
+        &signal,
         &flat_frames(1)[0],
+        Vec3::new(0.5, 0.5, 0.0),
         1.0 / GATE_R_SCALE,
         GATE_SIDE,
-        &signal,
-        &vec![0.0; ch],
-        &mut out,
-        &mut ResampleScratch::new(),
-    );
-    assert_eq!(
-        covered,
-        (GATE_SIDE * GATE_SIDE) as usize,
-        "the square covers the image"
-    );
-    Image::from_data(GATE_SIDE, GATE_SIDE, ch as u32, out).expect("image size")
+    )
 }
 
 /// Planar synthesis (seed 4) from the centre 64² crop of each of `textures`

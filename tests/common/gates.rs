@@ -301,3 +301,48 @@ pub fn grid_image(
     });
     (img, map)
 }
+
+/// A result on a flat mesh as a `side`² image at one exemplar pixel per
+/// pixel: `signal` resampled (`surfsynth::kernels::surface_sample`, linear
+/// over the faces) at the `side`² template points `spacing` world units
+/// apart around the vertex nearest `centre`, in `frame` (image x along `s`,
+/// image y along `−t`). For meshes whose vertices are not on a pixel
+/// lattice (√2 hierarchies, coarse planes with corner UVs, lapped pastes);
+/// panics unless the faces cover every point.
+pub fn plane_image(
+    mesh: &surfsynth::mesh::PolyMesh,
+    signal: &surfsynth::kernels::metrics::SurfaceSignal,
+    frame: &surfsynth::kernels::frames::TangentFrame,
+    centre: glam::Vec3,
+    spacing: f32,
+    side: u32,
+) -> Image {
+    use surfsynth::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+    let vertex = (0..mesh.vertex_count())
+        .min_by(|&a, &b| {
+            let d = |v: usize| (mesh.positions[v] - centre).length();
+            d(a).total_cmp(&d(b))
+        })
+        .expect("a mesh with vertices");
+    let topo = surfsynth::mesh::Topology::build(mesh);
+    let ch = signal.channels();
+    let mut out = vec![0.0; (side * side) as usize * ch];
+    let covered = resample_neighbourhood(
+        mesh,
+        &topo,
+        vertex as u32,
+        frame,
+        spacing,
+        side,
+        signal,
+        &vec![0.0; ch],
+        &mut out,
+        &mut ResampleScratch::new(),
+    );
+    assert_eq!(
+        covered,
+        (side * side) as usize,
+        "the mesh covers the {side}² image"
+    );
+    Image::from_data(side, side, ch as u32, out).expect("image size")
+}
