@@ -123,9 +123,24 @@ pub fn gate_failures(ours: &ImageQuality, peer: &ImageQuality, gate: &Gate) -> V
         })
         .map(|(name, a, b, bound, at_most)| {
             let rel = if at_most { "≤" } else { "≥" };
-            format!("{name}: ours {a:.4} vs peer {b:.4} (needs {rel} {bound:.4})")
+            format!(
+                "{name}: ours {} vs peer {} (needs {rel} {})",
+                figure(a),
+                figure(b),
+                figure(bound)
+            )
         })
         .collect()
+}
+
+/// A measure with three significant digits (coherence and completeness are
+/// often a few ten-thousandths).
+fn figure(v: f32) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return format!("{v}");
+    }
+    let decimals = (2 - v.abs().log10().floor() as i32).max(0) as usize;
+    format!("{v:.decimals$}")
 }
 
 /// Every measure of `ours` beside the peer's, one line each ("ours vs peer
@@ -144,7 +159,13 @@ pub fn comparison(label: &str, ours: &ImageQuality, peer: &ImageQuality) -> Stri
         ("histogram", ours.histogram, peer.histogram),
     ]
     .iter()
-    .map(|(m, a, b)| format!("{label}: ours vs peer on {m}: {a:.4} vs {b:.4}"))
+    .map(|(m, a, b)| {
+        format!(
+            "{label}: ours vs peer on {m}: {} vs {}",
+            figure(*a),
+            figure(*b)
+        )
+    })
     .chain(std::iter::once(format!(
         "{label}: ours vs peer on source coverage: {} vs {}",
         coverage(ours),
