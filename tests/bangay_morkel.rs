@@ -422,16 +422,16 @@ fn planar_synthesis_looks_like_the_peers_on_water_and_stones() {
 
 /// The planar gate where Bangay–Morkel fails it today (issue 12); measured
 /// (ours vs peer, bound), without / with the graph cut:
-/// - brick: coherence p90 0.0010 / 0.0012 vs 0.0002 (≤ 0.0003), completeness
-///   0.0007 / 0.0007 vs 0.0002 (≤ 0.0003), sharpness 0.643 / 0.681 vs 0.928
-///   (≥ 0.743);
-/// - grass: completeness 0.0123 / 0.0115 vs 0.0054 (≤ 0.0080), sharpness
-///   0.735 (without the cut) vs 0.997 (≥ 0.797);
-/// - planks: coherence p90 0.0024 / 0.0032 vs 0.0012 (≤ 0.0018), structure
-///   0.203 / 0.200 vs 0.064 (≤ 0.164), completeness (with the cut) 0.0017 vs
-///   0.0011 (≤ 0.0016).
+/// - brick: coherence p90 0.00104 / 0.00117 vs 0.000182 (≤ 0.000273),
+///   completeness 0.000689 / 0.000697 vs 0.000194 (≤ 0.000290), sharpness
+///   0.643 / 0.681 vs 0.928 (≥ 0.743);
+/// - grass: completeness 0.0123 / 0.0115 vs 0.00535 (≤ 0.00803), sharpness
+///   0.735 (without the cut; 0.802 with it) vs 0.997 (≥ 0.797);
+/// - planks: coherence p90 0.00238 / 0.00315 vs 0.00118 (≤ 0.00178),
+///   structure 0.203 / 0.200 vs 0.0637 (≤ 0.164), completeness (with the
+///   cut) 0.00166 vs 0.00106 (≤ 0.00159).
 #[test]
-#[ignore = "fails the peer gate today: brick p90 0.0010 vs peer 0.0002, completeness 0.0007 vs 0.0002, sharpness 0.643 vs 0.928; grass completeness 0.0123 vs 0.0054, sharpness 0.735 vs 0.997; planks p90 0.0024 vs 0.0012, structure 0.203 vs 0.064 (issue 12)"]
+#[ignore = "fails the peer gate today: brick p90 0.00104 vs peer 0.000182, completeness 0.000689 vs 0.000194, sharpness 0.643 vs 0.928; grass completeness 0.0123 vs 0.00535, sharpness 0.735 vs 0.997; planks p90 0.00238 vs 0.00118, structure 0.203 vs 0.0637 (issue 12)"]
 fn planar_synthesis_looks_like_the_peers_on_brick_grass_and_planks() {
     gate_plane(&["brick", "grass", "planks"]);
 }

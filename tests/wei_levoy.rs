@@ -375,12 +375,12 @@ fn planar_synthesis_looks_like_the_peers_on_water_and_planks() {
 }
 
 /// The planar gate where Wei–Levoy fails it today (issue 12); measured (ours
-/// vs peer, bound): stones completeness 0.0062 vs 0.0033 (≤ 0.0050); brick
-/// coherence p90 0.0047 vs 0.0019 (≤ 0.0029); grass completeness 0.0084 vs
-/// 0.0054 (≤ 0.0082). Grass sharpness is 0.742 vs 0.865, just inside the
-/// bound (≥ 0.692); every other measure passes.
+/// vs peer, bound): stones completeness 0.00622 vs 0.00330 (≤ 0.00496);
+/// brick coherence p90 0.00475 vs 0.00192 (≤ 0.00288); grass completeness
+/// 0.00841 vs 0.00545 (≤ 0.00817). Grass sharpness is 0.742 vs 0.865, just
+/// inside its bound (≥ 0.692); every other measure passes.
 #[test]
-#[ignore = "fails the peer gate today: stones completeness: ours 0.0062 vs peer 0.0033; brick coherence p90: ours 0.0047 vs peer 0.0019; grass completeness: ours 0.0084 vs peer 0.0054 (issue 12)"]
+#[ignore = "fails the peer gate today: stones completeness: ours 0.00622 vs peer 0.00330; brick coherence p90: ours 0.00475 vs peer 0.00192; grass completeness: ours 0.00841 vs peer 0.00545 (issue 12)"]
 fn planar_synthesis_looks_like_the_peers_on_stones_brick_and_grass() {
     gate_planar(&["stones", "brick", "grass"]);
 }
