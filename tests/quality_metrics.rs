@@ -11,75 +11,8 @@
 
 mod common;
 
-/// Stand-in for tests/common/peer.rs (being written on another branch).
-mod peer_tmp {
-    use surfsynth::image::Image;
-    use surfsynth::kernels::metrics::SourceMap;
-    pub struct PeerResult {
-        pub image: Image,
-        pub sources: SourceMap,
-    }
-    pub fn peer_synthesis(ex: &Image, w: u32, h: u32, seed: u64, threads: usize) -> PeerResult {
-        let rgba: Vec<u8> = ex
-            .data
-            .chunks_exact(3)
-            .flat_map(|p| {
-                [p[0], p[1], p[2], 1.0].map(|v| (v * 255.0).round().clamp(0.0, 255.0) as u8)
-            })
-            .collect();
-        let buf = texture_synthesis::image::RgbaImage::from_raw(ex.width, ex.height, rgba).unwrap();
-        let session = texture_synthesis::Session::builder()
-            .add_example(texture_synthesis::image::DynamicImage::ImageRgba8(buf))
-            .output_size(texture_synthesis::Dims::new(w, h))
-            .seed(seed)
-            .max_thread_count(threads)
-            .build()
-            .unwrap();
-        let out = session.run(None);
-        let mut bytes = Vec::new();
-        out.get_coordinate_transform().write(&mut bytes).unwrap();
-        let words: Vec<u32> = bytes
-            .chunks_exact(4)
-            .map(|b| u32::from_le_bytes(b.try_into().unwrap()))
-            .collect();
-        let maps = words[3] as usize;
-        let coords = &words[4 + 2 * maps..];
-        let texels = coords
-            .chunks_exact(3)
-            .map(|c| [c[0] as f32 + 0.5, c[1] as f32 + 0.5])
-            .collect();
-        let img = out.into_image().to_rgba8();
-        let data = img
-            .pixels()
-            .flat_map(|p| [p[0], p[1], p[2]].map(|v| v as f32 / 255.0))
-            .collect();
-        PeerResult {
-            image: Image::from_data(w, h, 3, data).unwrap(),
-            sources: SourceMap {
-                width: w,
-                height: h,
-                texels,
-            },
-        }
-    }
-}
-
-fn to_rgb(img: &Image) -> Image {
-    let ch = img.channels as usize;
-    let data = img
-        .data
-        .chunks_exact(ch)
-        .flat_map(|p| {
-            if ch >= 3 {
-                [p[0], p[1], p[2]]
-            } else {
-                [p[0]; 3]
-            }
-        })
-        .collect();
-    Image::from_data(img.width, img.height, 3, data).unwrap()
-}
-
+use common::gates::to_rgb;
+use common::peer::peer_synthesis;
 use surfsynth::image::Image;
 use surfsynth::image::io::load_image;
 use surfsynth::kernels::metrics::quality::{luminance, structure_features, structure_scales};
@@ -220,7 +153,7 @@ fn each_measure_sees_the_failure_it_is_meant_to_catch() {
     };
     let size = 128;
     for (name, ex) in shared_textures() {
-        let peer = peer_tmp::peer_synthesis(&ex, size, size, 1, 2);
+        let peer = peer_synthesis(&ex, size, size, 1, 2);
         let honest = image_quality(&peer.image, &ex, Some(&peer.sources), &settings);
         let blurred = image_quality(&gaussian_blur(&ex, 2.0), &ex, None, &settings);
         let flat_q = image_quality(&flat(&ex), &ex, None, &settings);

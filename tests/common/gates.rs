@@ -113,13 +113,10 @@ pub fn gate_failures(ours: &ImageQuality, peer: &ImageQuality, gate: &Gate) -> V
     ];
     checks
         .into_iter()
-        // `!(a <= b)` rather than `a > b`: a NaN measure fails.
+        // A measure fails unless it passes, so a NaN measure fails.
         .filter(|&(_, a, _, bound, at_most)| {
-            if at_most {
-                !(a <= bound)
-            } else {
-                !(a >= bound)
-            }
+            let passes = if at_most { a <= bound } else { a >= bound };
+            !passes
         })
         .map(|(name, a, b, bound, at_most)| {
             let rel = if at_most { "≤" } else { "≥" };
