@@ -16,7 +16,7 @@ use surfsynth::kernels::diffuse_orientation::diffuse_orientation;
 use surfsynth::kernels::frames::TangentFrame;
 use surfsynth::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
 use surfsynth::kernels::graph_match::*;
-use surfsynth::kernels::metrics::{EnergySettings, SurfaceSignal, surface_texture_energy};
+use surfsynth::kernels::metrics::SurfaceSignal;
 use surfsynth::kernels::sqrt2::sqrt2_subdivide;
 use surfsynth::kernels::sweep::{sweep_field, sweep_order};
 use surfsynth::mesh::{PolyMesh, Topology};
@@ -61,12 +61,6 @@ fn cylinder(around: usize, rows: usize, radius: f32) -> PolyMesh {
 
 fn flat_frames(n: usize) -> Vec<TangentFrame> {
     vec![TangentFrame::from_up(Vec3::Z, Vec3::Y); n]
-}
-
-/// The shared stochastic exemplar (water caustics, 128×128 RGB).
-fn water() -> Image {
-    surfsynth::image::load_image(&common::shared("textures/water.png"))
-        .expect("../shared/data/textures/water.png loads")
 }
 
 /// A smooth-ish random RGB exemplar (noise blurred once), `w × h`.
@@ -282,17 +276,21 @@ fn oversampled_and_plain_matching_pick_the_same_texel() {
     );
 }
 
-/// Coarse-to-fine synthesis on a planar grid (kernels only), returning the
-/// finest mesh, its colours and the r_scale.
-fn synthesise_plane(ex: &Image, graph_cut: bool, seed: u64) -> (PolyMesh, SynthesisState, f32) {
+/// Coarse-to-fine synthesis on a planar unit square (kernels only) at
+/// `r_scale` exemplar texels per unit, returning the finest mesh (a 65²
+/// vertex grid, 64 quads per side) and its colours.
+fn synthesise_plane(
+    ex: &Image,
+    graph_cut: bool,
+    seed: u64,
+    r_scale: f32,
+) -> (PolyMesh, SynthesisState) {
     let mut levels: Vec<(PolyMesh, Option<surfsynth::kernels::sqrt2::Parents>)> =
         vec![(quad_grid(8, 1.0 / 8.0), None)];
     for _ in 0..6 {
         let s = sqrt2_subdivide(&levels.last().unwrap().0);
         levels.push((s.mesh, Some(s.parents)));
     }
-    // The finest grid has 64 quads per unit side: about 0.75 texels per edge.
-    let r_scale = 48.0;
     let images = MatchImages::new(ex, ImageLevels::Stack, 6, Wrap::Repeat);
     let settings = GraphMatchSettings {
         r_scale,
@@ -362,47 +360,80 @@ fn synthesise_plane(ex: &Image, graph_cut: bool, seed: u64) -> (PolyMesh, Synthe
         state = Some(st);
     }
     let (mesh, _) = levels.pop().unwrap();
-    (mesh, state.unwrap(), r_scale)
+    (mesh, state.unwrap())
 }
 
-fn plane_energy(mesh: &PolyMesh, colours: &[f32], r_scale: f32, ex: &Image) -> f32 {
-    let topo = Topology::build(mesh);
-    let frames = flat_frames(mesh.vertex_count());
-    let settings = EnergySettings {
-        neighbourhood: 5,
-        samples: 300,
-        seed: 3,
-        min_coverage: 0.9,
-    };
+/// Texels per unit of the planar gate: the finest grid's 64 quads per side
+/// at about one exemplar texel per edge.
+const GATE_R_SCALE: f32 = 64.0;
+
+/// Side of the planar gate's image: the square's 64 texels less a border.
+const GATE_SIDE: u32 = 63;
+
+/// The finest planar result as a [`GATE_SIDE`]² image at one exemplar texel
+/// per pixel, resampled around the square's centre
+/// (`tests/common/gates.rs`, `plane_image`). The √2 steps smooth the
+/// interior vertices and never refine the boundary, so the finest vertices
+/// are near but not on a lattice: they are not an image by themselves. No
+/// source map: sources interpolated across copied regions would mean
+/// nothing (the gate does not use them).
+fn plane_image(mesh: &PolyMesh, st: &SynthesisState) -> Image {
     let signal = SurfaceSignal::VertexColours {
-        values: colours,
-        channels: 3,
+        values: &st.colours,
+        channels: st.channels,
     };
-    surface_texture_energy(mesh, &topo, &frames, 1.0 / r_scale, &signal, ex, &settings).mean
+    common::gates::plane_image(
+        mesh,
+        &signal,
+        &flat_frames(1)[0],
+        Vec3::new(0.5, 0.5, 0.0),
+        1.0 / GATE_R_SCALE,
+        GATE_SIDE,
+    )
 }
 
-#[test]
-fn planar_synthesis_has_at_most_half_the_energy_of_a_shuffle() {
-    let ex = water();
-    for graph_cut in [false, true] {
-        let (mesh, st, r_scale) = synthesise_plane(&ex, graph_cut, 4);
-        // The same colours, shuffled over the vertices: same histogram, no
-        // structure.
-        let nv = mesh.vertex_count();
-        let mut perm: Vec<usize> = (0..nv).collect();
-        perm.shuffle(&mut Pcg64Mcg::seed_from_u64(9));
-        let shuffled: Vec<f32> = perm
-            .iter()
-            .flat_map(|&v| st.colours[v * 3..v * 3 + 3].iter().copied())
-            .collect();
-        let e = plane_energy(&mesh, &st.colours, r_scale, &ex);
-        let e_shuffled = plane_energy(&mesh, &shuffled, r_scale, &ex);
-        eprintln!("graph cut {graph_cut}: energy {e:.5}, shuffled {e_shuffled:.5}");
-        assert!(
-            e <= 0.5 * e_shuffled,
-            "graph cut {graph_cut}: energy {e} vs shuffled {e_shuffled}"
-        );
+/// Planar synthesis (seed 4) from the centre 64² crop of each of `textures`
+/// at one texel per edge, without and with the graph cut, as 63² images
+/// (`plane_image`) gated against the peer's 63² synthesis of the same crop
+/// (`tests/common/gates.rs`, `NEAR_PEER`). Every vertex is coloured and the
+/// first pass sweeps one front (checked in `synthesise_plane`).
+fn gate_plane(textures: &[&str]) {
+    let mut results = Vec::new();
+    for &name in textures {
+        let full = surfsynth::image::load_image(&common::shared(&format!("textures/{name}.png")))
+            .unwrap_or_else(|e| panic!("shared texture {name}: {e}"));
+        let ex = common::gates::to_rgb(&common::gates::crop(&full, 32, 32, 64, 64));
+        let peer = common::gates::peer_quality(&ex, GATE_SIDE, GATE_SIDE);
+        for graph_cut in [false, true] {
+            let (mesh, st) = synthesise_plane(&ex, graph_cut, 4, GATE_R_SCALE);
+            let ours = common::gates::quality_of(&plane_image(&mesh, &st), None, &ex);
+            results.push((format!("{name}, graph cut {graph_cut}"), ours, peer));
+        }
     }
+    common::gates::assert_all_near_peer(&results, &common::gates::NEAR_PEER);
+}
+
+/// The planar gate where Bangay–Morkel meets it today, with and without the
+/// graph cut.
+#[test]
+fn planar_synthesis_looks_like_the_peers_on_water_and_stones() {
+    gate_plane(&["water", "stones"]);
+}
+
+/// The planar gate where Bangay–Morkel fails it today (issue 12); measured
+/// (ours vs peer, bound), without / with the graph cut:
+/// - brick: coherence p90 0.00104 / 0.00117 vs 0.000182 (≤ 0.000273),
+///   completeness 0.000689 / 0.000697 vs 0.000194 (≤ 0.000290), sharpness
+///   0.643 / 0.681 vs 0.928 (≥ 0.743);
+/// - grass: completeness 0.0123 / 0.0115 vs 0.00535 (≤ 0.00803), sharpness
+///   0.735 (without the cut; 0.802 with it) vs 0.997 (≥ 0.797);
+/// - planks: coherence p90 0.00238 / 0.00315 vs 0.00118 (≤ 0.00178),
+///   structure 0.203 / 0.200 vs 0.0637 (≤ 0.164), completeness (with the
+///   cut) 0.00166 vs 0.00106 (≤ 0.00159).
+#[test]
+#[ignore = "fails the peer gate today: brick p90 0.00104 vs peer 0.000182, completeness 0.000689 vs 0.000194, sharpness 0.643 vs 0.928; grass completeness 0.0123 vs 0.00535, sharpness 0.735 vs 0.997; planks p90 0.00238 vs 0.00118, structure 0.203 vs 0.0637 (issue 12)"]
+fn planar_synthesis_looks_like_the_peers_on_brick_grass_and_planks() {
+    gate_plane(&["brick", "grass", "planks"]);
 }
 
 // ----- graph cut (§3.4) ----------------------------------------------------------------
@@ -575,7 +606,7 @@ fn matching_is_identical_at_one_and_two_threads() {
             .num_threads(threads)
             .build()
             .unwrap()
-            .install(|| synthesise_plane(&ex, graph_cut, 8).1)
+            .install(|| synthesise_plane(&ex, graph_cut, 8, 48.0).1)
     };
     for graph_cut in [false, true] {
         let a = run(1, graph_cut);

@@ -11,22 +11,8 @@
 
 mod common;
 
-fn to_rgb(img: &Image) -> Image {
-    let ch = img.channels as usize;
-    let data = img
-        .data
-        .chunks_exact(ch)
-        .flat_map(|p| {
-            if ch >= 3 {
-                [p[0], p[1], p[2]]
-            } else {
-                [p[0]; 3]
-            }
-        })
-        .collect();
-    Image::from_data(img.width, img.height, 3, data).unwrap()
-}
-
+use common::gates::to_rgb;
+use common::peer::peer_synthesis;
 use surfsynth::image::Image;
 use surfsynth::image::io::load_image;
 use surfsynth::kernels::metrics::quality::{luminance, structure_features, structure_scales};
@@ -167,7 +153,7 @@ fn each_measure_sees_the_failure_it_is_meant_to_catch() {
     };
     let size = 128;
     for (name, ex) in shared_textures() {
-        let peer = common::peer::peer_synthesis(&ex, size, size, 1, 1);
+        let peer = peer_synthesis(&ex, size, size, 1, 1);
         let honest = image_quality(&peer.image, &ex, Some(&peer.sources), &settings);
         let blurred = image_quality(&gaussian_blur(&ex, 2.0), &ex, None, &settings);
         let flat_q = image_quality(&flat(&ex), &ex, None, &settings);

@@ -15,7 +15,9 @@ use surfsynth::kernels::flatten::{
     resample_stencil, template_spacing,
 };
 use surfsynth::kernels::frames::TangentFrame;
-use surfsynth::kernels::metrics::{EnergySettings, SurfaceSignal, surface_texture_energy};
+use surfsynth::kernels::metrics::{
+    EnergySettings, SourceMap, SurfaceSignal, surface_texture_energy,
+};
 use surfsynth::kernels::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
 };
@@ -26,7 +28,6 @@ use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{PolyMesh, Topology};
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
-use surfsynth::stages::init_colours::random_texels;
 use surfsynth::stages::world::*;
 
 const TEXTURES: [&str; 5] = ["stones", "brick", "water", "planks", "grass"];
@@ -291,8 +292,13 @@ const TSVQ: SearchKind = SearchKind::Tsvq {
     leaves: 4,
 };
 
+/// Exhaustive and approximate back-ends on a 48² crop of each shared
+/// texture: every normal meets the coarser planes, and each approximate
+/// back-end's result energy is within a stated tolerance of the exhaustive
+/// one's. The quality of the result is gated against the peer in
+/// `planar_synthesis_looks_like_the_peers_on_*`.
 #[test]
-fn planar_synthesis_of_each_shared_texture_beats_a_random_shuffle_and_back_ends_agree() {
+fn planar_synthesis_of_each_shared_texture_back_ends_agree() {
     let case = planar_case();
     assert!(
         (template_spacing(
@@ -303,8 +309,6 @@ fn planar_synthesis_of_each_shared_texture_beats_a_random_shuffle_and_back_ends_
     );
     for name in TEXTURES {
         let exemplar = texture_crop(name, 48);
-        let (shuffle, _) = random_texels(&exemplar, case.meshes[0].vertex_count(), 5);
-        let e_random = energy(&case, &shuffle.values, &exemplar);
         let exhaustive = synthesize(&case, &exemplar, SearchKind::Exhaustive, 7);
         for r in &exhaustive {
             // Every normal meets the coarser planes, borders included.
@@ -313,13 +317,7 @@ fn planar_synthesis_of_each_shared_texture_beats_a_random_shuffle_and_back_ends_
         let e_exhaustive = energy(&case, &exhaustive[0].colours, &exemplar);
         // The finest level's mean match distance per value (pass 2).
         let d_exhaustive = exhaustive[0].report.mean_distance[1].unwrap();
-        eprintln!(
-            "{name}: random {e_random:.5}, exhaustive {e_exhaustive:.5} (match {d_exhaustive:.5})"
-        );
-        assert!(
-            e_exhaustive <= 0.5 * e_random,
-            "{name}: synthesis energy {e_exhaustive} should be at most half the shuffle's {e_random}"
-        );
+        eprintln!("{name}: exhaustive {e_exhaustive:.5} (match {d_exhaustive:.5})");
         // Stated tolerances: an approximate back-end's result energy lies
         // within this fraction of the exhaustive one's (PCA + kd-tree re-ranks
         // 16 candidates and is nearly exact; TSVQ searches 4 leaves of 8).
@@ -332,12 +330,59 @@ fn planar_synthesis_of_each_shared_texture_beats_a_random_shuffle_and_back_ends_
                 (e - e_exhaustive).abs() <= tolerance * e_exhaustive,
                 "{name}: {label} energy {e} vs exhaustive {e_exhaustive}"
             );
-            assert!(
-                e <= 0.5 * e_random,
-                "{name}: {label} energy {e} vs shuffle {e_random}"
-            );
         }
     }
+}
+
+/// The finest level of a synthesis on a square planar grid at one vertex per
+/// exemplar pixel (frames s = +x, t = +y) as an image, with its source map.
+fn grid_result(case: &PlanarCase, r: &LevelResult, channels: usize) -> (Image, SourceMap) {
+    let nv = case.meshes[0].vertex_count();
+    let side = (nv as f64).sqrt().round() as u32;
+    assert_eq!((side * side) as usize, nv, "a square grid");
+    let sources: Vec<[f32; 2]> = r
+        .texels
+        .iter()
+        .map(|t| [t[0] as f32 + 0.5, t[1] as f32 + 0.5])
+        .collect();
+    let (img, map) = common::gates::grid_image(&r.colours, channels, side, side, Some(&sources));
+    (img, map.expect("sources given"))
+}
+
+/// Exhaustive synthesis (seed 7) of a 48² crop of each of `textures` on the
+/// 65² planar grid, as a 65² image, gated against the peer's 65² synthesis
+/// of the same crop (`tests/common/gates.rs`, `NEAR_PEER`). The approximate
+/// back-ends are tied to the exhaustive one by
+/// `planar_synthesis_of_each_shared_texture_back_ends_agree`.
+fn gate_planar(textures: &[&str]) {
+    let case = planar_case();
+    let mut results = Vec::new();
+    for &name in textures {
+        let exemplar = texture_crop(name, 48);
+        let r = synthesize(&case, &exemplar, SearchKind::Exhaustive, 7);
+        let (img, sources) = grid_result(&case, &r[0], exemplar.channels as usize);
+        let ours = common::gates::quality_of(&img, Some(&sources), &exemplar);
+        let peer = common::gates::peer_quality(&exemplar, img.width, img.height);
+        results.push((name.to_string(), ours, peer));
+    }
+    common::gates::assert_all_near_peer(&results, &common::gates::NEAR_PEER);
+}
+
+/// The planar gate where Wei–Levoy meets it today.
+#[test]
+fn planar_synthesis_looks_like_the_peers_on_water_and_planks() {
+    gate_planar(&["water", "planks"]);
+}
+
+/// The planar gate where Wei–Levoy fails it today (issue 12); measured (ours
+/// vs peer, bound): stones completeness 0.00622 vs 0.00330 (≤ 0.00496);
+/// brick coherence p90 0.00475 vs 0.00192 (≤ 0.00288); grass completeness
+/// 0.00841 vs 0.00545 (≤ 0.00817). Grass sharpness is 0.742 vs 0.865, just
+/// inside its bound (≥ 0.692); every other measure passes.
+#[test]
+#[ignore = "fails the peer gate today: stones completeness: ours 0.00622 vs peer 0.00330; brick coherence p90: ours 0.00475 vs peer 0.00192; grass completeness: ours 0.00841 vs peer 0.00545 (issue 12)"]
+fn planar_synthesis_looks_like_the_peers_on_stones_brick_and_grass() {
+    gate_planar(&["stones", "brick", "grass"]);
 }
 
 #[test]
@@ -590,11 +635,18 @@ kind = "init_colours"
 }
 
 /// `match` on real `retile` output (not the builtin pyramid): an icosphere
-/// re-tiled to 3,000 vertices, 3 levels, orientations relaxed 4-way; the
-/// synthesised stones score a texture energy well below a random shuffle of
-/// exemplar texels, with the exhaustive and the PCA + kd-tree back-ends.
+/// re-tiled to 3,000 vertices, 3 levels, orientations relaxed 4-way; with
+/// the exhaustive and the PCA + kd-tree back-ends every normal meets the
+/// coarser levels and under 1 % of the templates are uncovered.
+///
+/// The result's quality is not gated here but on the plane
+/// (`planar_synthesis_looks_like_the_peers_on_*`, the same `match` kernel and
+/// back-ends): the peer makes images, and on a curved surface only the
+/// surface measures apply, whose completeness has fewer candidate templates
+/// than an image of equal area has windows (docs/metrics.md) and so would
+/// not compare like with like.
 #[test]
-fn match_on_retiled_output_beats_a_random_shuffle() {
+fn match_on_retiled_output_covers_the_sphere() {
     use surfsynth::kernels::retile::{RetileSettings, retile};
     let input = builtin_mesh("icosphere", &BuiltinOptions::default()).expect("icosphere");
     let pyramid = retile(
@@ -624,30 +676,6 @@ fn match_on_retiled_output_beats_a_random_shuffle() {
         })
         .collect();
     let exemplar = texture_crop("stones", 32);
-    let fine = &levels[0];
-    let energy_of = |colours: &[f32], spacing: f32| {
-        let signal = SurfaceSignal::VertexColours {
-            values: colours,
-            channels: exemplar.channels as usize,
-        };
-        let settings = EnergySettings {
-            neighbourhood: 5,
-            samples: 1500,
-            seed: 3,
-            ..Default::default()
-        };
-        surface_texture_energy(
-            &fine.mesh,
-            &fine.topology,
-            &relaxed.frames[0],
-            spacing,
-            &signal,
-            &exemplar,
-            &settings,
-        )
-        .mean
-    };
-    let (shuffle, _) = random_texels(&exemplar, fine.mesh.vertex_count(), 5);
     for (label, search) in [("exhaustive", SearchKind::Exhaustive), ("pca_kdtree", PCA)] {
         let r = wei_levoy_synthesis(
             &inputs,
@@ -661,25 +689,14 @@ fn match_on_retiled_output_beats_a_random_shuffle() {
             None,
         )
         .expect("synthesis runs");
-        let spacing = r[0].report.spacing;
         assert_eq!(r[0].report.parent_misses, 0, "{label}");
         assert!(r[0].report.uncovered < 0.01, "{label}: {:?}", r[0].report);
-        let e_random = energy_of(&shuffle.values, spacing);
-        let e = energy_of(&r[0].colours, spacing);
-        eprintln!("retiled sphere, {label}: synthesis {e:.5}, shuffle {e_random:.5}");
-        assert!(
-            e <= 0.5 * e_random,
-            "{label}: synthesis energy {e} should be at most half the shuffle's {e_random}"
-        );
     }
 }
 
-/// `match` works on quad meshes (fan-triangulated for flattening), as the
-/// √2 hierarchy needs: a planar QUAD grid pyramid at one texel per vertex
-/// spacing synthesises stones at under half a random shuffle's energy, and
-/// every vertex stores a matched texel inside the exemplar.
-#[test]
-fn synthesis_on_a_quad_grid_beats_a_random_shuffle() {
+/// The planar quad-grid pyramid of the quad tests: 49² vertices at one
+/// texel spacing (48 units), 3 levels, frames s = +x, t = +y.
+fn quad_case() -> PlanarCase {
     let meshes = builtin_pyramid(&BuiltinPyramidSettings {
         mesh: "plane".into(),
         levels: 3,
@@ -699,7 +716,18 @@ fn synthesis_on_a_quad_grid_beats_a_random_shuffle() {
                 .collect()
         })
         .collect();
-    let case = PlanarCase { meshes, frames };
+    PlanarCase { meshes, frames }
+}
+
+/// `match` works on quad meshes (fan-triangulated for flattening), as the
+/// √2 hierarchy needs: on a planar QUAD grid pyramid at one texel per vertex
+/// spacing every vertex stores a matched texel inside the exemplar, few
+/// templates are uncovered, and the result (stones, 32² crop, seed 3) as a
+/// 49² image meets the peer gate against the peer's 49² synthesis of the
+/// same crop (`tests/common/gates.rs`, `NEAR_PEER`).
+#[test]
+fn synthesis_on_a_quad_grid_looks_like_the_peers() {
+    let case = quad_case();
     let exemplar = texture_crop("stones", 32);
     let r = synthesize(&case, &exemplar, SearchKind::Exhaustive, 3);
     assert!(
@@ -712,9 +740,8 @@ fn synthesis_on_a_quad_grid_beats_a_random_shuffle() {
         r[0].texels.iter().all(|t| t[0] < 32 && t[1] < 32),
         "matched texels lie in the exemplar"
     );
-    let (shuffle, _) = random_texels(&exemplar, case.meshes[0].vertex_count(), 5);
-    let e_random = energy(&case, &shuffle.values, &exemplar);
-    let e = energy(&case, &r[0].colours, &exemplar);
-    eprintln!("quad grid: synthesis {e:.5}, shuffle {e_random:.5}");
-    assert!(e <= 0.5 * e_random, "quad grid: {e} vs shuffle {e_random}");
+    let (img, sources) = grid_result(&case, &r[0], exemplar.channels as usize);
+    let ours = common::gates::quality_of(&img, Some(&sources), &exemplar);
+    let peer = common::gates::peer_quality(&exemplar, img.width, img.height);
+    common::gates::assert_near_peer("quad grid stones", &ours, &peer, &common::gates::NEAR_PEER);
 }

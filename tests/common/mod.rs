@@ -1,10 +1,11 @@
 //! Helpers shared by the integration tests.
 #![allow(dead_code)]
 
+pub mod gates;
+pub mod peer;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-pub mod peer;
 
 /// The built CLI binary.
 pub fn bin() -> Command {
