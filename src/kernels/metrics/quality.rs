@@ -17,6 +17,29 @@ use crate::image::{Image, sample::Wrap};
 /// output window [`completeness`] looks for (the issue asks for ≤ 2).
 pub const COMPLETENESS_STRIDE: u32 = 2;
 
+/// Most exemplar windows [`completeness`] compares: beyond this the windows
+/// at stride [`COMPLETENESS_STRIDE`] are thinned evenly (every k-th), which
+/// keeps the mean unbiased and the cost at most this many exhaustive
+/// searches of the result (exemplars up to 128² are measured exactly).
+pub const COMPLETENESS_MAX_WINDOWS: usize = 4096;
+
+/// The origins of the exemplar windows completeness compares: stride
+/// [`COMPLETENESS_STRIDE`], wholly inside, thinned evenly to at most
+/// [`COMPLETENESS_MAX_WINDOWS`].
+pub fn completeness_windows(width: u32, height: u32, n: u32) -> Vec<(usize, usize)> {
+    let (w, h, n) = (width as usize, height as usize, n as usize);
+    if n > w || n > h {
+        return Vec::new();
+    }
+    let stride = COMPLETENESS_STRIDE as usize;
+    let all: Vec<(usize, usize)> = (0..=h - n)
+        .step_by(stride)
+        .flat_map(|y| (0..=w - n).step_by(stride).map(move |x| (x, y)))
+        .collect();
+    let step = all.len().div_ceil(COMPLETENESS_MAX_WINDOWS).max(1);
+    all.into_iter().step_by(step).collect()
+}
+
 /// Orientation bins of [`structure_features`] over 180° (22.5° each).
 pub const STRUCTURE_ORIENTATIONS: usize = 8;
 
@@ -113,7 +136,8 @@ pub fn image_quality(
 
 /// Completeness, the other half of bidirectional similarity (Simakov et al.
 /// 2008): the mean, over the exemplar's `n`×`n` windows at a stride of
-/// [`COMPLETENESS_STRIDE`] pixels (windows wholly inside the exemplar), of the
+/// [`COMPLETENESS_STRIDE`] pixels (windows wholly inside the exemplar; at
+/// most [`COMPLETENESS_MAX_WINDOWS`], see [`completeness_windows`]), of the
 /// squared distance to the nearest `n`×`n` window wholly inside `output`,
 /// divided by `n² · channels` (the units of the texture energy).
 ///
@@ -127,13 +151,7 @@ pub fn completeness(output: &Image, exemplar: &Image, n: u32) -> f32 {
     assert_eq!(output.channels, exemplar.channels, "channel counts differ");
     let search = ExemplarNeighbourhoods::interior(output, n);
     let (n, ch) = (n as usize, exemplar.channels as usize);
-    let stride = COMPLETENESS_STRIDE as usize;
-    let xs: Vec<usize> = (0..=exemplar.width as usize - n).step_by(stride).collect();
-    let ys: Vec<usize> = (0..=exemplar.height as usize - n).step_by(stride).collect();
-    let picks: Vec<(usize, usize)> = ys
-        .iter()
-        .flat_map(|&y| xs.iter().map(move |&x| (x, y)))
-        .collect();
+    let picks = completeness_windows(exemplar.width, exemplar.height, n as u32);
     let norm = (n * n * ch) as f64;
     let values: Vec<f32> = picks
         .par_iter()
@@ -462,6 +480,16 @@ mod tests {
             }
         }
         assert!(completeness(&part, &ex, 5) > 0.02);
+    }
+
+    #[test]
+    fn completeness_windows_are_exact_up_to_128_and_bounded_beyond() {
+        assert_eq!(completeness_windows(128, 128, 7).len(), 61 * 61);
+        let big = completeness_windows(1024, 768, 7);
+        assert!(big.len() <= COMPLETENESS_MAX_WINDOWS && big.len() > COMPLETENESS_MAX_WINDOWS / 2);
+        // Spread over the whole exemplar, not only its top rows.
+        assert!(big.iter().any(|&(_, y)| y > 700) && big.iter().any(|&(x, _)| x > 1000));
+        assert!(completeness_windows(5, 20, 7).is_empty());
     }
 
     #[test]

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 
 use super::energy::sample_indices;
 use super::quality::{
-    COMPLETENESS_STRIDE, VerbatimStats, luminance, mean_gradient, normalised_l1,
+    VerbatimStats, completeness_windows, luminance, mean_gradient, normalised_l1,
     structure_features, structure_scales,
 };
 use super::{EnergySettings, SurfaceSignal};
@@ -39,7 +39,7 @@ pub const STRUCTURE_SAMPLES: usize = 256;
 /// their meaning and units). A measure is NaN when no template qualified.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct SurfaceQuality {
-    /// Mean over exemplar windows (stride [`COMPLETENESS_STRIDE`]) of the
+    /// Mean over exemplar windows (stride [`super::quality::COMPLETENESS_STRIDE`]) of the
     /// squared distance per value to the nearest resampled result template
     /// among the sampled vertices. With fewer candidate templates than an
     /// image has windows it reads higher than on an image: compare surface
@@ -225,7 +225,7 @@ pub fn surface_quality(
     }
 }
 
-/// Mean over the exemplar's `n`×`n` windows (stride [`COMPLETENESS_STRIDE`])
+/// Mean over the exemplar's `n`×`n` windows (stride [`super::quality::COMPLETENESS_STRIDE`])
 /// of the smallest squared distance per value to any of `templates` (each
 /// `n·n·channels` values, the exemplar's layout). Exhaustive with a partial
 /// distance exit per row; parallel over exemplar windows.
@@ -233,15 +233,7 @@ fn completeness_against(templates: &[f32], n: usize, exemplar: &Image) -> f32 {
     let ch = exemplar.channels as usize;
     let per = n * n * ch;
     let count = templates.len() / per;
-    let stride = COMPLETENESS_STRIDE as usize;
-    let origins: Vec<(usize, usize)> = (0..=exemplar.height as usize - n)
-        .step_by(stride)
-        .flat_map(|y| {
-            (0..=exemplar.width as usize - n)
-                .step_by(stride)
-                .map(move |x| (x, y))
-        })
-        .collect();
+    let origins = completeness_windows(exemplar.width, exemplar.height, n as u32);
     let values: Vec<f64> = origins
         .par_iter()
         .map_init(
