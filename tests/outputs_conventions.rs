@@ -11,7 +11,7 @@ use glam::{Vec2, Vec3};
 use std::path::Path;
 use surfsynth::config::ConfigSource;
 use surfsynth::image::sample::Wrap;
-use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
+use surfsynth::pipeline::{Pipeline, check_input_files, load_input, run_in_world};
 use surfsynth::stages::world::*;
 
 /// A small jump-map pipeline on a builtin sphere, exporting `formats`.
@@ -282,5 +282,161 @@ fn jump_surface_ply_has_the_blended_exemplar_colour_at_each_vertex() {
                 "vertex {v} channel {c}: PLY {got}, exemplar blend {expected}"
             );
         }
+    }
+}
+
+// ----- the path rule ---------------------------------------------------------
+
+/// An octahedron, as OBJ text.
+const OCTAHEDRON: &str = "v 1 0 0\nv -1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nv 0 0 -1\n\
+f 1 3 5\nf 3 2 5\nf 2 4 5\nf 4 1 5\nf 3 1 6\nf 2 3 6\nf 4 2 6\nf 1 4 6\n";
+
+/// A config naming `mesh` and the exemplar `e.png` by relative paths.
+fn path_config(mesh: &str) -> String {
+    format!(
+        "seed = 1\n[input]\nmesh = \"{mesh}\"\nexemplar = \"e.png\"\n\n\
+         [[stage]]\nkind = \"orientation\"\n\n[[stage]]\nkind = \"init_colours\"\n\n\
+         [[stage]]\nkind = \"export\"\nformats = [\"ply\"]\n"
+    )
+}
+
+/// A folder holding `c.toml` (`mesh = MESH`), `m.obj` and `e.png`.
+fn config_folder(mesh: &str) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("c.toml"), path_config(mesh)).unwrap();
+    std::fs::write(dir.path().join("m.obj"), OCTAHEDRON).unwrap();
+    let mut img = surfsynth::image::Image::new(8, 8, 3);
+    for (i, v) in img.data.iter_mut().enumerate() {
+        *v = (i % 7) as f32 / 7.0;
+    }
+    surfsynth::output::write_png(&dir.path().join("e.png"), &img).unwrap();
+    dir
+}
+
+/// Runs the CLI in `cwd`; returns (exit code, stderr).
+fn run_in(cwd: &Path, args: &[&str]) -> (i32, String) {
+    let out = bin()
+        .args(args)
+        .current_dir(cwd)
+        .env("RUST_LOG", "warn")
+        .output()
+        .expect("the surfsynth binary runs");
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn paths_in_a_config_file_resolve_against_its_folder_from_any_directory() {
+    let folder = config_folder("m.obj");
+    let elsewhere = tempfile::tempdir().unwrap();
+    let config = folder.path().join("c.toml");
+    let (code, stderr) = run_in(
+        elsewhere.path(),
+        &["run", config.to_str().unwrap(), "--out", "out", "-q"],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    // The output folder is relative to the current directory, not the config.
+    assert!(
+        elsewhere.path().join("out/result.ply").is_file(),
+        "{stderr}"
+    );
+    assert!(!folder.path().join("out").exists());
+}
+
+#[test]
+fn a_set_path_resolves_against_the_current_directory() {
+    let folder = config_folder("m.obj");
+    let cwd = tempfile::tempdir().unwrap();
+    std::fs::create_dir(cwd.path().join("sub")).unwrap();
+    std::fs::write(cwd.path().join("sub/m2.obj"), OCTAHEDRON).unwrap();
+    let config = folder.path().join("c.toml");
+    let args = |mesh: &'static str| {
+        vec![
+            "run".to_string(),
+            config.display().to_string(),
+            "--out".into(),
+            "out".into(),
+            "-q".into(),
+            "--set".into(),
+            format!("input.mesh={mesh}"),
+        ]
+    };
+    let run = |mesh| {
+        let a = args(mesh);
+        run_in(
+            cwd.path(),
+            &a.iter().map(String::as_str).collect::<Vec<_>>(),
+        )
+    };
+    let (code, stderr) = run("sub/m2.obj");
+    assert_eq!(code, 0, "{stderr}");
+    // `m.obj` sits beside the config but not in the current directory.
+    let (code, stderr) = run("m.obj");
+    assert_eq!(code, 2, "{stderr}");
+    let cwd_abs = std::path::absolute(cwd.path()).unwrap();
+    assert!(
+        stderr.contains("--set input.mesh") && stderr.contains(&cwd_abs.display().to_string()),
+        "{stderr}"
+    );
+}
+
+#[test]
+fn a_missing_input_file_names_key_file_line_and_directory() {
+    let folder = config_folder("nowhere/missing.obj");
+    let config = folder.path().join("c.toml");
+    let elsewhere = tempfile::tempdir().unwrap();
+    let (code, stderr) = run_in(
+        elsewhere.path(),
+        &["run", config.to_str().unwrap(), "--out", "out", "-q"],
+    );
+    assert_eq!(code, 2, "{stderr}");
+    let dir = std::path::absolute(folder.path()).unwrap();
+    for needle in [
+        "`input.mesh`",
+        "\"nowhere/missing.obj\"",
+        &format!("{}:3:", config.display()),
+        &dir.display().to_string(),
+    ] {
+        assert!(stderr.contains(needle), "{needle:?} not in: {stderr}");
+    }
+    assert!(
+        !elsewhere.path().join("out").exists(),
+        "nothing was written"
+    );
+}
+
+#[test]
+fn a_text_config_resolves_against_the_current_directory() {
+    // `cargo test` runs in the package root, where Cargo.toml is.
+    let text = path_config("Cargo.toml").replace("e.png", "builtin:bricks");
+    let source = ConfigSource::from_text("t.toml", &text);
+    let p = Pipeline::from_source(source).unwrap();
+    let files = check_input_files(&p.input, &p.source).unwrap();
+    assert_eq!(files, vec![Path::new(".").join("Cargo.toml")]);
+    let source = ConfigSource::from_text("t.toml", &path_config("no_such.obj"));
+    let p = Pipeline::from_source(source).unwrap();
+    let e = check_input_files(&p.input, &p.source)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("t.toml:3") && e.contains("no_such.obj"), "{e}");
+}
+
+#[test]
+fn every_shipped_config_validates_and_finds_its_files() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+    let mut configs: Vec<_> = [root.clone(), root.join("plane")]
+        .iter()
+        .flat_map(|d| std::fs::read_dir(d).unwrap())
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    configs.sort();
+    assert!(configs.len() >= 30, "{configs:?}");
+    for path in configs {
+        let source = ConfigSource::from_file(&path).unwrap();
+        let p = Pipeline::from_source(source).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+        check_input_files(&p.input, &p.source).unwrap_or_else(|e| panic!("{e}"));
     }
 }
