@@ -405,6 +405,16 @@ fn a_missing_input_file_names_key_file_line_and_directory() {
         !elsewhere.path().join("out").exists(),
         "nothing was written"
     );
+    // Another override rewrites the text; the line is still the file's.
+    let (code, stderr) = run_in(
+        elsewhere.path(),
+        &["run", config.to_str().unwrap(), "--set", "seed=3", "-q"],
+    );
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains(&format!("{}:3:", config.display())),
+        "{stderr}"
+    );
 }
 
 #[test]

@@ -43,6 +43,9 @@ pub struct ConfigSource {
     /// Dotted keys set with `--set` (`input.mesh`, `stage.3.mask_image`):
     /// their relative paths resolve against the current directory.
     pub command_line_keys: Vec<String>,
+    /// The name and text before `--set` rewrote them, so that messages about
+    /// keys from the file give the line the user wrote.
+    pub before_overrides: Option<(String, String)>,
 }
 
 impl ConfigSource {
@@ -62,6 +65,7 @@ impl ConfigSource {
             text,
             base_dir,
             command_line_keys: Vec::new(),
+            before_overrides: None,
         })
     }
 
@@ -73,6 +77,7 @@ impl ConfigSource {
             text: text.to_string(),
             base_dir: PathBuf::from("."),
             command_line_keys: Vec::new(),
+            before_overrides: None,
         }
     }
 
@@ -109,14 +114,16 @@ impl ConfigSource {
         if self.is_command_line_key(key) {
             return format!("--set {key}");
         }
+        let file = self.before_overrides.as_ref().map_or(&self.file, |b| &b.0);
         match self.line_of_key(key) {
-            Some(line) => format!("{}:{line}", self.file),
-            None => self.file.clone(),
+            Some(line) => format!("{file}:{line}"),
+            None => file.clone(),
         }
     }
 
     /// 1-based line of the value of a dotted `key` (`input.mesh`,
-    /// `output.dir`, `stage.N.PARAM` with `N` from 1) in the text.
+    /// `output.dir`, `stage.N.PARAM` with `N` from 1) in the text as written
+    /// in the file (before `--set` overrides).
     pub fn line_of_key(&self, key: &str) -> Option<usize> {
         type Table = BTreeMap<String, Spanned<toml::Value>>;
         #[derive(Deserialize)]
@@ -128,7 +135,8 @@ impl ConfigSource {
             #[serde(default)]
             stage: Vec<Table>,
         }
-        let spans: Spans = toml::from_str(&self.text).ok()?;
+        let text = self.before_overrides.as_ref().map_or(&self.text, |b| &b.1);
+        let spans: Spans = toml::from_str(text).ok()?;
         let segments: Vec<&str> = key.split('.').collect();
         let value = match segments.as_slice() {
             ["input", name] => spans.input.get(*name),
@@ -141,7 +149,13 @@ impl ConfigSource {
                 .and_then(|t| t.get(*name)),
             _ => None,
         }?;
-        Some(self.line_of(value.span().start))
+        Some(
+            1 + text
+                .bytes()
+                .take(value.span().start)
+                .filter(|&b| b == b'\n')
+                .count(),
+        )
     }
 
     /// 1-based line of a byte offset into the text.
@@ -171,6 +185,9 @@ impl ConfigSource {
                 file: self.file.clone(),
                 message: e.to_string(),
             })?;
+        if self.before_overrides.is_none() {
+            self.before_overrides = Some((self.file.clone(), self.text.clone()));
+        }
         for assignment in overrides {
             apply_override(&mut table, assignment)?;
             if let Some((path, _)) = assignment.split_once('=') {
