@@ -14,62 +14,32 @@ use surfsynth::image::sample::Wrap;
 use surfsynth::pipeline::{Pipeline, check_input_files, load_input, run_in_world};
 use surfsynth::stages::world::*;
 
-/// A small jump-map pipeline on a builtin sphere, exporting `formats`.
-fn jump_config(formats: &str) -> String {
+/// A pipeline on a small builtin sphere with the builtin bricks: `stages`
+/// (TOML `[[stage]]` entries), then `export` with `formats`.
+fn sphere_config(stages: &str, formats: &str) -> String {
     format!(
-        r#"
-seed = 5
-[input]
-mesh = "builtin:icosphere"
-exemplar = "builtin:bricks"
-exemplar_wrap = "repeat"
-[input.mesh_options]
-subdivisions = 2
-[input.exemplar_options]
-size = 32
+        "seed = 5\n[input]\nmesh = \"builtin:icosphere\"\nexemplar = \"builtin:bricks\"\n\
+         exemplar_wrap = \"repeat\"\n[input.mesh_options]\nsubdivisions = 2\n\
+         [input.exemplar_options]\nsize = 32\n\n{stages}\n\
+         [[stage]]\nkind = \"export\"\nformats = {formats}\n"
+    )
+}
 
-[[stage]]
-kind = "orientation"
-up = [0.0, 0.0, 1.0]
-
-[[stage]]
-kind = "jump_map"
-cache = false
-
-[[stage]]
-kind = "jump_surface"
-scale = 20.0
-
-[[stage]]
-kind = "export"
-formats = {formats}
-"#
+/// A small jump-map pipeline (per-corner UVs) exporting `formats`.
+fn jump_config(formats: &str) -> String {
+    sphere_config(
+        "[[stage]]\nkind = \"orientation\"\nup = [0.0, 0.0, 1.0]\n\n\
+         [[stage]]\nkind = \"jump_map\"\ncache = false\n\n\
+         [[stage]]\nkind = \"jump_surface\"\nscale = 20.0\n",
+        formats,
     )
 }
 
 /// A vertex-colour pipeline (no texture coordinates) exporting `formats`.
 fn colour_config(formats: &str) -> String {
-    format!(
-        r#"
-seed = 5
-[input]
-mesh = "builtin:icosphere"
-exemplar = "builtin:bricks"
-[input.mesh_options]
-subdivisions = 2
-[input.exemplar_options]
-size = 32
-
-[[stage]]
-kind = "orientation"
-
-[[stage]]
-kind = "init_colours"
-
-[[stage]]
-kind = "export"
-formats = {formats}
-"#
+    sphere_config(
+        "[[stage]]\nkind = \"orientation\"\n\n[[stage]]\nkind = \"init_colours\"\n",
+        formats,
     )
 }
 
@@ -84,11 +54,14 @@ fn run_and_write(text: &str, dir: &Path) -> World {
     w
 }
 
-/// The `v`, `vn` and face-corner `(v, vt, vn)` references (0-based) of an OBJ text.
+/// A face corner's `(v, vt, vn)` references, 0-based.
+type CornerRef = (usize, Option<usize>, Option<usize>);
+
+/// The `v`, `vn` and face-corner references of an OBJ text.
 struct ObjText {
     positions: Vec<Vec3>,
     normals: Vec<Vec3>,
-    corners: Vec<Vec<(usize, Option<usize>, Option<usize>)>>,
+    corners: Vec<Vec<CornerRef>>,
     smoothing: bool,
 }
 
