@@ -44,6 +44,20 @@ pub enum ConfigError {
         key: String,
         message: String,
     },
+    /// An input file named in the config does not exist.
+    #[error("{origin}: `{key}` names {written:?}, which does not exist in {dir} ({rule})")]
+    MissingFile {
+        /// `FILE:LINE` of the value, or `--set KEY`.
+        origin: String,
+        /// The dotted key (`input.mesh`).
+        key: String,
+        /// The path as written.
+        written: String,
+        /// The folder it was resolved against, absolute.
+        dir: String,
+        /// Which rule chose that folder.
+        rule: &'static str,
+    },
     /// A stage needs data that no earlier stage produces.
     #[error(
         "{file}:{line}: stage {index} ({kind}) needs {needs}, which no earlier stage produces: {hint}"

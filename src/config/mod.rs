@@ -18,38 +18,144 @@ use std::path::{Path, PathBuf};
 use toml::Spanned;
 
 /// The config file's text and where it came from.
+///
+/// The path rule: a relative path written in a config **file** (`[input]`
+/// paths, a stage's `mask_image`) resolves against the folder of that file,
+/// as in most config-driven tools, so a config and its data move together
+/// and run from any directory. A path given on the command line with
+/// `--set KEY=PATH` resolves against the current directory, as every other
+/// command-line path does; so does every path of a config given as text
+/// ([`ConfigSource::from_text`], no file). `[output] dir` (and `--out`) are
+/// not inputs: they resolve against the current directory, so results land
+/// where the user runs the command (`out/...` under the repository root),
+/// whichever folder holds the config, and a config in a read-only folder
+/// still runs.
 #[derive(Clone, Debug)]
 pub struct ConfigSource {
     /// Name shown in messages (the path as given).
     pub file: String,
     /// The TOML text (after `--set` overrides, if any).
     pub text: String,
-    /// Folder against which relative input paths are resolved: the current
-    /// working directory, so paths behave as on the command line.
+    /// Folder against which relative input paths written in the config
+    /// resolve: the config file's folder, or the current directory (`.`) for
+    /// a config given as text.
     pub base_dir: PathBuf,
+    /// Dotted keys set with `--set` (`input.mesh`, `stage.3.mask_image`):
+    /// their relative paths resolve against the current directory.
+    pub command_line_keys: Vec<String>,
+    /// The name and text before `--set` rewrote them, so that messages about
+    /// keys from the file give the line the user wrote.
+    pub before_overrides: Option<(String, String)>,
 }
 
 impl ConfigSource {
-    /// Reads a config file.
+    /// Reads a config file; relative input paths in it resolve against its
+    /// folder.
     pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
         let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
             path: path.to_path_buf(),
             source,
         })?;
+        let base_dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
         Ok(Self {
             file: path.display().to_string(),
             text,
-            base_dir: PathBuf::from("."),
+            base_dir,
+            command_line_keys: Vec::new(),
+            before_overrides: None,
         })
     }
 
-    /// A config given as text (tests, embedded configs).
+    /// A config given as text (tests, embedded configs): relative paths
+    /// resolve against the current directory.
     pub fn from_text(name: &str, text: &str) -> Self {
         Self {
             file: name.to_string(),
             text: text.to_string(),
             base_dir: PathBuf::from("."),
+            command_line_keys: Vec::new(),
+            before_overrides: None,
         }
+    }
+
+    /// Whether the dotted `key` was set with `--set`.
+    pub fn is_command_line_key(&self, key: &str) -> bool {
+        self.command_line_keys.iter().any(|k| k == key)
+    }
+
+    /// The folder a relative path under the dotted `key` resolves against:
+    /// the current directory (`.`) for a `--set` key, else [`Self::base_dir`].
+    pub fn base_dir_for(&self, key: &str) -> &Path {
+        if self.is_command_line_key(key) {
+            Path::new(".")
+        } else {
+            &self.base_dir
+        }
+    }
+
+    /// Resolves `spec`, the path written under the dotted `key`: absolute
+    /// paths stay, relative ones join [`Self::base_dir_for`] the key.
+    pub fn resolve_path(&self, key: &str, spec: &str) -> PathBuf {
+        let path = Path::new(spec);
+        if path.is_absolute() {
+            path.to_path_buf()
+        } else {
+            self.base_dir_for(key).join(path)
+        }
+    }
+
+    /// Where the value of the dotted `key` is written, for messages:
+    /// `FILE:LINE` (the line of the value in [`Self::text`]), `--set KEY` for
+    /// a command-line key, or `FILE` when the key is not found.
+    pub fn origin_of(&self, key: &str) -> String {
+        if self.is_command_line_key(key) {
+            return format!("--set {key}");
+        }
+        let file = self.before_overrides.as_ref().map_or(&self.file, |b| &b.0);
+        match self.line_of_key(key) {
+            Some(line) => format!("{file}:{line}"),
+            None => file.clone(),
+        }
+    }
+
+    /// 1-based line of the value of a dotted `key` (`input.mesh`,
+    /// `output.dir`, `stage.N.PARAM` with `N` from 1) in the text as written
+    /// in the file (before `--set` overrides).
+    pub fn line_of_key(&self, key: &str) -> Option<usize> {
+        type Table = BTreeMap<String, Spanned<toml::Value>>;
+        #[derive(Deserialize)]
+        struct Spans {
+            #[serde(default)]
+            input: Table,
+            #[serde(default)]
+            output: Table,
+            #[serde(default)]
+            stage: Vec<Table>,
+        }
+        let text = self.before_overrides.as_ref().map_or(&self.text, |b| &b.1);
+        let spans: Spans = toml::from_str(text).ok()?;
+        let segments: Vec<&str> = key.split('.').collect();
+        let value = match segments.as_slice() {
+            ["input", name] => spans.input.get(*name),
+            ["output", name] => spans.output.get(*name),
+            ["stage", n, name] => n
+                .parse::<usize>()
+                .ok()
+                .and_then(|n| n.checked_sub(1))
+                .and_then(|i| spans.stage.get(i))
+                .and_then(|t| t.get(*name)),
+            _ => None,
+        }?;
+        Some(
+            1 + text
+                .bytes()
+                .take(value.span().start)
+                .filter(|&b| b == b'\n')
+                .count(),
+        )
     }
 
     /// 1-based line of a byte offset into the text.
@@ -67,7 +173,9 @@ impl ConfigSource {
     /// `stage.N` addresses the N-th `[[stage]]` (1-based, as messages count
     /// them). VALUE is parsed as a TOML value, or taken as a string when it is
     /// not one (`--set input.mesh=../x.obj`). Line numbers in later messages
-    /// then refer to the config as rewritten with the overrides.
+    /// then refer to the config as rewritten with the overrides. Relative
+    /// paths set here resolve against the current directory (see
+    /// [`ConfigSource`]).
     pub fn apply_overrides(&mut self, overrides: &[String]) -> Result<(), ConfigError> {
         if overrides.is_empty() {
             return Ok(());
@@ -77,8 +185,17 @@ impl ConfigSource {
                 file: self.file.clone(),
                 message: e.to_string(),
             })?;
+        if self.before_overrides.is_none() {
+            self.before_overrides = Some((self.file.clone(), self.text.clone()));
+        }
         for assignment in overrides {
             apply_override(&mut table, assignment)?;
+            if let Some((path, _)) = assignment.split_once('=') {
+                let key = path.trim().to_string();
+                if !self.command_line_keys.contains(&key) {
+                    self.command_line_keys.push(key);
+                }
+            }
         }
         self.text = toml::to_string(&table).map_err(|e| ConfigError::Override {
             assignment: overrides.join(" "),
@@ -184,7 +301,9 @@ pub struct RawConfig {
 #[serde(deny_unknown_fields)]
 pub struct RawInput {
     /// `builtin:NAME` or a path to .obj, .ply, .off or .stl. Optional for
-    /// image-only pipelines (`jump_image`).
+    /// image-only pipelines (`jump_image`). A relative path (here and in
+    /// every path of `[input]`) resolves against the config file's folder;
+    /// given with `--set`, against the current directory.
     #[serde(default)]
     pub mesh: Option<String>,
     /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga.
@@ -230,7 +349,8 @@ fn default_normal_strength() -> f32 {
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RawOutput {
-    /// Output folder (created). Default `out/run`.
+    /// Output folder (created). Default `out/run`. Relative to the current
+    /// directory, not to the config file (see [`ConfigSource`]).
     pub dir: String,
     /// Neighbourhood width of the texture-energy metric, texels (odd, 3..=15).
     pub metric_neighbourhood: u32,

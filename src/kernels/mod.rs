@@ -21,5 +21,6 @@ pub mod retile;
 pub mod sqrt2;
 pub mod surface_sample;
 pub mod sweep;
+pub mod vertex_colours_from_uvs;
 pub mod vertex_order;
 pub mod wl_match;

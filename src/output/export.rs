@@ -21,6 +21,7 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                 let colours = job
                     .colours
                     .as_ref()
+                    .or(job.corner_colours.as_ref())
                     .map(|c| (c.values.as_slice(), c.channels));
                 super::ply::write_ply(&path, &job.mesh, colours, &[])?;
                 files.push(path);
@@ -134,6 +135,7 @@ pub fn encode_pastes_obj(
     for p in &mesh.positions {
         let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
     }
+    super::obj::push_vertex_normals(&mut s, mesh);
     for paste in &pastes.pastes {
         for uv in &paste.uvs {
             let _ = writeln!(s, "vt {} {}", uv.x, 1.0 - uv.y);
@@ -141,7 +143,7 @@ pub fn encode_pastes_obj(
     }
     let mut vt = 1usize;
     for (i, paste) in pastes.pastes.iter().enumerate() {
-        let _ = writeln!(s, "g paste_{i:05}\nusemtl patch_{}", paste.texture);
+        let _ = writeln!(s, "g paste_{i:05}\nusemtl patch_{}\ns 1", paste.texture);
         let mut used = 0usize;
         for &f in &paste.faces {
             let Some(face) = ((f as usize) < mesh.face_count()).then(|| mesh.face(f as usize))
@@ -156,7 +158,7 @@ pub fn encode_pastes_obj(
             };
             s.push('f');
             for &v in face {
-                let _ = write!(s, " {}/{}", v + 1, vt);
+                let _ = write!(s, " {}/{}/{}", v + 1, vt, v + 1);
                 vt += 1;
                 used += 1;
             }
@@ -208,9 +210,9 @@ pub fn write_pastes(
 
 /// Writes the `bake` stage's asset as `dir/STEM.obj` (the original mesh,
 /// triangulated, with atlas coordinates), `STEM.mtl` and `STEM.png` (colour),
-/// plus `STEM_normal.png` (`norm`, and `map_Bump` for older readers),
-/// `STEM_roughness.png` (`map_Pr`) and `STEM_height.png` (`disp`) when those
-/// maps were baked. Returns the paths, the `.obj` first (written last).
+/// plus `STEM_normal.png`, `STEM_roughness.png` and `STEM_height.png` when
+/// those maps were baked (their MTL lines: [`non_colour_map_lines`]). Returns
+/// the paths, the `.obj` first (written last).
 pub fn write_baked_obj(
     dir: &Path,
     stem: &str,
@@ -226,11 +228,8 @@ pub fn write_baked_obj(
     let mut mtl = super::obj::encode_mtl(&png);
     for (role, img) in &asset.maps {
         let name = format!("{stem}_{role}.png");
-        let line = match role.as_str() {
-            "normal" => format!("norm {name}\nmap_Bump {name}\n"),
-            "roughness" => format!("map_Pr {name}\n"),
-            "height" => format!("disp {name}\n"),
-            _ => continue,
+        let Some(line) = non_colour_map_lines(role, &name) else {
+            continue;
         };
         write_png(&dir.join(&name), img)?;
         files.push(dir.join(&name));
@@ -241,4 +240,34 @@ pub fn write_baked_obj(
     files.push(mtl_path);
     write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
     Ok(files)
+}
+
+/// The MTL lines of a non-colour map (`role` = `normal`, `roughness` or
+/// `height`; `None` for any other role), written so that readers which can
+/// tell keep the map's values as data instead of decoding them as sRGB.
+///
+/// MTL has no colour-space option (`-colorspace` is no reader's keyword, and
+/// three.js would take an unknown option as part of the file name), so the
+/// statement itself must say what the map is:
+///
+/// - normal: `norm NAME` (the PBR extension; three.js' `MTLLoader` reads it as
+///   `normalMap`, assimp as its normals texture) and `map_Bump -bm 1 NAME`,
+///   which Blender's OBJ importer (3.x and 4.x) reads as a tangent-space
+///   Normal Map node of strength `-bm` with a Non-Color image. three.js also
+///   takes `map_Bump` as a bump (height) map: with `norm` present, drop the
+///   `map_Bump` line there.
+/// - roughness: `map_Pr NAME` (Blender: Roughness input, Non-Color;
+///   three.js' stock loader ignores it).
+/// - height: `disp NAME` (three.js: `displacementMap`, linear; Blender reads
+///   no displacement from MTL).
+///
+/// three.js marks only `map_Kd` and `map_Ke` as sRGB, so the maps above are
+/// linear there; MeshLab reads `map_Kd` only.
+pub fn non_colour_map_lines(role: &str, name: &str) -> Option<String> {
+    match role {
+        "normal" => Some(format!("norm {name}\nmap_Bump -bm 1 {name}\n")),
+        "roughness" => Some(format!("map_Pr {name}\n")),
+        "height" => Some(format!("disp {name}\n")),
+        _ => None,
+    }
 }

@@ -7,6 +7,11 @@
 //! Texture coordinates are per corner: corner `c` gets `vt` number `c + 1`,
 //! so seams need no vertex splitting.
 //!
+//! Normals: one `vn` per vertex (the area-weighted vertex normal of
+//! [`PolyMesh::vertex_normals`], `vn` number `v + 1`), referenced by every
+//! face corner (`f v/vt/vn` or `f v//vn`), and smoothing group `s 1`: Blender
+//! and MeshLab otherwise shade an OBJ without normals faceted.
+//!
 //! Numbers are written with Rust's shortest round-trip formatting, so the
 //! output is byte-deterministic and positions read back bit-exactly.
 
@@ -81,6 +86,7 @@ pub fn encode_obj(
         }
         s.push('\n');
     }
+    push_vertex_normals(&mut s, mesh);
     if let Some(uvs) = corner_uvs {
         for uv in uvs {
             let _ = writeln!(s, "vt {} {}", uv.x, 1.0 - uv.y);
@@ -89,19 +95,29 @@ pub fn encode_obj(
     if mtl.is_some() {
         let _ = writeln!(s, "usemtl {MATERIAL_NAME}");
     }
+    s.push_str("s 1\n");
     for f in 0..mesh.face_count() {
         s.push('f');
         for c in mesh.face_corners(f) {
             let v = mesh.corner_vertex[c] + 1;
             if corner_uvs.is_some() {
-                let _ = write!(s, " {v}/{}", c + 1);
+                let _ = write!(s, " {v}/{}/{v}", c + 1);
             } else {
-                let _ = write!(s, " {v}");
+                let _ = write!(s, " {v}//{v}");
             }
         }
         s.push('\n');
     }
     Ok(s)
+}
+
+/// Appends one `vn` line per vertex: the mesh's area-weighted unit vertex
+/// normals, so `vn` number `v + 1` belongs to vertex `v + 1` and a face
+/// corner references the same index for both.
+pub(crate) fn push_vertex_normals(s: &mut String, mesh: &PolyMesh) {
+    for n in mesh.vertex_normals() {
+        let _ = writeln!(s, "vn {} {} {}", n.x, n.y, n.z);
+    }
 }
 
 /// The `.mtl` text: one white diffuse material textured with `png`.
@@ -184,7 +200,11 @@ mod tests {
         let s = encode_obj(&m, Some(&uvs), None, Some("a.mtl")).unwrap();
         assert!(s.contains("mtllib a.mtl\n"));
         assert!(s.contains("vt 0.125 0.75\n"), "{s}");
-        assert!(s.contains("f 1/1 2/2 3/3 4/4\nf 4/5 3/6 5/7\n"), "{s}");
+        assert!(
+            s.contains("s 1\nf 1/1/1 2/2/2 3/3/3 4/4/4\nf 4/5/4 3/6/3 5/7/5\n"),
+            "{s}"
+        );
+        assert_eq!(s.matches("\nvn ").count(), 5);
         assert_eq!(s.matches("\nvt ").count(), 7);
     }
 

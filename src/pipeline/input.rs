@@ -1,10 +1,10 @@
 //! Loading `[input]`: the mesh (builtin or file) and the exemplar.
 
 use super::PipelineError;
-use crate::config::{ConfigError, RawInput};
+use crate::config::{ConfigError, ConfigSource, RawInput};
 use crate::image::Image;
 use crate::mesh::PolyMesh;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The loaded inputs of a run.
 #[derive(Clone, Debug)]
@@ -37,13 +37,82 @@ fn table_into<T: serde::de::DeserializeOwned>(
 }
 
 /// Loads the mesh and exemplar named in `[input]`; relative paths resolve
-/// against `base_dir`. `file` names the config in messages.
+/// against `base_dir`. `file` names the config in messages (without line
+/// numbers; [`load_input_from`] gives them).
 pub fn load_input(
     input: &RawInput,
     base_dir: &Path,
     file: &str,
 ) -> Result<LoadedInput, PipelineError> {
+    let mut source = ConfigSource::from_text(file, "");
+    source.base_dir = base_dir.to_path_buf();
+    load_input_from(input, &source)
+}
+
+/// The file a path-valued key names, resolved by the path rule of
+/// [`ConfigSource`] (the config file's folder; `--set` keys and text configs
+/// against the current directory).
+///
+/// # Errors
+/// [`ConfigError::MissingFile`] when it does not exist, naming the key, the
+/// path as written, the line of the config and the folder it was resolved
+/// against.
+pub fn input_file(source: &ConfigSource, key: &str, spec: &str) -> Result<PathBuf, ConfigError> {
+    let full = source.resolve_path(key, spec);
+    if full.exists() {
+        return Ok(full);
+    }
+    let base = source.base_dir_for(key);
+    let dir = std::path::absolute(base).unwrap_or_else(|_| base.to_path_buf());
+    Err(ConfigError::MissingFile {
+        origin: source.origin_of(key),
+        key: key.to_string(),
+        written: spec.to_string(),
+        dir: dir.display().to_string(),
+        rule: if source.is_command_line_key(key) {
+            "a path given with --set resolves against the current directory"
+        } else {
+            "a relative path in a config file resolves against the file's folder; in a config given as text, against the current directory"
+        },
+    })
+}
+
+/// Checks that every file `[input]` names exists (builtins and derivations
+/// need none); returns the resolved paths. [`load_input_from`] does the same
+/// checks before loading.
+pub fn check_input_files(
+    input: &RawInput,
+    source: &ConfigSource,
+) -> Result<Vec<PathBuf>, ConfigError> {
+    let mut files = Vec::new();
+    let entries = [
+        ("input.mesh", input.mesh.as_deref(), "builtin:"),
+        ("input.exemplar", Some(input.exemplar.as_str()), "builtin:"),
+        ("input.height_map", input.height_map.as_deref(), "derive:"),
+        ("input.normal_map", input.normal_map.as_deref(), "derive:"),
+        (
+            "input.roughness_map",
+            input.roughness_map.as_deref(),
+            "derive:",
+        ),
+    ];
+    for (key, spec, special) in entries {
+        if let Some(spec) = spec.map(str::trim).filter(|s| !s.starts_with(special)) {
+            files.push(input_file(source, key, spec)?);
+        }
+    }
+    Ok(files)
+}
+
+/// Loads the mesh and exemplar named in `[input]`, relative paths resolved
+/// by the path rule of [`ConfigSource`].
+pub fn load_input_from(
+    input: &RawInput,
+    source: &ConfigSource,
+) -> Result<LoadedInput, PipelineError> {
     let _span = tracing::info_span!("load_input").entered();
+    check_input_files(input, source)?;
+    let file = source.file.as_str();
     let (mesh, load_report) = if let Some(name) = input
         .mesh
         .as_deref()
@@ -66,10 +135,10 @@ pub fn load_input(
             return Ok(LoadedInput {
                 mesh: PolyMesh::new(),
                 load_report: "no mesh (image-only pipeline)".into(),
-                ..load_exemplar(input, base_dir, file)?
+                ..load_exemplar(input, source)?
             });
         };
-        let path = base_dir.join(mesh_path);
+        let path = source.resolve_path("input.mesh", mesh_path.trim());
         let options = crate::mesh::LoadOptions {
             merge_duplicates: input.merge_duplicates,
             ..Default::default()
@@ -80,15 +149,12 @@ pub fn load_input(
     Ok(LoadedInput {
         mesh,
         load_report,
-        ..load_exemplar(input, base_dir, file)?
+        ..load_exemplar(input, source)?
     })
 }
 
-fn load_exemplar(
-    input: &RawInput,
-    base_dir: &Path,
-    file: &str,
-) -> Result<LoadedInput, PipelineError> {
+fn load_exemplar(input: &RawInput, source: &ConfigSource) -> Result<LoadedInput, PipelineError> {
+    let file = source.file.as_str();
     if input.exemplar.starts_with("builtin:") {
         let _: crate::image::ExemplarOptions =
             table_into(&input.exemplar_options, file, "input.exemplar_options")?;
@@ -102,9 +168,12 @@ fn load_exemplar(
     }
     let opts: crate::image::ExemplarOptions =
         table_into(&input.exemplar_options, file, "input.exemplar_options")?;
-    let (exemplar, exemplar_name) =
-        crate::image::exemplar_from_spec(&input.exemplar, base_dir, &opts)?;
-    let channels = load_channels(input, base_dir, file, &exemplar, &exemplar_name, &opts)?;
+    let (exemplar, exemplar_name) = crate::image::exemplar_from_spec(
+        &input.exemplar,
+        source.base_dir_for("input.exemplar"),
+        &opts,
+    )?;
+    let channels = load_channels(input, source, &exemplar, &exemplar_name, &opts)?;
     Ok(LoadedInput {
         mesh: PolyMesh::new(),
         load_report: String::new(),
@@ -123,13 +192,13 @@ const MAX_NORMAL_STRENGTH: f32 = 100.0;
 /// need three channels.
 fn load_channels(
     input: &RawInput,
-    base_dir: &Path,
-    file: &str,
+    source: &ConfigSource,
     exemplar: &Image,
     exemplar_name: &str,
     opts: &crate::image::ExemplarOptions,
 ) -> Result<crate::stages::world::ExemplarChannels, PipelineError> {
     use crate::kernels::channels as ch;
+    let file = source.file.as_str();
     let value_err = |key: &str, message: String| -> PipelineError {
         ConfigError::Value {
             file: file.to_string(),
@@ -139,13 +208,7 @@ fn load_channels(
         .into()
     };
     let load_file = |key: &str, spec: &str| -> Result<Image, PipelineError> {
-        let path = Path::new(spec);
-        let full = if path.is_absolute() {
-            path.to_path_buf()
-        } else {
-            base_dir.join(path)
-        };
-        let img = crate::image::load_image(&full)?;
+        let img = crate::image::load_image(&source.resolve_path(key, spec))?;
         if (img.width, img.height) != (exemplar.width, exemplar.height) {
             return Err(crate::image::ImageError::ChannelSize {
                 key: key.to_string(),

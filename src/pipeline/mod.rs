@@ -14,7 +14,7 @@ mod report;
 mod run;
 
 pub use error::PipelineError;
-pub use input::{LoadedInput, load_input};
+pub use input::{LoadedInput, check_input_files, input_file, load_input, load_input_from};
 pub use registry::{Datum, PlaneRole, Stage, StageCtx, StageInfo, StagePlan, registry};
 pub use report::{describe_stages, format_report};
 pub use run::{
@@ -50,6 +50,32 @@ impl std::fmt::Debug for Pipeline {
             )
             .finish()
     }
+}
+
+/// Stage parameters that name a file, by stage kind: resolved by the path
+/// rule of [`ConfigSource`] before the stage parses its settings.
+const STAGE_PATH_PARAMS: &[(&str, &str)] = &[("lapped_paste", "mask_image")];
+
+/// Replaces each path-valued parameter of stage `index` (1-based) by the
+/// path resolved against the config's folder (or the current directory for
+/// a `--set` value); a missing file is a [`ConfigError::MissingFile`].
+fn resolve_stage_paths(
+    source: &ConfigSource,
+    kind: &str,
+    index: usize,
+    table: &mut toml::Table,
+) -> Result<(), ConfigError> {
+    for (_, param) in STAGE_PATH_PARAMS.iter().filter(|(k, _)| *k == kind) {
+        if let Some(toml::Value::String(spec)) = table.get_mut(*param)
+            && !spec.trim().is_empty()
+        {
+            let key = format!("stage.{index}.{param}");
+            *spec = input::input_file(source, &key, spec.trim())?
+                .display()
+                .to_string();
+        }
+    }
+    Ok(())
 }
 
 impl Pipeline {
@@ -121,6 +147,7 @@ impl Pipeline {
                     table.insert(k.get_ref().clone(), v.clone());
                 }
             }
+            resolve_stage_paths(&source, &kind, index, &mut table)?;
             let plan = (info.parse)(table).map_err(|(param, message)| {
                 let line = entries
                     .iter()

@@ -1,7 +1,7 @@
 //! Running a pipeline: inputs into a fresh `World`, the schedule, the result
 //! metrics, then the files.
 
-use super::{LoadedInput, Pipeline, PipelineError, StageCtx, load_input};
+use super::{LoadedInput, Pipeline, PipelineError, StageCtx, load_input_from};
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::SingleThreadedExecutor;
@@ -156,11 +156,7 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         .out_dir
         .clone()
         .unwrap_or_else(|| PathBuf::from(&pipeline.output.dir));
-    let input = load_input(
-        &pipeline.input,
-        &pipeline.source.base_dir,
-        &pipeline.source.file,
-    )?;
+    let input = load_input_from(&pipeline.input, &pipeline.source)?;
     tracing::info!(
         "input: {} vertices, {} faces ({}); exemplar {} {}x{}x{}",
         input.mesh.vertex_count(),

@@ -194,6 +194,11 @@ pub struct ExportJob {
     pub colours: Option<VertexColours>,
     /// Its per-corner texture coordinates and the texture they address.
     pub uvs: Option<(Vec<Vec2>, Image)>,
+    /// For a result without vertex colours but with per-corner texture
+    /// coordinates (jump maps, a lapped atlas): the colour at each vertex,
+    /// sampled as the preview blends it and averaged over the vertex's
+    /// corners, for `result.ply` (format `ply`).
+    pub corner_colours: Option<VertexColours>,
     /// Rendered preview images.
     pub previews: Vec<Image>,
     /// Further images to write as PNG, by file name (`jump_image.png`, ...).

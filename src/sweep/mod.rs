@@ -318,7 +318,11 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         last_invocation: read_record(&opts.out).and_then(|r| r.last_invocation),
     };
     for ((_, file, options), input) in exemplars.iter().zip(&exemplar_inputs) {
-        match write_exemplar(&opts.out.join(file), input, &fixed_source.base_dir) {
+        match write_exemplar(
+            &opts.out.join(file),
+            input,
+            fixed_source.base_dir_for("input.exemplar"),
+        ) {
             Ok(()) => record.exemplars.push(ExemplarRecord {
                 file: file.clone(),
                 spec: input.exemplar.clone(),

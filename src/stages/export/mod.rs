@@ -57,7 +57,7 @@ impl StageSettings for ExportSettings {
                 "baked_obj",
                 "plane",
             ]),
-            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex colours; obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs; plane: the result as an image, plane.png (8-bit RGB, plane_size) sampled over the xy bounding box of a mesh flat in xy (row 0 = max y, so image-up is +y) or a jump_image result as it is, plus plane_sources.png (16-bit RGB: R, G = the exemplar pixel x, y each pixel was copied from, B = 65535 where known, else 0)",
+            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex colours (per-corner-UV results such as jump maps: the preview's blended colour at each vertex, averaged over its corners); obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs; plane: the result as an image, plane.png (8-bit RGB, plane_size) sampled over the xy bounding box of a mesh flat in xy (row 0 = max y, so image-up is +y) or a jump_image result as it is, plus plane_sources.png (16-bit RGB: R, G = the exemplar pixel x, y each pixel was copied from, B = 65535 where known, else 0)",
         },
         ParamDoc {
             name: "preview_size",
@@ -368,6 +368,35 @@ impl Stage for Export {
                 (None, Some(a)) => Some((a.uvs.clone(), a.image.clone())),
                 (None, None) => None,
             };
+            // PLY carries colours per vertex only: a per-corner-UV result
+            // gets the colour its preview shows at each vertex.
+            let corner_colours = if colours.is_none() && settings.formats.iter().any(|f| f == "ply")
+            {
+                let source = match (uvs, atlas) {
+                    (Some(u), _) => Some((
+                        u.0.as_slice(),
+                        blend.map(|b| b.0.as_slice()),
+                        &exemplar.image,
+                        exemplar.wrap,
+                    )),
+                    (None, Some(a)) => Some((
+                        a.uvs.as_slice(),
+                        None,
+                        &a.image,
+                        crate::image::sample::Wrap::Clamp,
+                    )),
+                    (None, None) => None,
+                };
+                source.map(|(uvs, blend, texture, wrap)| {
+                    let (values, channels) =
+                        crate::kernels::vertex_colours_from_uvs::vertex_colours_from_corner_uvs(
+                            mesh, uvs, blend, texture, wrap,
+                        );
+                    VertexColours { channels, values }
+                })
+            } else {
+                None
+            };
             // The result mapped back onto the input mesh (`map_back`).
             let original = originals
                 .single()
@@ -398,6 +427,7 @@ impl Stage for Export {
                 mesh: mesh.clone(),
                 colours: colours.cloned(),
                 uvs: export_uvs,
+                corner_colours,
                 previews,
                 images,
                 baked,
