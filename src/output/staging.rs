@@ -212,6 +212,14 @@ pub fn check_replaceable(dir: &Path) -> Result<(), String> {
     ))
 }
 
+/// Removes the stale temporary siblings of `dir` now (e.g. after a child run
+/// into `dir` was killed), as the next run into `dir` would.
+pub fn clean_stale_siblings(dir: &Path) {
+    if let Ok((parent, name)) = split(dir) {
+        clean_stale(&parent, &name, dir);
+    }
+}
+
 fn lock_active() -> std::sync::MutexGuard<'static, Vec<Vec<PathBuf>>> {
     ACTIVE.lock().unwrap_or_else(|e| e.into_inner())
 }

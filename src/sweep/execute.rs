@@ -279,6 +279,8 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     let started = Instant::now();
     let result = run_child(&spec.exe, &args, spec.timeout);
     let wall_seconds = started.elapsed().as_secs_f64();
+    // A run killed on timeout leaves its temporary sibling folder.
+    crate::output::staging::clean_stale_siblings(&dir);
     // A successful run replaces its whole folder (see `output::staging`), so
     // the record written before it started is written again.
     if let Err(e) = write_json(&dir.join(RUN_RECORD), &record) {
