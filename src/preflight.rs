@@ -126,7 +126,11 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join("f");
         std::fs::write(&file, b"x").unwrap();
-        assert!(check_folder_target(&file).unwrap_err().contains("is a file"));
+        assert!(
+            check_folder_target(&file)
+                .unwrap_err()
+                .contains("is a file")
+        );
         assert!(check_folder_target(&file.join("sub")).is_err());
         assert!(check_folder_target(&dir.join("a/b/c")).is_ok());
         assert!(check_file_target(&dir).unwrap_err().contains("is a folder"));

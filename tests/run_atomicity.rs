@@ -115,14 +115,24 @@ fn trace_on_a_folder_or_an_unwritable_or_missing_folder_is_refused() {
     let cases = [
         (dir.path().to_path_buf(), "is a folder"),
         (dir.path().join("missing/trace.json"), "does not exist"),
-        (unwritable_folder().join("trace.json"), "cannot create files in"),
+        (
+            unwritable_folder().join("trace.json"),
+            "cannot create files in",
+        ),
     ];
     for (trace, what) in cases {
         let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out), "--trace", s(&trace)]);
         assert_refused(code, &stderr, &["--trace", what, "allowed:"]);
-        assert!(!out.exists(), "no output folder for --trace {}", trace.display());
+        assert!(
+            !out.exists(),
+            "no output folder for --trace {}",
+            trace.display()
+        );
     }
-    assert!(!dir.path().join("missing").exists(), "no trace folder created");
+    assert!(
+        !dir.path().join("missing").exists(),
+        "no trace folder created"
+    );
 }
 
 #[test]
@@ -138,13 +148,21 @@ fn out_that_is_a_file_unwritable_or_foreign_is_refused_before_any_work() {
     let cases = [
         (file.clone(), "is a file"),
         (file.join("sub"), "is a file"),
-        (unwritable_folder().join("surfsynth-out"), "cannot create files in"),
+        (
+            unwritable_folder().join("surfsynth-out"),
+            "cannot create files in",
+        ),
         (foreign.clone(), "not the output of a run"),
     ];
     for (out, what) in cases {
         let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
         assert_refused(code, &stderr, &["--out", what, "allowed:"]);
-        assert_eq!(snapshot(dir.path()), before, "nothing changed for --out {}", out.display());
+        assert_eq!(
+            snapshot(dir.path()),
+            before,
+            "nothing changed for --out {}",
+            out.display()
+        );
     }
     // `[output] dir` of the config is checked the same way, and named.
     let (code, _, stderr) = run_cli(&[
@@ -165,7 +183,14 @@ fn sweep_threads_and_out_are_checked_before_any_work() {
     std::fs::write(&file, b"keep me").unwrap();
     let out = dir.path().join("sweep");
     let (code, _, stderr) = run_cli(&[
-        "sweep", s(&cfg), "--grid", "seed=1,2", "--out", s(&out), "--threads", "100000",
+        "sweep",
+        s(&cfg),
+        "--grid",
+        "seed=1,2",
+        "--out",
+        s(&out),
+        "--threads",
+        "100000",
     ]);
     assert_refused(code, &stderr, &["--threads", "allowed: 1..=1024"]);
     assert!(!out.exists());
@@ -185,11 +210,18 @@ fn a_rerun_replaces_the_folder_as_a_whole() {
     std::fs::write(out.join("result.glb"), b"stale").unwrap();
     let (code, stdout, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
     assert_eq!(code, 0, "{stderr}");
-    assert!(!out.join("result.glb").exists(), "the old folder is replaced, not merged");
+    assert!(
+        !out.join("result.glb").exists(),
+        "the old folder is replaced, not merged"
+    );
     for name in ["config.toml", "metrics.json", "result.ply", "preview_0.png"] {
         assert!(out.join(name).is_file(), "{name} written");
     }
-    assert!(siblings(&out).is_empty(), "no temporaries left: {:?}", siblings(&out));
+    assert!(
+        siblings(&out).is_empty(),
+        "no temporaries left: {:?}",
+        siblings(&out)
+    );
     assert!(
         !stdout.contains(".tmp-"),
         "the report names the final folder: {stdout}"
@@ -205,7 +237,10 @@ fn a_failed_run_leaves_no_output_folder_and_an_earlier_one_untouched() {
     let missing_mesh = format!("input.mesh={}", dir.path().join("no_such.obj").display());
     let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&fresh), "--set", &missing_mesh]);
     assert_eq!(code, 2, "{stderr}");
-    assert!(!dir.path().join("nested").exists(), "no output folder, nor its parents");
+    assert!(
+        !dir.path().join("nested").exists(),
+        "no output folder, nor its parents"
+    );
     assert!(siblings(&fresh).is_empty());
 
     let out = dir.path().join("out");
@@ -227,9 +262,20 @@ fn a_failed_run_leaves_no_output_folder_and_an_earlier_one_untouched() {
 fn start_slow_run(out: &Path) -> Child {
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/wei_levoy.toml");
     let mut child = bin()
-        .args(["run", s(&config), "--out", s(out), "--threads", "1", "--quiet"])
+        .args([
+            "run",
+            s(&config),
+            "--out",
+            s(out),
+            "--threads",
+            "1",
+            "--quiet",
+        ])
         .arg("--set")
-        .arg(format!("input.exemplar={}", shared("textures/stones.png").display()))
+        .arg(format!(
+            "input.exemplar={}",
+            shared("textures/stones.png").display()
+        ))
         .env("RUST_LOG", "warn")
         .env(
             "SURFSYNTH_CACHE",
@@ -245,7 +291,10 @@ fn start_slow_run(out: &Path) -> Child {
             child.try_wait().unwrap().is_none(),
             "the slow run ended before its temporary folder appeared"
         );
-        assert!(started.elapsed() < Duration::from_secs(60), "no temporary folder");
+        assert!(
+            started.elapsed() < Duration::from_secs(60),
+            "no temporary folder"
+        );
         std::thread::sleep(Duration::from_millis(20));
     }
     // Into the stages: the inputs are loaded and the pyramid is being built.
@@ -283,9 +332,17 @@ fn a_killed_run_leaves_the_previous_result_and_the_next_run_cleans_up() {
     child.kill().unwrap();
     let status = child.wait().unwrap();
     assert!(!status.success());
-    assert_eq!(snapshot(&out), before, "the previous result is byte-identical");
+    assert_eq!(
+        snapshot(&out),
+        before,
+        "the previous result is byte-identical"
+    );
     let stale = siblings(&out);
-    assert_eq!(stale.len(), 1, "SIGKILL leaves the temporary folder: {stale:?}");
+    assert_eq!(
+        stale.len(),
+        1,
+        "SIGKILL leaves the temporary folder: {stale:?}"
+    );
     assert!(
         !dir.path().join("out").join("plane.png").exists(),
         "no partial final file"
@@ -294,7 +351,11 @@ fn a_killed_run_leaves_the_previous_result_and_the_next_run_cleans_up() {
     // The next run removes the stale temporary and succeeds.
     let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
     assert_eq!(code, 0, "{stderr}");
-    assert!(siblings(&out).is_empty(), "stale temporary removed: {:?}", siblings(&out));
+    assert!(
+        siblings(&out).is_empty(),
+        "stale temporary removed: {:?}",
+        siblings(&out)
+    );
     assert!(out.join("metrics.json").is_file());
 
     // A killed first run into a new folder leaves no final folder at all.
@@ -316,7 +377,11 @@ fn sigint_and_sigterm_remove_the_temporary_folder() {
         signal(&child, name);
         let status = child.wait().unwrap();
         assert_eq!(status.code(), Some(code), "SIG{name} exits {code}");
-        assert_eq!(snapshot(&out), before, "SIG{name}: the previous result is untouched");
+        assert_eq!(
+            snapshot(&out),
+            before,
+            "SIG{name}: the previous result is untouched"
+        );
         assert!(siblings(&out).is_empty(), "SIG{name}: {:?}", siblings(&out));
     }
 }

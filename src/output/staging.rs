@@ -383,7 +383,11 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         assert!(check_replaceable(&dir).is_ok(), "empty");
         std::fs::write(dir.join("notes.txt"), b"mine").unwrap();
-        assert!(check_replaceable(&dir).unwrap_err().contains("not the output of a run"));
+        assert!(
+            check_replaceable(&dir)
+                .unwrap_err()
+                .contains("not the output of a run")
+        );
         std::fs::write(dir.join("metrics.json"), b"{}").unwrap();
         assert!(check_replaceable(&dir).is_ok(), "an earlier run");
         let _ = std::fs::remove_dir_all(&dir);

@@ -235,11 +235,9 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         })?;
     }
     if !opts.dry_run {
-        crate::preflight::check_folder_target(&opts.out).map_err(|message| {
-            SweepError::Option {
-                flag: "--out".into(),
-                message,
-            }
+        crate::preflight::check_folder_target(&opts.out).map_err(|message| SweepError::Option {
+            flag: "--out".into(),
+            message,
         })?;
     }
     let timeout = match opts.timeout {
