@@ -385,3 +385,77 @@ fn sigint_and_sigterm_remove_the_temporary_folder() {
         assert!(siblings(&out).is_empty(), "SIG{name}: {:?}", siblings(&out));
     }
 }
+
+/// Entries of the sweep folder whose names start with a dot.
+fn hidden_entries(dir: &Path) -> Vec<String> {
+    std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with('.'))
+        .collect()
+}
+
+#[test]
+fn sweep_run_folders_stay_complete_and_a_timed_out_run_leaves_no_temporary() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = quick_config(dir.path());
+    let out = dir.path().join("sweep");
+    let (code, _, stderr) = run_cli(&[
+        "sweep",
+        s(&cfg),
+        "--grid",
+        "seed=1,2",
+        "--out",
+        s(&out),
+        "--threads",
+        "1",
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    for run in ["seed=1", "seed=2"] {
+        let folder = out.join(run);
+        for name in [
+            "run.json",
+            "log.txt",
+            "done.json",
+            "metrics.json",
+            "result.ply",
+        ] {
+            assert!(folder.join(name).is_file(), "{run}/{name}");
+        }
+    }
+    assert!(
+        hidden_entries(&out).is_empty(),
+        "{:?}",
+        hidden_entries(&out)
+    );
+
+    // A run killed on its timeout after it began writing.
+    let slow = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/wei_levoy.toml");
+    let exemplar = format!("input.exemplar={}", shared("textures/stones.png").display());
+    let out = dir.path().join("slow");
+    let (code, _, stderr) = run_cli(&[
+        "sweep",
+        s(&slow),
+        "--grid",
+        "seed=1",
+        "--set",
+        &exemplar,
+        "--out",
+        s(&out),
+        "--threads",
+        "1",
+        "--timeout",
+        "1.5",
+        "-q",
+    ]);
+    assert_eq!(code, 1, "{stderr}");
+    assert!(
+        hidden_entries(&out).is_empty(),
+        "{:?}",
+        hidden_entries(&out)
+    );
+    let failed = std::fs::read_to_string(out.join("seed=1/failed.json")).unwrap();
+    assert!(failed.contains("timed out"), "{failed}");
+}
