@@ -18,6 +18,7 @@ pub mod kernels;
 pub mod mesh;
 pub mod output;
 pub mod pipeline;
+pub mod preflight;
 pub mod progress;
 pub mod stages;
 pub mod sweep;

@@ -25,13 +25,16 @@ enum Command {
         /// (e.g. --set seed=3 --set stage.2.iterations=50).
         #[arg(long = "set", value_name = "PATH=VALUE")]
         set: Vec<String>,
-        /// Output folder (default: `[output].dir` of the config).
+        /// Output folder (default: `[output].dir` of the config): new, empty,
+        /// or an earlier run's, which is replaced as a whole at the end.
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Worker threads (default: all cores). Results do not depend on it.
+        /// Worker threads, 1..=1024 (default: all cores). Results do not
+        /// depend on it.
         #[arg(long)]
         threads: Option<usize>,
-        /// Writes a Chrome trace of every stage and kernel span to FILE.
+        /// Writes a Chrome trace of every stage and kernel span to FILE
+        /// (its folder must exist).
         #[arg(long, value_name = "FILE")]
         trace: Option<PathBuf>,
         /// Only warnings and errors on stderr, no progress bars.
@@ -76,7 +79,7 @@ struct SweepArgs {
     /// Runs at a time.
     #[arg(long, default_value_t = 1)]
     jobs: usize,
-    /// Worker threads per run (default: cores / jobs, at least 1).
+    /// Worker threads per run, 1..=1024 (default: cores / jobs, at least 1).
     #[arg(long)]
     threads: Option<usize>,
     /// Runs only every N-th run, starting at the I-th (1-based), e.g. 2/4.
@@ -135,20 +138,28 @@ fn run(
     trace: Option<PathBuf>,
     quiet: bool,
 ) -> Result<(), PipelineError> {
+    // Options and paths are checked before any work; `--out` is checked by
+    // `pipeline::run` before it loads the inputs.
+    let option_err = |key: &str, message: String| {
+        PipelineError::Config(surfsynth::config::ConfigError::Value {
+            file: "command line".into(),
+            key: key.into(),
+            message,
+        })
+    };
+    if let Some(n) = threads {
+        surfsynth::preflight::check_threads(n).map_err(|m| option_err("--threads", m))?;
+    }
+    if let Some(t) = &trace {
+        surfsynth::preflight::check_file_target(t).map_err(|m| option_err("--trace", m))?;
+    }
+    surfsynth::output::staging::exit_cleanly_on_signals()
+        .map_err(|e| PipelineError::Internal(format!("signal handler: {e}")))?;
     let guard = surfsynth::telemetry::init(trace.as_deref(), quiet);
     if quiet {
         surfsynth::progress::set_enabled(false);
     }
     if let Some(n) = threads {
-        if n == 0 {
-            return Err(PipelineError::Config(
-                surfsynth::config::ConfigError::Value {
-                    file: "command line".into(),
-                    key: "--threads".into(),
-                    message: "must be at least 1".into(),
-                },
-            ));
-        }
         rayon::ThreadPoolBuilder::new()
             .num_threads(n)
             .build_global()

@@ -13,6 +13,7 @@ pub mod gltf;
 pub mod obj;
 pub mod ply;
 pub mod render;
+pub mod staging;
 
 pub use error::OutputError;
 

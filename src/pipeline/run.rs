@@ -19,7 +19,9 @@ pub struct ResultMetricsSet;
 /// Options of one run.
 #[derive(Clone, Debug, Default)]
 pub struct RunOptions {
-    /// Output folder; `[output].dir` when `None`.
+    /// Output folder (`--out`); `[output].dir` when `None`. It is checked
+    /// before any work, written as a whole into a sibling temporary folder
+    /// and renamed into place at the end (`output::staging`).
     pub out_dir: Option<PathBuf>,
 }
 
@@ -149,13 +151,31 @@ pub fn peak_rss_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
-/// Runs a pipeline end to end and writes its outputs.
+/// Runs a pipeline end to end and writes its outputs. The output folder is
+/// checked first (not a file, writable parent, empty or an earlier run's:
+/// exit 2); the outputs appear all at once, replacing an earlier run's
+/// folder, or not at all.
 pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, PipelineError> {
     let started = Instant::now();
     let out_dir = options
         .out_dir
         .clone()
         .unwrap_or_else(|| PathBuf::from(&pipeline.output.dir));
+    let (file, key) = match options.out_dir {
+        Some(_) => ("command line".to_string(), "--out"),
+        None => (pipeline.source.file.clone(), "output.dir"),
+    };
+    crate::preflight::check_folder_target(&out_dir)
+        .and_then(|()| crate::output::staging::check_replaceable(&out_dir))
+        .map_err(|message| crate::config::ConfigError::Value {
+            file,
+            key: key.into(),
+            message,
+        })?;
+    // Every file goes into a sibling temporary folder, renamed to `out_dir`
+    // at the end: a failed or killed run leaves no partial result.
+    let folder = crate::output::staging::RunFolder::begin(&out_dir)?;
+    let staged = folder.path().to_path_buf();
     let input = load_input_from(&pipeline.input, &pipeline.source)?;
     tracing::info!(
         "input: {} vertices, {} faces ({}); exemplar {} {}x{}x{}",
@@ -179,11 +199,11 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
 
     let _span = tracing::info_span!("write_outputs").entered();
     let mut files = Vec::new();
-    let config_path = out_dir.join("config.toml");
+    let config_path = staged.join("config.toml");
     crate::output::write_bytes_atomic(&config_path, pipeline.resolved_toml().as_bytes())?;
     files.push(config_path);
     let job = std::mem::take(&mut *world.resource_mut::<ExportJob>());
-    files.extend(crate::output::export::write_export(&out_dir, &job)?);
+    files.extend(crate::output::export::write_export(&staged, &job)?);
 
     let timings = world.resource::<StageTimings>().0.clone();
     let metrics_res = world.resource::<Metrics>();
@@ -218,11 +238,19 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         "total_seconds": started.elapsed().as_secs_f64(),
         "peak_rss_bytes": peak_rss_bytes(),
     });
-    let metrics_path = out_dir.join("metrics.json");
+    let metrics_path = staged.join("metrics.json");
     let text = serde_json::to_string_pretty(&metrics)
         .map_err(|e| PipelineError::Internal(format!("metrics.json: {e}")))?;
     crate::output::write_bytes_atomic(&metrics_path, text.as_bytes())?;
     files.push(metrics_path);
+    folder.commit()?;
+    let files = files
+        .into_iter()
+        .map(|f| match f.strip_prefix(&staged) {
+            Ok(rel) => out_dir.join(rel),
+            Err(_) => f,
+        })
+        .collect();
     Ok(RunReport {
         out_dir,
         files,

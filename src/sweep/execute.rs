@@ -72,7 +72,8 @@ pub struct Outcome {
     pub log_tail: Vec<String>,
 }
 
-/// `run.json`: what a run folder holds, written before the child starts.
+/// `run.json`: what a run folder holds, written before the child starts and
+/// again after it exits (a successful child replaces the folder).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct RunRecord {
     /// Folder name.
@@ -278,6 +279,18 @@ fn run_one(spec: &ChildSpec, r: &ValidRun) -> Outcome {
     let started = Instant::now();
     let result = run_child(&spec.exe, &args, spec.timeout);
     let wall_seconds = started.elapsed().as_secs_f64();
+    // A run killed on timeout leaves its temporary sibling folder.
+    crate::output::staging::clean_stale_siblings(&dir);
+    // A successful run replaces its whole folder (see `output::staging`), so
+    // the record written before it started is written again.
+    if let Err(e) = write_json(&dir.join(RUN_RECORD), &record) {
+        return failed_outcome(
+            r,
+            format!("cannot write {RUN_RECORD}: {e}"),
+            wall_seconds,
+            Vec::new(),
+        );
+    }
     let (exit_code, status, stdout, stderr) = match result {
         Ok(c) => (c.exit_code, c.status, c.stdout, c.stderr),
         Err(e) => (

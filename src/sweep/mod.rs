@@ -228,11 +228,17 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
             message: "must be at least 1".into(),
         });
     }
-    if opts.threads == Some(0) {
-        return Err(SweepError::Option {
+    if let Some(n) = opts.threads {
+        crate::preflight::check_threads(n).map_err(|message| SweepError::Option {
             flag: "--threads".into(),
-            message: "must be at least 1".into(),
-        });
+            message,
+        })?;
+    }
+    if !opts.dry_run {
+        crate::preflight::check_folder_target(&opts.out).map_err(|message| SweepError::Option {
+            flag: "--out".into(),
+            message,
+        })?;
     }
     let timeout = match opts.timeout {
         None => None,

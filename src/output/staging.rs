@@ -1,0 +1,395 @@
+//! Whole-run atomicity: a run writes every file into a hidden sibling folder
+//! `.DIR.tmp-PID` and renames it to `DIR` at the end, so a reader sees either
+//! the previous complete result or the new one, never a mix, and a run that
+//! fails or is killed leaves no folder with final names.
+//!
+//! When `DIR` already holds an earlier run, it is renamed aside to
+//! `.DIR.old-PID` just before the new folder takes its name, then deleted.
+//! A run refuses to replace a folder that does not look like a run's output
+//! (see [`check_replaceable`]), so `--out ~/Documents` cannot delete files.
+//!
+//! Stale siblings (the owning process is gone, or started after the folder
+//! was last written, so it is a reused PID) are removed when the next run
+//! into the same `DIR` begins; a stale `.DIR.old-PID` whose `DIR` is missing
+//! (the process died between the two renames) is renamed back first.
+
+use super::OutputError;
+use std::ffi::OsString;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// Folders to remove when the process is interrupted (see [`abandon_active`]):
+/// each active run's temporary folder, then the parents it created.
+static ACTIVE: Mutex<Vec<Vec<PathBuf>>> = Mutex::new(Vec::new());
+
+/// Distinguishes two runs of one process into the same folder.
+static SEQUENCE: AtomicU64 = AtomicU64::new(0);
+
+const TMP_TAG: &str = ".tmp-";
+const OLD_TAG: &str = ".old-";
+
+/// The output folder of one run while it is being written.
+#[derive(Debug)]
+pub struct RunFolder {
+    final_dir: PathBuf,
+    tmp_dir: PathBuf,
+    /// Ancestors of `final_dir` this run created, deepest first; removed
+    /// again (when empty) if the run does not commit.
+    created: Vec<PathBuf>,
+    committed: bool,
+}
+
+impl RunFolder {
+    /// Cleans stale siblings of `dir`, creates its missing parents and the
+    /// temporary folder. Fails when `dir` is a file, has no folder name, or
+    /// holds something other than an earlier run.
+    pub fn begin(dir: &Path) -> Result<Self, OutputError> {
+        let (parent, name) = split(dir)?;
+        check_replaceable(dir).map_err(|m| io_error(dir, m))?;
+        let created = create_parents(&parent).map_err(|e| OutputError::Io {
+            path: parent.clone(),
+            source: e,
+        })?;
+        clean_stale(&parent, &name, dir);
+        let pid = std::process::id();
+        let seq = SEQUENCE.fetch_add(1, Ordering::Relaxed);
+        let mut tmp_name = OsString::from(".");
+        tmp_name.push(&name);
+        tmp_name.push(format!("{TMP_TAG}{pid}.{seq}"));
+        let tmp_dir = parent.join(tmp_name);
+        let folder = Self {
+            final_dir: dir.to_path_buf(),
+            tmp_dir,
+            created,
+            committed: false,
+        };
+        let mut registered = vec![folder.tmp_dir.clone()];
+        registered.extend(folder.created.iter().cloned());
+        lock_active().push(registered);
+        std::fs::create_dir(&folder.tmp_dir).map_err(|e| OutputError::Io {
+            path: folder.tmp_dir.clone(),
+            source: e,
+        })?;
+        Ok(folder)
+    }
+
+    /// Where the run writes its files.
+    pub fn path(&self) -> &Path {
+        &self.tmp_dir
+    }
+
+    /// The folder the files will have once committed.
+    pub fn final_dir(&self) -> &Path {
+        &self.final_dir
+    }
+
+    /// Moves the finished folder into place: the earlier run (if any) aside,
+    /// the new one to the final name, then the earlier one deleted.
+    pub fn commit(mut self) -> Result<PathBuf, OutputError> {
+        // Held across the renames so an interrupt handler does not delete
+        // the temporary folder half-way through.
+        let mut active = lock_active();
+        let io = |path: &Path| {
+            let path = path.to_path_buf();
+            move |source| OutputError::Io { path, source }
+        };
+        let old = if self.final_dir.exists() {
+            let mut old_name = OsString::from(".");
+            let (parent, name) = split(&self.final_dir)?;
+            old_name.push(&name);
+            old_name.push(format!(
+                "{OLD_TAG}{}.{}",
+                std::process::id(),
+                SEQUENCE.fetch_add(1, Ordering::Relaxed)
+            ));
+            let old = parent.join(old_name);
+            std::fs::rename(&self.final_dir, &old).map_err(io(&self.final_dir))?;
+            Some(old)
+        } else {
+            None
+        };
+        if let Err(e) = std::fs::rename(&self.tmp_dir, &self.final_dir) {
+            if let Some(old) = &old {
+                let _ = std::fs::rename(old, &self.final_dir);
+            }
+            return Err(io(&self.final_dir)(e));
+        }
+        self.committed = true;
+        active.retain(|paths| paths.first() != Some(&self.tmp_dir));
+        drop(active);
+        if let Some(old) = old
+            && let Err(e) = std::fs::remove_dir_all(&old)
+        {
+            tracing::warn!(
+                "the earlier result moved to {} could not be deleted: {e}",
+                old.display()
+            );
+        }
+        Ok(self.final_dir.clone())
+    }
+}
+
+impl Drop for RunFolder {
+    fn drop(&mut self) {
+        if self.committed {
+            return;
+        }
+        let mut active = lock_active();
+        remove_all(&self.tmp_dir, &self.created);
+        active.retain(|paths| paths.first() != Some(&self.tmp_dir));
+    }
+}
+
+/// Removes the temporary folder of every run in progress (and the parents
+/// they created). For an interrupt handler that then exits the process;
+/// a file written concurrently may recreate a folder, which the next run
+/// into the same place removes as stale.
+pub fn abandon_active() {
+    let mut active = lock_active();
+    for paths in active.drain(..) {
+        if let Some((tmp, created)) = paths.split_first() {
+            remove_all(tmp, created);
+        }
+    }
+}
+
+/// On SIGINT, SIGTERM and SIGHUP: removes the temporary folders of the runs
+/// in progress and exits with 128 + the signal number (130, 143, 129). For
+/// the `run` command; a library user installs its own handler and calls
+/// [`abandon_active`].
+#[cfg(unix)]
+pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let mut signals = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP])?;
+    std::thread::Builder::new()
+        .name("signals".into())
+        .spawn(move || {
+            if let Some(signal) = signals.forever().next() {
+                abandon_active();
+                std::process::exit(128 + signal);
+            }
+        })?;
+    Ok(())
+}
+
+/// Without Unix signals there is nothing to install; the next run cleans up.
+#[cfg(not(unix))]
+pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
+    Ok(())
+}
+
+/// Whether a run may replace `dir`: it does not exist, is an empty folder, or
+/// holds an earlier run's output (`metrics.json`, a `config.toml` written by
+/// a run, or a sweep's `run.json`).
+pub fn check_replaceable(dir: &Path) -> Result<(), String> {
+    if !dir.exists() {
+        return Ok(());
+    }
+    if !dir.is_dir() {
+        return Err(format!(
+            "{} is a file; allowed: a new folder, an empty one, or the folder of an earlier run",
+            dir.display()
+        ));
+    }
+    let empty = std::fs::read_dir(dir)
+        .map_err(|e| format!("cannot read {}: {e}", dir.display()))?
+        .next()
+        .is_none();
+    let config_is_ours = std::fs::read_to_string(dir.join("config.toml"))
+        .is_ok_and(|t| t.starts_with("# Resolved configuration of this run"));
+    if empty
+        || config_is_ours
+        || dir.join("metrics.json").is_file()
+        || dir.join("run.json").is_file()
+    {
+        return Ok(());
+    }
+    Err(format!(
+        "{} holds files that are not the output of a run, and a run replaces the whole folder; \
+         allowed: a new folder, an empty one, or the folder of an earlier run (with metrics.json or config.toml)",
+        dir.display()
+    ))
+}
+
+/// Removes the stale temporary siblings of `dir` now (e.g. after a child run
+/// into `dir` was killed), as the next run into `dir` would.
+pub fn clean_stale_siblings(dir: &Path) {
+    if let Ok((parent, name)) = split(dir) {
+        clean_stale(&parent, &name, dir);
+    }
+}
+
+fn lock_active() -> std::sync::MutexGuard<'static, Vec<Vec<PathBuf>>> {
+    ACTIVE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn io_error(path: &Path, message: String) -> OutputError {
+    OutputError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(message),
+    }
+}
+
+/// The absolute parent and the name of `dir` (`.` and `..` resolved when
+/// they exist).
+fn split(dir: &Path) -> Result<(PathBuf, OsString), OutputError> {
+    let abs = std::path::absolute(dir).map_err(|e| OutputError::Io {
+        path: dir.to_path_buf(),
+        source: e,
+    })?;
+    let abs = match abs.canonicalize() {
+        Ok(c) => c,
+        Err(_) => abs,
+    };
+    match (abs.parent(), abs.file_name()) {
+        (Some(p), Some(n)) => Ok((p.to_path_buf(), n.to_os_string())),
+        _ => Err(io_error(
+            dir,
+            "names no folder; allowed: a path ending in a folder name".into(),
+        )),
+    }
+}
+
+/// `create_dir_all` that returns what it created, deepest first.
+fn create_parents(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut missing = Vec::new();
+    let mut p = dir;
+    while !p.exists() {
+        missing.push(p.to_path_buf());
+        match p.parent() {
+            Some(q) => p = q,
+            None => break,
+        }
+    }
+    std::fs::create_dir_all(dir)?;
+    Ok(missing)
+}
+
+fn remove_all(tmp: &Path, created: &[PathBuf]) {
+    let _ = std::fs::remove_dir_all(tmp);
+    for dir in created {
+        // Only when empty: another process may have put files there meanwhile.
+        let _ = std::fs::remove_dir(dir);
+    }
+}
+
+/// Removes the stale temporary and set-aside siblings of `.NAME` in `parent`.
+fn clean_stale(parent: &Path, name: &std::ffi::OsStr, dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(parent) else {
+        return;
+    };
+    let prefix = format!(".{}", name.to_string_lossy());
+    let mut stale_old = Vec::new();
+    for entry in entries.flatten() {
+        let file_name = entry.file_name().to_string_lossy().into_owned();
+        let Some(rest) = file_name.strip_prefix(&prefix) else {
+            continue;
+        };
+        let (is_old, tail) = if let Some(t) = rest.strip_prefix(TMP_TAG) {
+            (false, t)
+        } else if let Some(t) = rest.strip_prefix(OLD_TAG) {
+            (true, t)
+        } else {
+            continue;
+        };
+        let Some(pid) = tail.split('.').next().and_then(|p| p.parse::<u32>().ok()) else {
+            continue;
+        };
+        let path = entry.path();
+        if !is_stale(pid, &path) {
+            continue;
+        }
+        if is_old {
+            stale_old.push(path);
+        } else {
+            tracing::info!("removing {}, left by an interrupted run", path.display());
+            let _ = std::fs::remove_dir_all(&path);
+        }
+    }
+    for old in stale_old {
+        if !dir.exists() && std::fs::rename(&old, dir).is_ok() {
+            tracing::info!(
+                "restored {} from {}, set aside by an interrupted run",
+                dir.display(),
+                old.display()
+            );
+            continue;
+        }
+        let _ = std::fs::remove_dir_all(&old);
+    }
+}
+
+/// A sibling is stale when process `pid` is not running, or started after
+/// the folder was last modified (its PID was reused). Without `/proc`
+/// nothing can be told, and nothing is removed.
+fn is_stale(pid: u32, folder: &Path) -> bool {
+    if pid == std::process::id() {
+        return false;
+    }
+    if !Path::new("/proc/self").exists() {
+        return false;
+    }
+    let proc_dir = PathBuf::from(format!("/proc/{pid}"));
+    if !proc_dir.exists() {
+        return true;
+    }
+    let (Some(started), Ok(modified)) = (
+        process_start(pid),
+        std::fs::metadata(folder).and_then(|m| m.modified()),
+    ) else {
+        return false;
+    };
+    started > modified + std::time::Duration::from_secs(2)
+}
+
+/// When process `pid` started (Linux: `/proc/PID/stat` field 22, in clock
+/// ticks after boot; `/proc/stat` `btime`, the boot time). The tick is the
+/// kernel's fixed user-space `USER_HZ`, 100 on every mainstream architecture.
+fn process_start(pid: u32) -> Option<std::time::SystemTime> {
+    const USER_HZ: u64 = 100;
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    // The command name (field 2) is parenthesised and may hold spaces.
+    let after = &stat[stat.rfind(')')? + 1..];
+    let ticks: u64 = after.split_whitespace().nth(19)?.parse().ok()?;
+    let boot: u64 = std::fs::read_to_string("/proc/stat")
+        .ok()?
+        .lines()
+        .find_map(|l| l.strip_prefix("btime "))?
+        .trim()
+        .parse()
+        .ok()?;
+    let millis = boot * 1000 + ticks * 1000 / USER_HZ;
+    Some(std::time::UNIX_EPOCH + std::time::Duration::from_millis(millis))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn this_process_started_before_now_and_after_boot() {
+        let started = process_start(std::process::id());
+        if Path::new("/proc/self").exists() {
+            let s = started.expect("a start time");
+            assert!(s <= std::time::SystemTime::now() + std::time::Duration::from_secs(2));
+            assert!(s > std::time::UNIX_EPOCH);
+        }
+    }
+
+    #[test]
+    fn a_folder_of_other_files_is_not_replaced() {
+        let dir = std::env::temp_dir().join(format!("surfsynth-staging-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        assert!(check_replaceable(&dir).is_ok(), "empty");
+        std::fs::write(dir.join("notes.txt"), b"mine").unwrap();
+        assert!(
+            check_replaceable(&dir)
+                .unwrap_err()
+                .contains("not the output of a run")
+        );
+        std::fs::write(dir.join("metrics.json"), b"{}").unwrap();
+        assert!(check_replaceable(&dir).is_ok(), "an earlier run");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
