@@ -189,7 +189,9 @@ fn trace_file_is_chrome_json() {
     let v: serde_json::Value = serde_json::from_str(&text).expect("valid JSON");
     let events = v.as_array().expect("an array of trace events");
     assert!(
-        events.iter().any(|e| e["name"] == "stage"),
-        "stage spans recorded"
+        events
+            .iter()
+            .any(|e| e["name"].as_str().is_some_and(|n| n.starts_with("stage:"))),
+        "stage spans recorded, named stage:<kind>"
     );
 }

@@ -108,7 +108,21 @@ pub fn check_range(value: &toml::Value, range: &ParamRange) -> Result<(), String
 
 /// The default value of every parameter, as TOML.
 pub fn defaults_table<S: StageSettings>() -> toml::Table {
-    toml::Table::try_from(S::default()).unwrap_or_default()
+    to_table(&S::default())
+}
+
+/// `value` as a TOML table whose floats are written shortest: an `f32` field
+/// holding 0.2 becomes `0.2`, not the `0.20000000298023224` of its widening
+/// to `f64`. `toml::Table::try_from` widens every `f32`; the TOML writer
+/// prints an `f32` with its own shortest form, and re-reading that text
+/// keeps it, so the table comes from the written text. Re-parsing the text
+/// gives the same `f32` back.
+pub fn to_table<T: Serialize>(value: &T) -> toml::Table {
+    toml::to_string(value)
+        .ok()
+        .and_then(|text| toml::from_str(&text).ok())
+        .or_else(|| toml::Table::try_from(value).ok())
+        .unwrap_or_default()
 }
 
 /// Renders a TOML value compactly for tables and messages.

@@ -217,9 +217,10 @@ impl Pipeline {
     pub fn resolved_toml(&self) -> String {
         let mut root = toml::Table::new();
         root.insert("seed".into(), toml::Value::Integer(self.seed as i64));
-        if let Ok(t) = toml::Table::try_from(&self.input) {
-            root.insert("input".into(), toml::Value::Table(t));
-        }
+        root.insert(
+            "input".into(),
+            toml::Value::Table(crate::config::params::to_table(&self.input)),
+        );
         let stages = self
             .stages
             .iter()
@@ -231,9 +232,10 @@ impl Pipeline {
             })
             .collect();
         root.insert("stage".into(), toml::Value::Array(stages));
-        if let Ok(t) = toml::Table::try_from(&self.output) {
-            root.insert("output".into(), toml::Value::Table(t));
-        }
+        root.insert(
+            "output".into(),
+            toml::Value::Table(crate::config::params::to_table(&self.output)),
+        );
         format!(
             "# Resolved configuration of this run (defaults filled in).\n# Source: {}\n\n{}",
             self.source.file,

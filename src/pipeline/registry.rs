@@ -146,7 +146,7 @@ impl<S: Stage> StagePlan for Plan<S> {
         S::produces(&self.0)
     }
     fn resolved(&self) -> toml::Table {
-        toml::Table::try_from(&self.0).unwrap_or_default()
+        crate::config::params::to_table(&self.0)
     }
     fn systems(&self, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         S::systems(self.0.clone(), ctx)

@@ -77,8 +77,11 @@ pub fn build_schedule(pipeline: &Pipeline) -> Schedule {
     for (i, stage) in pipeline.stages.iter().enumerate() {
         let kind = stage.kind();
         let begin = move |world: &mut World| {
-            let span = tracing::info_span!("stage", index = i + 1, kind).entered();
+            // The start line is logged outside the span, whose fields would
+            // repeat the index and kind on it; events inside the stage carry them.
             tracing::info!("stage {} ({kind}) started", i + 1);
+            let span =
+                tracing::info_span!(crate::telemetry::STAGE_SPAN, index = i + 1, kind).entered();
             world.insert_non_send(StageSpan(span));
             world.insert_resource(StageClock(Instant::now()));
         };
