@@ -36,6 +36,7 @@ impl ConfigSource {
             path: path.to_path_buf(),
             source,
         })?;
+        let text = without_bom(text);
         Ok(Self {
             file: path.display().to_string(),
             text,
@@ -47,7 +48,7 @@ impl ConfigSource {
     pub fn from_text(name: &str, text: &str) -> Self {
         Self {
             file: name.to_string(),
-            text: text.to_string(),
+            text: without_bom(text.to_string()),
             base_dir: PathBuf::from("."),
         }
     }
@@ -94,6 +95,15 @@ impl ConfigSource {
             file: self.file.clone(),
             message: e.to_string().trim_end().to_string(),
         })
+    }
+}
+
+/// `text` without a leading UTF-8 byte-order mark (which some Windows editors
+/// write and the TOML parser rejects as a stray character).
+fn without_bom(text: String) -> String {
+    match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
     }
 }
 
