@@ -194,10 +194,15 @@ pub struct RawConfig {
 #[serde(deny_unknown_fields)]
 pub struct RawInput {
     /// `builtin:NAME` or a path to .obj, .ply, .off or .stl. Optional for
-    /// image-only pipelines (`jump_image`).
+    /// image-only pipelines (`jump_image`). Faces of more than 255 corners
+    /// are triangulated on load; a UTF-8 byte-order mark is skipped.
     #[serde(default)]
     pub mesh: Option<String>,
-    /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga.
+    /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga. Files (and the
+    /// material maps below) may have at most
+    /// [`MAX_IMAGE_SIDE`](crate::image::io::MAX_IMAGE_SIDE) = 8192 pixels a
+    /// side and [`MAX_IMAGE_PIXELS`](crate::image::io::MAX_IMAGE_PIXELS) =
+    /// 4096² pixels in all, checked from the file header before decoding.
     pub exemplar: String,
     /// Options of a builtin mesh (`surfsynth stages` lists them).
     #[serde(default)]

@@ -178,6 +178,7 @@ fn header_problem(bytes: &[u8], line: Option<usize>, parser_message: &str) -> St
         .unwrap_or_default();
     let shown = super::show_token(text.as_bytes());
     match text.split_whitespace().next().unwrap_or_default() {
+        "" => "the header has no `end_header` line (truncated?)".into(),
         _ if line_no == 1 => {
             format!("the file starts with {shown:?}; a PLY file starts with the line `ply`")
         }
