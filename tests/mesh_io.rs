@@ -268,20 +268,21 @@ fn bad_inputs_give_the_right_error_naming_file_and_element() {
         "range.obj",
         "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 7\n",
     );
+    // OBJ errors name the reference as written (7, 1-based) and its line.
     assert!(
         matches!(
             e,
-            MeshError::IndexOutOfRange {
+            MeshError::ReferenceOutOfRange {
+                line: 5,
                 face: 1,
-                index: 6,
-                vertex_count: 3,
+                written: 7,
                 ..
             }
         ),
         "{e}"
     );
     assert!(
-        e.to_string().contains("face 1") && e.to_string().contains("vertex 6"),
+        e.to_string().contains("line 5") && e.to_string().contains("vertex 7"),
         "{e}"
     );
 

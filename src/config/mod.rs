@@ -60,6 +60,7 @@ impl ConfigSource {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
         };
+        let text = without_bom(text);
         Ok(Self {
             file: path.display().to_string(),
             text,
@@ -74,7 +75,7 @@ impl ConfigSource {
     pub fn from_text(name: &str, text: &str) -> Self {
         Self {
             file: name.to_string(),
-            text: text.to_string(),
+            text: without_bom(text.to_string()),
             base_dir: PathBuf::from("."),
             command_line_keys: Vec::new(),
             before_overrides: None,
@@ -214,6 +215,15 @@ impl ConfigSource {
     }
 }
 
+/// `text` without a leading UTF-8 byte-order mark (which some Windows editors
+/// write and the TOML parser rejects as a stray character).
+fn without_bom(text: String) -> String {
+    match text.strip_prefix('\u{feff}') {
+        Some(rest) => rest.to_string(),
+        None => text,
+    }
+}
+
 fn apply_override(table: &mut toml::Table, assignment: &str) -> Result<(), ConfigError> {
     let err = |message: String| ConfigError::Override {
         assignment: assignment.to_string(),
@@ -303,10 +313,16 @@ pub struct RawInput {
     /// `builtin:NAME` or a path to .obj, .ply, .off or .stl. Optional for
     /// image-only pipelines (`jump_image`). A relative path (here and in
     /// every path of `[input]`) resolves against the config file's folder;
-    /// given with `--set`, against the current directory.
+    /// given with `--set`, against the current directory. Faces of more than
+    /// 255 corners are triangulated on load; a UTF-8 byte-order mark is
+    /// skipped.
     #[serde(default)]
     pub mesh: Option<String>,
-    /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga.
+    /// `builtin:NAME` or a path to .png, .jpg, .bmp or .tga. Files (and the
+    /// material maps below) may have at most
+    /// [`MAX_IMAGE_SIDE`](crate::image::io::MAX_IMAGE_SIDE) = 8192 pixels a
+    /// side and [`MAX_IMAGE_PIXELS`](crate::image::io::MAX_IMAGE_PIXELS) =
+    /// 4096² pixels in all, checked from the file header before decoding.
     pub exemplar: String,
     /// Options of a builtin mesh (`surfsynth stages` lists them).
     #[serde(default)]

@@ -6,6 +6,19 @@ pub enum ImageError {
     /// The file could not be read or decoded.
     #[error("cannot load image {path}: {message}")]
     Load { path: PathBuf, message: String },
+    /// The file declares more pixels than an exemplar or map may have
+    /// (checked from its header, before decoding).
+    #[error(
+        "image {path} declares {width}x{height} pixels, over the limit of {max_side} pixels per side and {max_pixels} pixels in all ({why}); use a smaller image"
+    )]
+    TooLarge {
+        path: PathBuf,
+        width: u32,
+        height: u32,
+        max_side: u32,
+        max_pixels: u64,
+        why: String,
+    },
     /// The image has no pixels or an unsupported layout.
     #[error("image {path}: {message}")]
     Invalid { path: PathBuf, message: String },

@@ -11,6 +11,23 @@ use image::DynamicImage;
 use super::builtin::{BUILTIN_PREFIX, ExemplarOptions, builtin_exemplar};
 use super::{Image, ImageError};
 
+/// Largest width or height of an exemplar or material map file, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 8192;
+
+/// Largest pixel count of an exemplar or material map file: 4096² (16.8 M).
+///
+/// Why: a loaded image is `f32` per channel (up to 16 bytes a pixel), and the
+/// heaviest analyses multiply that: the Gaussian stack of `match` and
+/// `graph_match` keeps `4 × levels` planes (13 levels at 4096: ≈ 830 bytes a
+/// pixel), the jump-map analysis a neighbourhood vector and 16 jumps per
+/// pixel (≈ 500 bytes). At 4096² pixels that is ≈ 13 GiB worst case for the
+/// stack, which already needs a large machine; past it, runs abort.
+pub const MAX_IMAGE_PIXELS: u64 = 4096 * 4096;
+
+/// Most memory the decoder may allocate, bytes: the largest allowed image
+/// at 16-bit RGBA (8 bytes a pixel).
+const MAX_DECODE_ALLOC: u64 = MAX_IMAGE_PIXELS * 8;
+
 /// Loads an image file into an [`Image`] with values in `[0, 1]`.
 ///
 /// PNG, JPEG, BMP and TGA are decoded with the `image` crate; the format is
@@ -23,27 +40,61 @@ use super::{Image, ImageError};
 /// # Errors
 ///
 /// [`ImageError::Load`] naming `path` when the file is missing, unreadable or
-/// not a decodable image (corrupt, truncated, unsupported format);
+/// not a decodable image (corrupt, truncated — a JPEG without its end-of-image
+/// marker counts — or an unsupported format);
+/// [`ImageError::TooLarge`] when its header declares more than
+/// [`MAX_IMAGE_SIDE`] pixels a side or [`MAX_IMAGE_PIXELS`] in all (checked
+/// before any pixel is decoded);
 /// [`ImageError::Invalid`] when it decodes to zero width or height.
 pub fn load_image(path: &Path) -> Result<Image, ImageError> {
     let load_err = |message: String| ImageError::Load {
         path: path.to_path_buf(),
         message,
     };
-    let reader = image::ImageReader::open(path).map_err(|e| {
-        load_err(match e.kind() {
-            std::io::ErrorKind::NotFound => "file not found".to_string(),
-            _ => e.to_string(),
-        })
-    })?;
-    let reader = reader
-        .with_guessed_format()
+    let open = || -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>, ImageError> {
+        let reader = image::ImageReader::open(path).map_err(|e| {
+            load_err(match e.kind() {
+                std::io::ErrorKind::NotFound => "file not found".to_string(),
+                _ => e.to_string(),
+            })
+        })?;
+        let reader = reader
+            .with_guessed_format()
+            .map_err(|e| load_err(e.to_string()))?;
+        if reader.format().is_none() {
+            return Err(load_err(
+                "not a recognised image format (PNG, JPEG, BMP or TGA expected)".to_string(),
+            ));
+        }
+        Ok(reader)
+    };
+    // The header first: a small file may declare a huge image.
+    let (width, height) = open()?
+        .into_dimensions()
         .map_err(|e| load_err(e.to_string()))?;
-    if reader.format().is_none() {
-        return Err(load_err(
-            "not a recognised image format (PNG, JPEG, BMP or TGA expected)".to_string(),
-        ));
+    if width > MAX_IMAGE_SIDE
+        || height > MAX_IMAGE_SIDE
+        || width as u64 * height as u64 > MAX_IMAGE_PIXELS
+    {
+        return Err(ImageError::TooLarge {
+            path: path.to_path_buf(),
+            width,
+            height,
+            max_side: MAX_IMAGE_SIDE,
+            max_pixels: MAX_IMAGE_PIXELS,
+            why: "the Gaussian stack and jump-map analysis of a larger exemplar outgrow memory"
+                .into(),
+        });
     }
+    let mut reader = open()?;
+    if reader.format() == Some(image::ImageFormat::Jpeg) {
+        check_jpeg_complete(path)?;
+    }
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_IMAGE_SIDE);
+    limits.max_image_height = Some(MAX_IMAGE_SIDE);
+    limits.max_alloc = Some(MAX_DECODE_ALLOC);
+    reader.limits(limits);
     let decoded = reader.decode().map_err(|e| load_err(e.to_string()))?;
     if decoded.width() == 0 || decoded.height() == 0 {
         return Err(ImageError::Invalid {
@@ -56,6 +107,32 @@ pub fn load_image(path: &Path) -> Result<Image, ImageError> {
         });
     }
     Ok(dynamic_to_image(decoded))
+}
+
+/// Refuses a JPEG whose last scan is not followed by an end-of-image marker
+/// (`FF D9`): the decoder fills a cut-off file with grey and reports nothing.
+/// Inside entropy-coded data every `FF` byte is followed by `00` or a restart
+/// marker, so the last start-of-scan (`FF DA`) is the main image's last scan
+/// (an embedded EXIF thumbnail comes earlier), and a complete file has
+/// `FF D9` after it; bytes after the marker are allowed.
+fn check_jpeg_complete(path: &Path) -> Result<(), ImageError> {
+    let bytes = std::fs::read(path).map_err(|e| ImageError::Load {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let marker = |m: u8| move |w: &[u8]| w[0] == 0xFF && w[1] == m;
+    let last_scan = bytes.windows(2).rposition(marker(0xDA));
+    let complete = last_scan.is_some_and(|s| bytes[s..].windows(2).any(marker(0xD9)));
+    if complete {
+        return Ok(());
+    }
+    Err(ImageError::Load {
+        path: path.to_path_buf(),
+        message: format!(
+            "truncated JPEG: no end-of-image marker (FF D9) after the last scan ({} bytes read); the file is incomplete",
+            bytes.len()
+        ),
+    })
 }
 
 /// Converts a decoded image to `f32` values in `[0, 1]`, keeping its channels.
@@ -186,6 +263,25 @@ mod tests {
         std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
         let e = load_image(&truncated).unwrap_err().to_string();
         assert!(e.contains("truncated.png"), "{e}");
+    }
+
+    #[test]
+    fn truncated_jpeg_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let good = dir.path().join("good.jpg");
+        let buf: ImageBuffer<Rgb<u8>, Vec<u8>> =
+            ImageBuffer::from_fn(64, 64, |x, y| Rgb([(x * 4) as u8, (y * 4) as u8, 9]));
+        buf.save(&good).unwrap();
+        assert!(load_image(&good).is_ok());
+        let bytes = std::fs::read(&good).unwrap();
+        let cut = dir.path().join("cut.jpg");
+        std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+        let e = load_image(&cut).unwrap_err().to_string();
+        assert!(e.contains("cut.jpg") && e.contains("truncated"), "{e}");
+        // Trailing bytes after the end-of-image marker are fine.
+        let padded = dir.path().join("padded.jpg");
+        std::fs::write(&padded, [&bytes[..], b"trailer"].concat()).unwrap();
+        assert!(load_image(&padded).is_ok());
     }
 
     #[test]

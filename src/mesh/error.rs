@@ -40,6 +40,20 @@ pub enum MeshError {
         index: i64,
         vertex_count: usize,
     },
+    /// An OBJ face reference names no vertex, reported as the user wrote it
+    /// (1-based, or negative relative to the vertices above its line).
+    #[error("mesh file {path}, line {line}: face {face} refers to vertex {written}, but {detail}")]
+    ReferenceOutOfRange {
+        path: PathBuf,
+        /// 1-based line of the face.
+        line: usize,
+        /// 0-based face number (faces counted in file order).
+        face: usize,
+        /// The reference as written.
+        written: i64,
+        /// What exists and what is allowed.
+        detail: String,
+    },
     /// Nothing to texture.
     #[error("mesh {path}: no faces{detail}; a mesh needs at least one triangle or polygon")]
     NoFaces { path: PathBuf, detail: String },

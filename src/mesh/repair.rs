@@ -9,7 +9,9 @@
 //!    whole, not collapsed, since its intended shape is unknown;
 //! 3. drop zero-area faces: area `<= 1e-12 × bbox_diagonal²`
 //!    ([`drop_zero_area_faces`]);
-//! 4. drop vertices no face uses, remapping face indices
+//! 4. split faces of more than [`MAX_FACE_CORNERS`] corners into triangles
+//!    ([`triangulate_large_faces`]);
+//! 5. drop vertices no face uses, remapping face indices
 //!    ([`drop_unused_vertices`]).
 //!
 //! Non-manifold edges, boundaries and several components are legal and kept.
@@ -24,6 +26,15 @@ use std::collections::HashMap;
 /// Faces with area at most this times the squared bounding-box diagonal count
 /// as zero-area.
 pub const ZERO_AREA_FACTOR: f64 = 1e-12;
+
+/// Largest face degree the loaders keep; larger polygons are triangulated.
+///
+/// 255 is the largest corner count a PLY `uchar` list holds, the layout most
+/// PLY readers expect, and well beyond the polygons modelling tools make
+/// (n-gon caps of cylinders and discs have tens of corners). Stages walk a
+/// face's corners in loops that are quadratic in the degree here and there,
+/// so a 10⁶-corner polygon would stall them; triangles never do.
+pub const MAX_FACE_CORNERS: usize = 255;
 
 /// What the loader changed in a mesh. All counts are zero for a clean mesh.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -40,6 +51,8 @@ pub struct LoadReport {
     pub dropped_zero_area_faces: usize,
     /// Vertices dropped because no face used them.
     pub dropped_unused_vertices: usize,
+    /// Faces of more than [`MAX_FACE_CORNERS`] corners split into triangles.
+    pub triangulated_faces: usize,
 }
 
 impl LoadReport {
@@ -49,6 +62,7 @@ impl LoadReport {
             && self.dropped_degenerate_faces == 0
             && self.dropped_zero_area_faces == 0
             && self.dropped_unused_vertices == 0
+            && self.triangulated_faces == 0
     }
 
     /// One line for the log, e.g. `read 1839 vertices, 3674 faces; no repairs
@@ -102,6 +116,12 @@ impl LoadReport {
         if !dropped.is_empty() {
             parts.push(format!("dropped {}", dropped.join(", ")));
         }
+        if self.triangulated_faces > 0 {
+            parts.push(format!(
+                "triangulated {} of more than {MAX_FACE_CORNERS} corners",
+                plural(self.triangulated_faces, "face", "faces")
+            ));
+        }
         s.push_str(&parts.join("; "));
         s
     }
@@ -130,6 +150,7 @@ pub fn repair_mesh(mesh: &mut PolyMesh, options: &LoadOptions) -> LoadReport {
     }
     report.dropped_degenerate_faces = drop_degenerate_faces(mesh);
     report.dropped_zero_area_faces = drop_zero_area_faces(mesh, ZERO_AREA_FACTOR * diag * diag);
+    report.triangulated_faces = triangulate_large_faces(mesh, MAX_FACE_CORNERS);
     report.dropped_unused_vertices = drop_unused_vertices(mesh);
     report
 }
@@ -314,6 +335,52 @@ pub fn drop_zero_area_faces(mesh: &mut PolyMesh, threshold: f64) -> usize {
     dropped
 }
 
+/// Splits every face of more than `max_corners` corners into triangles, in
+/// place of the face (face order otherwise kept); returns the number split.
+///
+/// The split is a zigzag strip: triangles `(l, l+1, r)` and `(l, r-1, r)`
+/// alternately, walking the two ends of the corner list towards each other.
+/// It is O(n) (ear clipping is O(n²): 10¹⁰ steps for a 10⁵-corner face),
+/// adds no vertex, keeps the polygon's winding, and is exact for convex
+/// polygons, which large polygons in practice are (caps, discs, hole fills);
+/// unlike a fan it gives no vertex a valence of n, and it makes no zero-area
+/// triangle on a side with collinear corners unless the opposite corner lies
+/// on the same line. A strongly non-convex polygon may get overlapping
+/// triangles.
+pub fn triangulate_large_faces(mesh: &mut PolyMesh, max_corners: usize) -> usize {
+    if mesh.faces().all(|f| f.len() <= max_corners) {
+        return 0;
+    }
+    let mut out = PolyMesh {
+        positions: std::mem::take(&mut mesh.positions),
+        face_start: Vec::with_capacity(mesh.face_start.len()),
+        corner_vertex: Vec::with_capacity(mesh.corner_vertex.len() * 3),
+    };
+    out.face_start.push(0);
+    let mut split = 0;
+    for face in mesh.faces() {
+        if face.len() <= max_corners {
+            out.push_face(face);
+            continue;
+        }
+        split += 1;
+        let (mut l, mut r) = (0, face.len() - 1);
+        let mut advance_left = true;
+        while r - l >= 2 {
+            if advance_left {
+                out.push_face(&[face[l], face[l + 1], face[r]]);
+                l += 1;
+            } else {
+                out.push_face(&[face[l], face[r - 1], face[r]]);
+                r -= 1;
+            }
+            advance_left = !advance_left;
+        }
+    }
+    *mesh = out;
+    split
+}
+
 /// Drops vertices that no face uses, keeping the others in order, and remaps
 /// the faces. Returns the number dropped.
 pub fn drop_unused_vertices(mesh: &mut PolyMesh) -> usize {
@@ -340,6 +407,44 @@ pub fn drop_unused_vertices(mesh: &mut PolyMesh) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn large_polygons_become_a_strip_of_triangles() {
+        let n = 1000u32;
+        let positions: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let a = i as f32 / n as f32 * std::f32::consts::TAU;
+                Vec3::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect();
+        let ring: Vec<u32> = (0..n).collect();
+        let mut m = PolyMesh::from_polygons(positions, [&ring[..], &[0, 1, 2][..]]);
+        let area = polygon_area(&m.positions, &ring);
+        assert_eq!(triangulate_large_faces(&mut m, MAX_FACE_CORNERS), 1);
+        assert_eq!(m.face_count(), n as usize - 2 + 1);
+        assert!(m.faces().all(|f| f.len() == 3));
+        // Same area, same winding (every triangle's normal is +z).
+        let tris: f64 = m
+            .faces()
+            .take(n as usize - 2)
+            .map(|f| polygon_area(&m.positions, f))
+            .sum();
+        assert!((tris - area).abs() < 1e-6 * area, "{tris} vs {area}");
+        for f in m.faces() {
+            let [a, b, c] = [f[0], f[1], f[2]].map(|v| m.positions[v as usize]);
+            assert!((b - a).cross(c - a).z > 0.0, "{f:?}");
+        }
+        // No vertex gets a large valence.
+        let mut valence = vec![0usize; n as usize];
+        for &v in &m.corner_vertex {
+            valence[v as usize] += 1;
+        }
+        assert!(
+            valence.iter().all(|&k| k <= 5),
+            "{:?}",
+            valence.iter().max()
+        );
+    }
 
     fn quad_pair() -> PolyMesh {
         // Two unit squares side by side whose shared edge is duplicated.

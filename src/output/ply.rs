@@ -3,7 +3,9 @@
 //!
 //! Layout: `vertex` with `float x y z`, then optional `uchar red green blue`
 //! (and `alpha`), then optional extra `float` properties; `face` with
-//! `list uchar int vertex_indices`.
+//! `list uchar int vertex_indices`, or `list uint int vertex_indices` when a
+//! face has 256 corners or more (so small meshes keep the common layout every
+//! reader knows, and any polygon still fits).
 
 use super::{OutputError, write_bytes_atomic};
 use crate::mesh::PolyMesh;
@@ -36,8 +38,7 @@ pub(crate) fn colour_byte(v: f32) -> u8 {
 /// [`OutputError::Encode`] when `colours` has a channel count outside `1..=4`
 /// or a length other than `vertices × channels`, an extra property has a
 /// length other than the vertex count or a name that is not a plain
-/// identifier (or clashes with another property), or a face has more than 255
-/// corners.
+/// identifier (or clashes with another property).
 pub fn encode_ply(
     mesh: &PolyMesh,
     colours: Option<VertexColours>,
@@ -87,8 +88,11 @@ pub fn encode_ply(
         names.push(name);
         header.push_str(&format!("property float {name}\n"));
     }
+    // A `uchar` count holds up to 255 corners; wider faces need `uint`.
+    let wide_counts = mesh.faces().any(|f| f.len() > u8::MAX as usize);
+    let count_type = if wide_counts { "uint" } else { "uchar" };
     header.push_str(&format!(
-        "element face {nf}\nproperty list uchar int vertex_indices\nend_header\n"
+        "element face {nf}\nproperty list {count_type} int vertex_indices\nend_header\n"
     ));
 
     let colour_bytes = colours.map_or(0, |(_, c)| if c % 2 == 0 { 4 } else { 3 });
@@ -114,14 +118,14 @@ pub fn encode_ply(
             out.extend_from_slice(&values[v].to_le_bytes());
         }
     }
-    for (f, face) in mesh.faces().enumerate() {
-        let degree = u8::try_from(face.len()).map_err(|_| {
-            encode_error(format!(
-                "face {f} has {} corners; PLY faces are written with at most 255",
-                face.len()
-            ))
-        })?;
-        out.push(degree);
+    for face in mesh.faces() {
+        // Corner counts fit `u32`: `PolyMesh` offsets are `u32`.
+        let degree = face.len() as u32;
+        if wide_counts {
+            out.extend_from_slice(&degree.to_le_bytes());
+        } else {
+            out.push(degree as u8);
+        }
         for &v in face {
             out.extend_from_slice(&(v as i32).to_le_bytes());
         }
@@ -197,5 +201,31 @@ mod tests {
         assert!(encode_ply(&m, None, &[("red", &[0.0; 5])]).is_err());
         assert!(encode_ply(&m, None, &[("a b", &[0.0; 5])]).is_err());
         assert!(encode_ply(&m, None, &[("k", &[0.0; 4])]).is_err());
+    }
+
+    #[test]
+    fn faces_of_256_corners_get_uint_list_counts() {
+        let n = 300u32;
+        let positions = (0..n)
+            .map(|i| {
+                let a = i as f32 / n as f32 * std::f32::consts::TAU;
+                glam::Vec3::new(a.cos(), a.sin(), 0.0)
+            })
+            .collect();
+        let m = PolyMesh::from_polygons(positions, [&(0..n).collect::<Vec<u32>>()[..]]);
+        let bytes = encode_ply(&m, None, &[]).unwrap();
+        let text = String::from_utf8_lossy(&bytes);
+        assert!(
+            text.contains("property list uint int vertex_indices"),
+            "{text}"
+        );
+        let back = crate::mesh::io::parse_mesh(
+            &bytes,
+            crate::mesh::io::MeshFormat::Ply,
+            Path::new("big.ply"),
+        )
+        .unwrap();
+        assert_eq!(back.face(0).len(), n as usize);
+        assert_eq!(back.face(0)[299], 299);
     }
 }

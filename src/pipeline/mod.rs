@@ -8,6 +8,7 @@
 
 mod error;
 mod input;
+pub mod memory_budget;
 pub mod plane_check;
 pub mod registry;
 mod report;
@@ -204,6 +205,7 @@ impl Pipeline {
             available.extend(plan.produces());
             stages.push(plan);
         }
+        memory_budget::check_memory(&raw.input, &stages, &file)?;
         Ok(Self {
             seed: raw.seed,
             input: raw.input,

@@ -118,8 +118,11 @@ pub const BUILTIN_PREFIX: &str = "builtin:";
 /// A path of the form `builtin:NAME` builds the procedural mesh `NAME` with
 /// default options instead (see [`crate::mesh::builtin`]); its report is empty.
 ///
-/// Faces keep their degree (no triangulation); all OBJ objects and groups merge
-/// into one mesh. Non-manifold edges, boundaries and several components are
+/// Faces keep their degree up to
+/// [`MAX_FACE_CORNERS`](crate::mesh::repair::MAX_FACE_CORNERS) corners; larger
+/// polygons are split into triangles (the report counts them). All OBJ
+/// objects and groups merge into one mesh. A UTF-8 byte-order mark at the
+/// start of a text file (OBJ, OFF, PLY header, ASCII STL) is skipped. Non-manifold edges, boundaries and several components are
 /// legal and kept.
 ///
 /// # Errors
@@ -128,7 +131,9 @@ pub const BUILTIN_PREFIX: &str = "builtin:";
 /// - [`MeshError::Parse`] for a truncated file or a bad token, with the line
 ///   (text) or the element (binary) where it happened;
 /// - [`MeshError::NonFinite`] for a NaN or infinite coordinate;
-/// - [`MeshError::IndexOutOfRange`] for a face index outside the vertex list;
+/// - [`MeshError::IndexOutOfRange`] for a face index outside the vertex list
+///   ([`MeshError::ReferenceOutOfRange`] for OBJ, with the line and the
+///   reference as written);
 /// - [`MeshError::NoFaces`] when no usable face is left;
 /// - [`MeshError::InvalidOption`] for out-of-range `options`.
 pub fn load_mesh(path: &Path, options: &LoadOptions) -> Result<(PolyMesh, LoadReport), MeshError> {
@@ -183,13 +188,31 @@ pub fn load_mesh_from_bytes(
 /// coordinates finite, but faces may have fewer than three corners, repeated
 /// vertices or zero area, and vertices may be unused.
 pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<PolyMesh, MeshError> {
+    // STL decides between binary and ASCII itself: the 80-byte header of a
+    // binary file may begin with the BOM's bytes.
+    let bytes = if format == MeshFormat::Stl {
+        bytes
+    } else {
+        strip_bom(bytes)
+    };
     let raw = match format {
         MeshFormat::Obj => obj::parse_obj(bytes, path)?,
         MeshFormat::Ply => ply::parse_ply(bytes, path)?,
         MeshFormat::Off => off::parse_off(bytes, path)?,
         MeshFormat::Stl => stl::parse_stl(bytes, path)?,
     };
-    raw.finish(path)
+    match raw.finish(path) {
+        Err(MeshError::IndexOutOfRange { face, .. }) if format == MeshFormat::Obj => {
+            Err(obj::reference_error(bytes, path, face).unwrap_or_else(|| {
+                parse_error(
+                    path,
+                    format!("face {face}"),
+                    "a face refers to a missing vertex",
+                )
+            }))
+        }
+        other => other,
+    }
 }
 
 /// A polygon soup as read from a file, before validation. Corner indices are
@@ -285,6 +308,15 @@ impl RawMesh {
             corner_vertex,
         })
     }
+}
+
+/// UTF-8 byte-order mark, written by some Windows editors at the start of a
+/// text file.
+const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
+/// `bytes` without a leading UTF-8 byte-order mark.
+pub(crate) fn strip_bom(bytes: &[u8]) -> &[u8] {
+    bytes.strip_prefix(UTF8_BOM).unwrap_or(bytes)
 }
 
 /// Lines of a text file as `(1-based line number, bytes)`, without the line

@@ -46,6 +46,58 @@ pub(super) fn parse_obj(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
     Ok(raw)
 }
 
+/// Rewrites the range error of face `face` (0-based, in file order) in the
+/// user's terms: finds the face's line again and the first reference on it
+/// that names no vertex, and reports it as written. Scanning again only when
+/// something is wrong keeps the line numbers out of the parse itself. Returns
+/// `None` when the face is not found (which the caller treats as "keep the
+/// original error").
+pub(super) fn reference_error(bytes: &[u8], path: &Path, face: usize) -> Option<MeshError> {
+    let vertex_count = lines(bytes)
+        .filter(|(_, l)| tokens(strip_comment(l)).next() == Some(b"v"))
+        .count() as i64;
+    let mut vertices_so_far = 0i64;
+    let mut faces_so_far = 0usize;
+    for (line_no, line) in lines(bytes) {
+        let mut toks = tokens(strip_comment(line));
+        match toks.next() {
+            Some(b"v") => vertices_so_far += 1,
+            Some(b"f") | Some(b"fo") => {
+                if faces_so_far == face {
+                    return toks.find_map(|tok| {
+                        let index = parse_reference(tok, vertices_so_far).ok()?;
+                        if (0..vertex_count).contains(&index) {
+                            return None;
+                        }
+                        let written: i64 = parse_token(tok.split(|&b| b == b'/').next()?)?;
+                        let detail = if vertex_count == 0 {
+                            "the file defines no vertices (`v x y z` lines)".to_string()
+                        } else if written > 0 {
+                            format!(
+                                "the file defines {vertex_count} vertices; allowed: 1..={vertex_count}, or -1..=-{vertices_so_far} counting back from this line"
+                            )
+                        } else {
+                            format!(
+                                "only {vertices_so_far} vertices are defined above this line; relative references allowed here: -1..=-{vertices_so_far} (absolute: 1..={vertex_count})"
+                            )
+                        };
+                        Some(MeshError::ReferenceOutOfRange {
+                            path: path.to_path_buf(),
+                            line: line_no,
+                            face,
+                            written,
+                            detail,
+                        })
+                    });
+                }
+                faces_so_far += 1;
+            }
+            _ => {}
+        }
+    }
+    None
+}
+
 /// Turns a face reference `v[/vt[/vn]]` into a 0-based vertex index, given the
 /// number of vertices read so far (for relative references).
 fn parse_reference(token: &[u8], vertices_so_far: i64) -> Result<i64, String> {
@@ -73,7 +125,11 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<crate::mesh::PolyMesh, MeshError> {
-        parse_obj(text.as_bytes(), Path::new("t.obj"))?.finish(Path::new("t.obj"))
+        super::super::parse_mesh(
+            text.as_bytes(),
+            super::super::MeshFormat::Obj,
+            Path::new("t.obj"),
+        )
     }
 
     #[test]
@@ -107,16 +163,35 @@ mod tests {
 
     #[test]
     fn out_of_range_references() {
-        let err = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nf 1 2 4\n").unwrap_err();
-        match err {
-            MeshError::IndexOutOfRange { face, index, .. } => assert_eq!((face, index), (1, 3)),
+        let err = parse("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n# c\nf 1 2/5/1 4\n").unwrap_err();
+        match &err {
+            MeshError::ReferenceOutOfRange {
+                line,
+                face,
+                written,
+                ..
+            } => assert_eq!((*line, *face, *written), (6, 1, 4)),
             e => panic!("{e}"),
         }
+        let text = err.to_string();
+        assert!(
+            text.contains("line 6") && text.contains("vertex 4"),
+            "{text}"
+        );
+        assert!(text.contains("1..=3"), "{text}");
         let err = parse("v 0 0 0\nv 1 0 0\nf -1 -2 -3\nv 0 1 0\n").unwrap_err();
-        match err {
-            MeshError::IndexOutOfRange { face, index, .. } => assert_eq!((face, index), (0, -1)),
+        match &err {
+            MeshError::ReferenceOutOfRange {
+                line,
+                face,
+                written,
+                ..
+            } => assert_eq!((*line, *face, *written), (3, 0, -3)),
             e => panic!("{e}"),
         }
+        assert!(err.to_string().contains("-1..=-2"), "{err}");
+        // A forward reference to a vertex defined later is fine.
+        assert!(parse("v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0\n").is_ok());
     }
 
     #[test]

@@ -155,6 +155,46 @@ fn is_float(t: &ply_rs_bw::ply::ScalarType) -> bool {
     matches!(t, ScalarType::Float | ScalarType::Double)
 }
 
+/// Scalar types a PLY property may have.
+const PLY_TYPES: &str = "char, uchar, short, ushort, int, uint, float, double (or int8, uint8, int16, uint16, int32, uint32, float32, float64)";
+
+/// A sentence for a header error of `ply_rs_bw`, whose messages embed the
+/// parser's `Debug` state: says what is wrong with header line `line` (the
+/// parser's 1-based count) and what is allowed, judged from the line itself.
+fn header_problem(bytes: &[u8], line: Option<usize>, parser_message: &str) -> String {
+    let Some(line_no) = line else {
+        // No line: the parser ran out of input or could not read it at all.
+        let first = parser_message.lines().next().unwrap_or_default().trim();
+        return if bytes.windows(10).any(|w| w == b"end_header") {
+            format!("unreadable header ({first})")
+        } else {
+            "the header has no `end_header` line (truncated, or not a PLY file?)".into()
+        };
+    };
+    let text = bytes
+        .split(|&b| b == b'\n')
+        .nth(line_no.saturating_sub(1))
+        .map(|l| String::from_utf8_lossy(l).trim().to_string())
+        .unwrap_or_default();
+    let shown = super::show_token(text.as_bytes());
+    match text.split_whitespace().next().unwrap_or_default() {
+        "" => "the header has no `end_header` line (truncated?)".into(),
+        _ if line_no == 1 => {
+            format!("the file starts with {shown:?}; a PLY file starts with the line `ply`")
+        }
+        "format" => format!(
+            "bad format line {shown:?}; allowed: `format ascii 1.0`, `format binary_little_endian 1.0` or `format binary_big_endian 1.0`"
+        ),
+        "element" => format!("bad element line {shown:?}; allowed: `element NAME COUNT`"),
+        "property" => format!(
+            "bad property line {shown:?}; allowed: `property TYPE NAME` or `property list COUNT_TYPE TYPE NAME`, TYPE one of {PLY_TYPES}"
+        ),
+        _ => format!(
+            "unexpected header line {shown:?}; allowed: `format`, `element`, `property`, `comment`, `obj_info` lines and `end_header`"
+        ),
+    }
+}
+
 /// Parses PLY bytes into a raw mesh (indices unchecked).
 pub(super) fn parse_ply(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError> {
     let parser = Parser::<Element>::new();
@@ -163,7 +203,11 @@ pub(super) fn parse_ply(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
         let location = e
             .line()
             .map_or_else(|| "header".to_string(), |l| format!("line {l} (header)"));
-        parse_error(path, location, e.to_string())
+        parse_error(
+            path,
+            location,
+            header_problem(bytes, e.line(), &e.to_string()),
+        )
     })?;
     let mut roles = Vec::with_capacity(header.elements.len());
     for def in header.elements.values() {
@@ -339,6 +383,16 @@ mod tests {
         let err = parse(bad.as_bytes()).unwrap_err();
         assert!(
             matches!(err, MeshError::IndexOutOfRange { index: 9, .. }),
+            "{err}"
+        );
+        let bad = ASCII.replace("property double z", "property doubel z");
+        let err = parse(bad.as_bytes()).unwrap_err().to_string();
+        assert!(
+            err.contains("line 7") && err.contains("bad property line"),
+            "{err}"
+        );
+        assert!(
+            err.contains("uchar") && !err.contains("ParseError"),
             "{err}"
         );
         let bad = ASCII.replace("property double z\n", "");

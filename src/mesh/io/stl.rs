@@ -6,10 +6,12 @@
 //!
 //! A file is read as binary when its length is exactly `84 + 50 * count` for
 //! the triangle count in bytes 80..84 (binary files may also start with
-//! `solid`), as ASCII when it starts with `solid` and holds no NUL byte, and
-//! as binary otherwise.
+//! `solid`), as ASCII when it starts with `solid` in any case (after an
+//! optional UTF-8 byte-order mark and whitespace) and holds no NUL byte, and
+//! as binary otherwise. ASCII keywords are matched case-insensitively
+//! (`SOLID` ... `ENDSOLID` is common from CAD exporters).
 
-use super::{RawMesh, lines, parse_error, parse_xyz, show_token, tokens};
+use super::{RawMesh, lines, parse_error, parse_xyz, show_token, strip_bom, tokens};
 use crate::mesh::MeshError;
 use crate::mesh::repair::weld_exact;
 use glam::Vec3;
@@ -21,19 +23,22 @@ pub(super) fn parse_stl(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
         .get(80..84)
         .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as u64);
     let exact_binary = binary_count.is_some_and(|n| 84 + 50 * n == bytes.len() as u64);
+    let text = strip_bom(bytes);
     let starts_solid = {
-        let start = bytes
+        let start = text
             .iter()
             .position(|b| !b.is_ascii_whitespace())
             .unwrap_or(0);
-        bytes[start..].starts_with(b"solid")
+        text[start..]
+            .get(..5)
+            .is_some_and(|kw| kw.eq_ignore_ascii_case(b"solid"))
     };
     // ASCII STL is text: a NUL byte means binary with a `solid` header.
     let ascii = starts_solid && !exact_binary && !bytes.contains(&0);
     let soup = if !ascii {
         parse_binary(bytes, path)?
     } else {
-        parse_ascii(bytes, path)?
+        parse_ascii(text, path)?
     };
     // Check before welding, so the error names the vertex as the file lists it
     // (triangle t, corner c is vertex 3t + c), and NaN never reaches the weld.
@@ -122,7 +127,17 @@ fn parse_ascii(bytes: &[u8], path: &Path) -> Result<Soup, MeshError> {
         last_line = n;
         let mut toks = tokens(line);
         let Some(kw) = toks.next() else { continue };
-        match kw {
+        // Keywords in any case, lowered on the stack (the longest is 8 bytes).
+        let mut lowered = [0u8; 8];
+        let kw_lower = match lowered.get_mut(..kw.len()) {
+            Some(buf) => {
+                buf.copy_from_slice(kw);
+                buf.make_ascii_lowercase();
+                &*buf
+            }
+            None => kw,
+        };
+        match kw_lower {
             b"solid" | b"facet" | b"endfacet" => {}
             b"outer" => {
                 if in_loop.is_some() {
@@ -235,6 +250,19 @@ mod tests {
         assert_eq!((m.vertex_count(), m.face_count()), (4, 2));
         let err = parse(&b[..b.len() - 1]).unwrap_err();
         assert!(err.to_string().contains("triangle 1"), "{err}");
+    }
+
+    #[test]
+    fn upper_case_ascii_and_bom_are_ascii() {
+        let upper = ASCII.to_ascii_uppercase();
+        let m = parse(upper.as_bytes()).unwrap();
+        assert_eq!((m.vertex_count(), m.face_count()), (4, 2));
+        let with_bom = [b"\xEF\xBB\xBF".as_slice(), ASCII.as_bytes()].concat();
+        assert_eq!(parse(&with_bom).unwrap(), parse(ASCII.as_bytes()).unwrap());
+        // A binary file whose header says SOLID stays binary (the size matches).
+        let mut b = binary(&[[[0., 0., 0.], [1., 0., 0.], [0., 1., 0.]]]);
+        b[..5].copy_from_slice(b"SOLID");
+        assert_eq!(parse(&b).unwrap().face_count(), 1);
     }
 
     #[test]
