@@ -22,31 +22,9 @@ kind = "init_colours"
 kind = "export"
 "#;
 
-/// Writes `config` into a temp dir, runs it with `--out`, and checks exit 2,
-/// that stderr contains every `needles`, and that no output file exists.
-fn expect_bad(config: &str, extra: &[&str], needles: &[&str]) {
-    let dir = tempfile::tempdir().unwrap();
-    let cfg = dir.path().join("bad.toml");
-    std::fs::write(&cfg, config).unwrap();
-    let out = dir.path().join("out");
-    let mut args = vec!["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
-    args.extend_from_slice(extra);
-    let (code, _stdout, stderr) = run_cli(&args);
-    assert_eq!(code, 2, "exit code for {needles:?}; stderr: {stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "stderr should contain {n:?}: {stderr}");
-    }
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    assert!(
-        files_under(&out).is_empty(),
-        "no output may be left behind: {:?}",
-        files_under(&out)
-    );
-}
-
 #[test]
 fn unknown_config_key_names_key_and_line() {
-    expect_bad(
+    common::expect_refused(
         &BASE.replace(
             "[[stage]]\nkind = \"init_colours\"",
             "[[stage]]\nkind = \"init_colours\"\nbogus = 3",
@@ -54,7 +32,7 @@ fn unknown_config_key_names_key_and_line() {
         &[],
         &["bad.toml:14", "bogus", "unknown parameter"],
     );
-    expect_bad(
+    common::expect_refused(
         &format!("colour = 1\n{BASE}"),
         &[],
         &["colour", "unknown field"],
@@ -63,7 +41,7 @@ fn unknown_config_key_names_key_and_line() {
 
 #[test]
 fn wrong_type_names_parameter() {
-    expect_bad(
+    common::expect_refused(
         &BASE.replace(
             "kind = \"orientation\"",
             "kind = \"orientation\"\nangle = \"ten\"",
@@ -75,7 +53,7 @@ fn wrong_type_names_parameter() {
 
 #[test]
 fn out_of_range_value_names_range() {
-    expect_bad(
+    common::expect_refused(
         BASE,
         &["--set", "stage.3.preview_size=10"],
         &["preview_size", "64..=4096"],
@@ -84,7 +62,7 @@ fn out_of_range_value_names_range() {
 
 #[test]
 fn unknown_stage_lists_allowed() {
-    expect_bad(
+    common::expect_refused(
         &BASE.replace("kind = \"init_colours\"", "kind = \"init_colors\""),
         &[],
         &["init_colors", "allowed", "init_colours"],
@@ -93,7 +71,7 @@ fn unknown_stage_lists_allowed() {
 
 #[test]
 fn missing_files_are_named() {
-    expect_bad(
+    common::expect_refused(
         BASE,
         &[
             "--set",
@@ -103,7 +81,7 @@ fn missing_files_are_named() {
         ],
         &["/nonexistent/x.obj"],
     );
-    expect_bad(
+    common::expect_refused(
         BASE,
         &["--set", "input.exemplar=/nonexistent/t.png"],
         &["/nonexistent/t.png"],
@@ -120,7 +98,7 @@ fn mesh_case(name: &str, content: &str, needles: &[&str]) {
     let set_mesh = format!("input.mesh={}", mesh.display());
     let mut all = vec![name];
     all.extend_from_slice(needles);
-    expect_bad(
+    common::expect_refused(
         BASE,
         &["--set", &set_mesh, "--set", "input.mesh_options={}"],
         &all,
@@ -151,7 +129,7 @@ fn bad_meshes_are_refused_with_what_and_where() {
 
 #[test]
 fn zero_threads_is_refused() {
-    expect_bad(BASE, &["--threads", "0"], &["--threads"]);
+    common::expect_refused(BASE, &["--threads", "0"], &["--threads"]);
 }
 
 #[test]
@@ -159,7 +137,7 @@ fn missing_stage_input_says_what_to_add() {
     let no_mesh = BASE
         .replace("mesh = \"builtin:icosphere\"\n", "")
         .replace("[input.mesh_options]\nsubdivisions = 2\n", "");
-    expect_bad(
+    common::expect_refused(
         &no_mesh,
         &[],
         &[

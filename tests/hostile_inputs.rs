@@ -28,29 +28,6 @@ kind = "export"
 formats = ["ply"]
 "#;
 
-/// Runs `config` (written to a temp dir, so relative paths are the caller's
-/// business) with `--out`, checks exit 2, that stderr holds every needle and
-/// no panic, and that no output folder was created.
-fn expect_refused(config: &str, extra: &[&str], needles: &[&str]) {
-    let dir = tempfile::tempdir().unwrap();
-    let cfg = dir.path().join("hostile.toml");
-    std::fs::write(&cfg, config).unwrap();
-    let out = dir.path().join("out");
-    let mut args = vec!["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
-    args.extend_from_slice(extra);
-    let (code, _stdout, stderr) = run_cli(&args);
-    assert_eq!(code, 2, "exit code for {needles:?}; stderr: {stderr}");
-    for n in needles {
-        assert!(stderr.contains(n), "stderr should contain {n:?}: {stderr}");
-    }
-    assert!(!stderr.contains("panicked"), "{stderr}");
-    assert!(
-        !out.exists(),
-        "no output folder may be created: {:?}",
-        files_under(&out)
-    );
-}
-
 /// Runs `config` with `--out DIR/out`, expects exit 0, returns the folder.
 fn expect_runs(dir: &Path, config: &str) -> std::path::PathBuf {
     let cfg = dir.join("ok.toml");
@@ -123,14 +100,14 @@ fn huge_png_is_refused_from_its_header() {
         other => panic!("expected TooLarge, got {other:?}"),
     }
     let exemplar = format!("input.exemplar={}", png.display());
-    expect_refused(
+    common::expect_refused(
         BASE,
         &["--set", &exemplar],
         &["huge.png", "20000x20000", "8192"],
     );
     // A material map is checked the same way, before the size comparison.
     let height_map = format!("input.height_map={}", png.display());
-    expect_refused(BASE, &["--set", &height_map], &["huge.png", "20000x20000"]);
+    common::expect_refused(BASE, &["--set", &height_map], &["huge.png", "20000x20000"]);
 }
 
 #[test]
@@ -148,12 +125,12 @@ kind = "jump_image"
 width = 32768
 height = 32768
 "#;
-    expect_refused(
+    common::expect_refused(
         jump_image,
         &[],
         &["jump_image", "32768x32768", "GiB", "budget of 8.0 GiB"],
     );
-    expect_refused(
+    common::expect_refused(
         BASE,
         &[
             "--set",
@@ -309,7 +286,7 @@ fn truncated_jpeg_is_refused() {
     std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
     assert!(matches!(load_image(&cut), Err(ImageError::Load { .. })));
     let exemplar = format!("input.exemplar={}", cut.display());
-    expect_refused(BASE, &["--set", &exemplar], &["cut.jpg", "truncated"]);
+    common::expect_refused(BASE, &["--set", &exemplar], &["cut.jpg", "truncated"]);
 }
 
 fn refused_mesh(name: &str, content: &str, needles: &[&str]) {
@@ -319,7 +296,7 @@ fn refused_mesh(name: &str, content: &str, needles: &[&str]) {
     let set_mesh = format!("input.mesh={}", mesh.display());
     let mut all = vec![name];
     all.extend_from_slice(needles);
-    expect_refused(
+    common::expect_refused(
         BASE,
         &["--set", &set_mesh, "--set", "input.mesh_options={}"],
         &all,

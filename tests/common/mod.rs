@@ -54,3 +54,26 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
     out.sort();
     out
 }
+
+/// Writes `config` into a temp dir, runs it with `--out DIR/out` and `extra`,
+/// and checks exit 2, that stderr contains every `needles` and no panic, and
+/// that no output folder was created.
+pub fn expect_refused(config: &str, extra: &[&str], needles: &[&str]) {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(&cfg, config).expect("the config is written");
+    let out = dir.path().join("out");
+    let mut args = vec!["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let (code, _stdout, stderr) = run_cli(&args);
+    assert_eq!(code, 2, "exit code for {needles:?}; stderr: {stderr}");
+    for n in needles {
+        assert!(stderr.contains(n), "stderr should contain {n:?}: {stderr}");
+    }
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        !out.exists(),
+        "no output folder may be created: {:?}",
+        files_under(&out)
+    );
+}
