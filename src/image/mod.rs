@@ -77,6 +77,29 @@ impl Image {
         &mut self.data[o..o + c]
     }
 
+    /// The image with 3 channels: the first three kept, grey (with or without
+    /// alpha) replicated.
+    pub fn to_rgb(&self) -> Image {
+        let c = self.channels.max(1) as usize;
+        if c == 3 {
+            return self.clone();
+        }
+        let data = self
+            .data
+            .chunks_exact(c)
+            .flat_map(|p| match c {
+                1 | 2 => [p[0]; 3],
+                _ => [p[0], p[1], p[2]],
+            })
+            .collect();
+        Image {
+            width: self.width,
+            height: self.height,
+            channels: 3,
+            data,
+        }
+    }
+
     /// Per-channel mean.
     pub fn mean(&self) -> Vec<f32> {
         let c = self.channels as usize;

@@ -85,7 +85,7 @@ pub fn contact_sheet(tiles: &[SheetTile<'_>], layout: &SheetLayout) -> ContactSh
         .max(1);
     let pictures: Vec<Image> = tiles
         .iter()
-        .map(|t| scale_to_height(&to_rgb(t.image), height))
+        .map(|t| scale_to_height(&t.image.to_rgb(), height))
         .collect();
     let line_height = (GLYPH_HEIGHT + 2) * scale;
     // A glyph's width of space on either side keeps neighbouring labels apart.
@@ -180,25 +180,6 @@ pub fn draw_text(img: &mut Image, x: u32, y: u32, text: &str, scale: u32, colour
                 }
             }
         }
-    }
-}
-
-/// The first three channels as RGB; grey (with or without alpha) replicated.
-fn to_rgb(img: &Image) -> Image {
-    let c = img.channels.max(1) as usize;
-    let data = img
-        .data
-        .chunks_exact(c)
-        .flat_map(|p| match c {
-            1 | 2 => [p[0], p[0], p[0]],
-            _ => [p[0], p[1], p[2]],
-        })
-        .collect();
-    Image {
-        width: img.width,
-        height: img.height,
-        channels: 3,
-        data,
     }
 }
 

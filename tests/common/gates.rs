@@ -255,22 +255,7 @@ pub fn assert_image_near_peer(
 
 /// `img` with 3 channels: RGB kept, grey repeated, alpha dropped.
 pub fn to_rgb(img: &Image) -> Image {
-    let ch = img.channels as usize;
-    if ch == 3 {
-        return img.clone();
-    }
-    let data = img
-        .data
-        .chunks_exact(ch)
-        .flat_map(|p| {
-            if ch >= 3 {
-                [p[0], p[1], p[2]]
-            } else {
-                [p[0]; 3]
-            }
-        })
-        .collect();
-    Image::from_data(img.width, img.height, 3, data).expect("RGB buffer")
+    img.to_rgb()
 }
 
 /// The `w`×`h` crop of `img` at `(x0, y0)`.

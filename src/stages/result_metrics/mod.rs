@@ -237,7 +237,7 @@ fn plane_quality(
     metrics: &mut Metrics,
 ) {
     let n = settings.neighbourhood;
-    let rgb = to_rgb(exemplar);
+    let rgb = exemplar.to_rgb();
     let img = &plane.image;
     if img.width < n || img.height < n || rgb.width < n || rgb.height < n {
         metrics.result.insert(
@@ -257,25 +257,4 @@ fn plane_quality(
     metrics
         .result
         .insert("plane".into(), serde_json::to_value(q).unwrap_or_default());
-}
-
-/// The exemplar as RGB (grey replicated, alpha and extra channels dropped),
-/// as the plane image stores it.
-fn to_rgb(img: &Image) -> Image {
-    let ch = img.channels as usize;
-    if ch == 3 {
-        return img.clone();
-    }
-    let data = img
-        .data
-        .chunks_exact(ch.max(1))
-        .flat_map(|p| {
-            if ch >= 3 {
-                [p[0], p[1], p[2]]
-            } else {
-                [p[0]; 3]
-            }
-        })
-        .collect();
-    Image::from_data(img.width, img.height, 3, data).unwrap_or_else(|| img.clone())
 }
