@@ -57,12 +57,13 @@ use surfsynth::output::{write_bytes_atomic, write_png};
 use surfsynth::pipeline::{Pipeline, RunOptions};
 
 /// The methods of `configs/plane/<method>.toml` (a public interface).
-const METHODS: [&str; 7] = [
+const METHODS: [&str; 8] = [
     "jump_pixel",
     "jump_patch",
     "jump_surface",
     "lapped",
     "wei_levoy",
+    "coherent",
     "bangay_morkel",
     "bangay_morkel_graph_cut",
 ];

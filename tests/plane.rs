@@ -37,6 +37,11 @@ fn small(method: &str) -> Vec<String> {
             "stage.1.size=63.0",
             "stage.5.plane_size=[64,64]",
         ],
+        "coherent" => &[
+            "stage.1.resolution=[64,64]",
+            "stage.1.size=63.0",
+            "stage.4.plane_size=[64,64]",
+        ],
         // 6 x 6 vertices refined to ≥ 4096 (about one per pixel).
         _ => &[
             "input.mesh_options.resolution=[6,6]",
@@ -48,12 +53,13 @@ fn small(method: &str) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
 }
 
-const METHODS: [&str; 7] = [
+const METHODS: [&str; 8] = [
     "jump_pixel",
     "jump_patch",
     "jump_surface",
     "lapped",
     "wei_levoy",
+    "coherent",
     "bangay_morkel",
     "bangay_morkel_graph_cut",
 ];

@@ -3,6 +3,7 @@
 pub mod atlas;
 pub mod bake_triangles;
 pub mod channels;
+pub mod coherent;
 pub mod diffuse_orientation;
 pub mod flatten;
 pub mod frames;

@@ -242,6 +242,7 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<builtin_pyramid::BuiltinPyramid>(),
         entry::<relax_orientation::RelaxOrientation>(),
         entry::<wl_match::Match>(),
+        entry::<coherent::Coherent>(),
         entry::<tangent_field::TangentField>(),
         entry::<lapped_paste::LappedPaste>(),
         entry::<subdivide_sqrt2::SubdivideSqrt2>(),

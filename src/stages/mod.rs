@@ -3,6 +3,7 @@
 
 pub mod bake;
 pub mod builtin_pyramid;
+pub mod coherent;
 pub mod diffuse_orientation;
 pub mod displace;
 pub mod export;

@@ -517,6 +517,11 @@ fn validate(
             });
         }
     }
+    validate_levels(levels)
+}
+
+/// Every level has faces and one frame per vertex.
+pub(crate) fn validate_levels(levels: &[SynthesisLevel]) -> Result<(), WlError> {
     for (level, lv) in levels.iter().enumerate() {
         if lv.mesh.face_count() == 0 {
             return Err(WlError::NoFaces { level });

@@ -179,9 +179,9 @@ impl MatchSettings {
 /// The `match` stage.
 pub struct Match;
 
-type LevelQuery<'w, 's> =
+pub(crate) type LevelQuery<'w, 's> =
     Query<'w, 's, (Entity, &'static MeshLevel, Has<SourceMesh>), With<Geometry>>;
-type DataQuery<'w, 's> = Query<
+pub(crate) type DataQuery<'w, 's> = Query<
     'w,
     's,
     (
@@ -220,23 +220,13 @@ impl Stage for Match {
                 kind: Self::KIND.into(),
                 message,
             };
-            let entities = match pyramid_entities(levels.iter().map(|(e, l, s)| (e, *l, s))) {
-                Ok(e) => e,
-                Err(m) => {
-                    failure.0 = Some(fail(m));
-                    return;
-                }
-            };
-            let meshes: Vec<&PolyMesh> = entities
-                .iter()
-                .filter_map(|&e| data.get(e).ok().map(|d| &d.0.0))
-                .collect();
-            let given: Vec<Option<&[TangentFrame]>> = entities
-                .iter()
-                .map(|&e| data.get(e).ok().and_then(|d| d.1).map(|f| &f.0[..]))
-                .collect();
-            let frames = match complete_frames(&meshes, &given, &data, active.0) {
-                Ok(f) => f,
+            let PyramidInput {
+                entities,
+                meshes,
+                given,
+                frames,
+            } = match pyramid_input(&levels, &data, active.0) {
+                Ok(p) => p,
                 Err(m) => {
                     failure.0 = Some(fail(m));
                     return;
@@ -330,7 +320,41 @@ impl Stage for Match {
     }
 }
 
-fn frames_missing(given: &[Option<&[TangentFrame]>], l: usize) -> bool {
+/// The mesh pyramid a per-vertex synthesis stage works on: its level
+/// entities (finest first), their meshes, the frames they carry and the
+/// frames of every level (completed by [`complete_frames`]).
+pub(crate) struct PyramidInput<'a> {
+    pub entities: Vec<Entity>,
+    pub meshes: Vec<&'a PolyMesh>,
+    pub given: Vec<Option<&'a [TangentFrame]>>,
+    pub frames: Vec<Vec<TangentFrame>>,
+}
+
+/// [`PyramidInput`] of the world: the levels `pyramid_entities` picks.
+pub(crate) fn pyramid_input<'a>(
+    levels: &LevelQuery,
+    data: &'a DataQuery,
+    active: Entity,
+) -> Result<PyramidInput<'a>, String> {
+    let entities = pyramid_entities(levels.iter().map(|(e, l, s)| (e, *l, s)))?;
+    let meshes: Vec<&PolyMesh> = entities
+        .iter()
+        .filter_map(|&e| data.get(e).ok().map(|d| &d.0.0))
+        .collect();
+    let given: Vec<Option<&[TangentFrame]>> = entities
+        .iter()
+        .map(|&e| data.get(e).ok().and_then(|d| d.1).map(|f| &f.0[..]))
+        .collect();
+    let frames = complete_frames(&meshes, &given, data, active)?;
+    Ok(PyramidInput {
+        entities,
+        meshes,
+        given,
+        frames,
+    })
+}
+
+pub(crate) fn frames_missing(given: &[Option<&[TangentFrame]>], l: usize) -> bool {
     given[l].is_none()
 }
 

@@ -14,7 +14,7 @@
 //! depend on the thread count. Ties go to the lower exemplar index.
 
 mod exhaustive;
-mod pca_kdtree;
+pub(crate) mod pca_kdtree;
 mod tsvq;
 
 pub use exhaustive::Exhaustive;

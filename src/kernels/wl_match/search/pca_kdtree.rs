@@ -23,7 +23,7 @@ use super::{Match, NeighbourhoodSearch, rerank};
 use crate::kernels::wl_match::features::FeatureMatrix;
 
 /// Dimensions of the kd-tree (kept components, zero padded).
-const TREE_DIMS: usize = 8;
+pub(crate) const TREE_DIMS: usize = 8;
 /// Rows sampled for the PCA fit at most.
 const SAMPLE: usize = 4096;
 
@@ -70,7 +70,7 @@ impl PcaKdTree {
 
 /// Mean and the leading `components` right singular vectors of a centred
 /// sample (rows of the basis, each `dim` long).
-fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
+pub(crate) fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
     let (dim, rows) = (features.dim, features.rows());
     let mut basis = vec![0.0f32; components * dim];
     if rows == 0 || dim == 0 {
@@ -131,7 +131,12 @@ fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Vec<f32>, Vec
 }
 
 #[inline]
-fn project(row: &[f32], mean: &[f32], basis: &[f32], components: usize) -> [f32; TREE_DIMS] {
+pub(crate) fn project(
+    row: &[f32],
+    mean: &[f32],
+    basis: &[f32],
+    components: usize,
+) -> [f32; TREE_DIMS] {
     let dim = row.len();
     let mut out = [0.0f32; TREE_DIMS];
     for (c, o) in out.iter_mut().enumerate().take(components) {

@@ -1,0 +1,226 @@
+//! Appearance space (Lefebvre & Hoppe 2006 §3): every exemplar pixel of one
+//! synthesis level becomes a short vector, the leading principal components
+//! of its Gaussian-weighted `w × w` neighbourhood in the level's Gaussian
+//! stack image, so comparing two pixels' vectors compares whole
+//! neighbourhoods. Each pixel also keeps its `k` most similar pixels
+//! (k-coherence, Tong et al. 2002): the jumps a coherent synthesis may take
+//! when shifting a neighbour's source is not good enough.
+
+use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use rayon::prelude::*;
+use std::num::NonZeroUsize;
+
+use crate::image::{Image, sample::Wrap};
+use crate::kernels::wl_match::features::FeatureMatrix;
+use crate::kernels::wl_match::search::pca_kdtree::{TREE_DIMS, fit, project};
+
+/// Values of an appearance vector (zero padded beyond the kept components).
+pub const APPEARANCE_DIMS: usize = TREE_DIMS;
+
+/// Rows the principal components are fitted on at most.
+const FIT_SAMPLE: usize = 4096;
+
+/// One level's appearance vectors and k-coherence sets.
+#[derive(Clone, Debug)]
+pub struct AppearanceLevel {
+    /// Exemplar width in pixels.
+    pub width: u32,
+    /// Exemplar height in pixels.
+    pub height: u32,
+    /// Per pixel (row-major), its appearance vector.
+    pub vectors: Vec<[f32; APPEARANCE_DIMS]>,
+    /// Similar pixels kept per pixel.
+    pub k: usize,
+    /// Per pixel, `k` pixel indices of similar appearance at least
+    /// `min_separation` pixels away (fewer are padded with the pixel itself).
+    pub similar: Vec<u32>,
+}
+
+impl AppearanceLevel {
+    /// The similar pixels of pixel index `p`.
+    #[inline]
+    pub fn similar_of(&self, p: u32) -> &[u32] {
+        &self.similar[p as usize * self.k..(p as usize + 1) * self.k]
+    }
+}
+
+/// What [`appearance_level`] reads.
+#[derive(Clone, Copy, Debug)]
+pub struct AppearanceSpec {
+    /// Window points per side (odd).
+    pub window: u32,
+    /// Distance between window points, in exemplar pixels (the level's
+    /// vertex spacing in exemplar pixels).
+    pub spacing: f32,
+    /// Principal components kept, `1..=8`.
+    pub dims: usize,
+    /// Similar pixels per pixel.
+    pub k: usize,
+    /// Seed of the fitting sample.
+    pub seed: u64,
+    /// Exemplar addressing.
+    pub wrap: Wrap,
+}
+
+/// The neighbourhood of pixel `(x, y)`: `window²` bilinear samples of
+/// `image` spaced `spacing` apart, Gaussian weighted (σ = half the window),
+/// written into `out`.
+fn neighbourhood(image: &Image, x: u32, y: u32, spec: &AppearanceSpec, out: &mut [f32]) {
+    let ch = image.channels as usize;
+    let h = (spec.window / 2) as i32;
+    let sigma = (h.max(1)) as f32;
+    let mut i = 0;
+    for dy in -h..=h {
+        for dx in -h..=h {
+            let w = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp();
+            let px = x as f32 + 0.5 + dx as f32 * spec.spacing;
+            let py = y as f32 + 0.5 + dy as f32 * spec.spacing;
+            let o = &mut out[i * ch..(i + 1) * ch];
+            image.sample_bilinear(px, py, spec.wrap, o);
+            o.iter_mut().for_each(|v| *v *= w);
+            i += 1;
+        }
+    }
+}
+
+/// Appearance vectors and k-coherence sets of every pixel of `image` (the
+/// level's Gaussian stack image, exemplar size).
+pub fn appearance_level(image: &Image, spec: &AppearanceSpec) -> AppearanceLevel {
+    let (width, height) = (image.width, image.height);
+    let pixels = (width * height) as usize;
+    let window = spec.window.max(1) | 1;
+    let spec = AppearanceSpec { window, ..*spec };
+    let dim = (window * window) as usize * image.channels as usize;
+    // Fit on an evenly strided sample (deterministic, spread over the image).
+    let stride = pixels.div_ceil(FIT_SAMPLE).max(1);
+    let sample: Vec<u32> = (0..pixels as u32).step_by(stride).collect();
+    let mut data = vec![0.0f32; sample.len() * dim];
+    data.par_chunks_mut(dim)
+        .zip(&sample)
+        .for_each(|(row, &p)| neighbourhood(image, p % width, p / width, &spec, row));
+    let fitted = FeatureMatrix { dim, data };
+    let components = spec.dims.clamp(1, APPEARANCE_DIMS).min(dim);
+    let (mean, basis) = fit(&fitted, components, spec.seed);
+    let vectors: Vec<[f32; APPEARANCE_DIMS]> = (0..pixels as u32)
+        .into_par_iter()
+        .map_init(
+            || vec![0.0f32; dim],
+            |row, p| {
+                neighbourhood(image, p % width, p / width, &spec, row);
+                project(row, &mean, &basis, components)
+            },
+        )
+        .collect();
+    let k = spec.k;
+    let similar = similar_sets(&vectors, width, k, 2.0 * spec.spacing.max(1.0));
+    AppearanceLevel {
+        width,
+        height,
+        vectors,
+        k,
+        similar,
+    }
+}
+
+/// For every pixel, its `k` nearest pixels in appearance space that lie at
+/// least `min_separation` pixels away in the image (Chebyshev distance), so
+/// the set offers other places rather than the pixel's own surroundings.
+fn similar_sets(
+    vectors: &[[f32; APPEARANCE_DIMS]],
+    width: u32,
+    k: usize,
+    min_separation: f32,
+) -> Vec<u32> {
+    if k == 0 || vectors.is_empty() {
+        return Vec::new();
+    }
+    let Ok(tree) = ImmutableKdTree::<f32, APPEARANCE_DIMS>::new_from_slice(vectors) else {
+        return (0..vectors.len() as u32)
+            .flat_map(|p| std::iter::repeat_n(p, k))
+            .collect();
+    };
+    // Near pixels look alike; ask for enough to skip the pixel's own surroundings.
+    let ask = (4 * k + 8).min(vectors.len());
+    let ask = NonZeroUsize::new(ask).unwrap_or(NonZeroUsize::MIN);
+    let sep = min_separation.ceil() as i64;
+    let mut out = vec![0u32; vectors.len() * k];
+    out.par_chunks_mut(k).enumerate().for_each(|(p, slot)| {
+        let (px, py) = ((p as u32 % width) as i64, (p as u32 / width) as i64);
+        let found = tree
+            .query(&vectors[p])
+            .nearest_n::<SquaredEuclidean<f32>>(ask)
+            .execute();
+        let mut n = 0;
+        for c in found.iter() {
+            let q = c.item;
+            let (qx, qy) = ((q % width) as i64, (q / width) as i64);
+            if (qx - px).abs().max((qy - py).abs()) < sep {
+                continue;
+            }
+            slot[n] = q;
+            n += 1;
+            if n == k {
+                break;
+            }
+        }
+        slot[n..].fill(p as u32);
+    });
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn stripes(w: u32, h: u32) -> Image {
+        let data = (0..w * h)
+            .map(|i| {
+                if ((i % w) / 4).is_multiple_of(2) {
+                    0.1
+                } else {
+                    0.9
+                }
+            })
+            .collect();
+        Image::from_data(w, h, 1, data).expect("size matches")
+    }
+
+    fn spec() -> AppearanceSpec {
+        AppearanceSpec {
+            window: 5,
+            spacing: 1.0,
+            dims: 8,
+            k: 3,
+            seed: 1,
+            wrap: Wrap::Repeat,
+        }
+    }
+
+    #[test]
+    fn pixels_of_the_same_phase_have_the_same_appearance_and_are_similar() {
+        let img = stripes(32, 32);
+        let level = appearance_level(&img, &spec());
+        let d = |a: usize, b: usize| -> f32 {
+            level.vectors[a]
+                .iter()
+                .zip(&level.vectors[b])
+                .map(|(x, y)| (x - y) * (x - y))
+                .sum()
+        };
+        // Period 8 in x; rows are all alike.
+        assert!(d(0, 8) < 1e-6, "same phase differs: {}", d(0, 8));
+        assert!(d(0, 5 * 32) < 1e-6);
+        assert!(d(0, 2) > 0.1, "different phase looks alike: {}", d(0, 2));
+        // Every similar pixel has the same phase and lies away from the pixel.
+        for p in [0usize, 37, 500] {
+            for &q in level.similar_of(p as u32) {
+                assert_eq!((q % 32) % 8, (p as u32 % 32) % 8, "pixel {p} got {q}");
+                let (dx, dy) = (
+                    (q % 32) as i64 - (p % 32) as i64,
+                    (q / 32) as i64 - (p / 32) as i64,
+                );
+                assert!(dx.abs().max(dy.abs()) >= 2);
+            }
+        }
+    }
+}

@@ -1,0 +1,668 @@
+//! Coherent per-vertex synthesis of exemplar **coordinates** over a mesh
+//! pyramid: an extension beyond Wei & Levoy 2001 that carries the ideas of
+//! parallel controllable synthesis (Lefebvre & Hoppe 2005), appearance space
+//! (Lefebvre & Hoppe 2006) and k-coherence (Ashikhmin 2001, Tong et al.
+//! 2002) from the image grid onto arbitrary meshes.
+//!
+//! # The algorithm
+//!
+//! Every vertex holds a continuous coordinate `u(v)` in the exemplar
+//! (level-0 pixels, pixel centres at `i + 0.5`); its colour, and every other
+//! exemplar channel, is the exemplar pixel under it, so the result is always
+//! made of exemplar pixels (sharp) and the channels follow for free.
+//!
+//! The texture scale is `τ` exemplar pixels per world unit (by default one
+//! pixel per vertex spacing `d₀ = √(2·A₀)` of the finest level). A world
+//! displacement `d` seen from vertex `v` is the pixel offset
+//! `δ = frame_v.texel_offset(d, τ)`. Mesh level `L` has spacing `d_L`, i.e.
+//! `r_L = τ·d_L` exemplar pixels between neighbouring vertices; it compares
+//! neighbourhoods in the appearance space of Gaussian stack level
+//! `round(log₂ r_L)`, sampled with window spacing `r_L` ([`appearance`]).
+//!
+//! Levels run from the coarsest:
+//!
+//! 1. **Initialise.** The coarsest level takes random coordinates. A finer
+//!    level takes, per vertex `v`, the coordinate of the nearest vertex `p` of
+//!    the nearest coarser triangle, shifted by the offset of `v` from `p` in
+//!    `p`'s frame (`u(p) + frame_p.texel_offset(x_v − x_p, τ)`): coherent
+//!    patches upsample to coherent patches, whatever the level ratio (2 for
+//!    `retile` and `builtin_pyramid` levels, √2 for `subdivide_sqrt2`).
+//! 2. **Jitter.** Each coordinate moves by up to `jitter · r_L` pixels per
+//!    axis (seeded per level), which breaks up the copied patches.
+//! 3. **Correction passes.** Each vertex `v` compares, over its mesh
+//!    neighbours `w` (the `ring`-ring, at most [`MAX_NEIGHBOURS`] nearest),
+//!    `E(c) = Σ_w ‖A(c + δ_w) − A(u(w))‖²` for candidates `c`: its current
+//!    coordinate, each neighbour's coordinate shifted back by the
+//!    neighbour's offset (`u(w) − δ_w`, coherent), and the same for the `k`
+//!    exemplar pixels most similar to `u(w)` (k-coherent). It keeps the
+//!    cheapest, so its own term never grows. A pass visits the vertices in a
+//!    seeded random order, run as batches of non-conflicting vertices
+//!    ([`crate::kernels::wl_match::schedule`]): exactly the sequential
+//!    result, for any thread count.
+//!
+//! Coordinates of a clamped (non-tileable) exemplar stay inside it:
+//! candidates outside are skipped. Of a tileable one they wrap.
+
+pub mod appearance;
+
+use std::time::Instant;
+
+use glam::{Vec2, Vec3};
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+
+use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appearance_level};
+use super::flatten::{TriangleAdjacency, template_spacing};
+use super::frames::TangentFrame;
+use super::wl_match::parents::TriangleBvh;
+use super::wl_match::schedule::{dependency_batches, random_order};
+use super::wl_match::{SynthesisLevel, WlError, validate_levels};
+use crate::image::{Image, pyramid::gaussian_stack, sample::Wrap};
+use crate::mesh::Topology;
+use crate::progress::Progress;
+
+/// Neighbours compared per vertex at most (the nearest of its rings).
+pub const MAX_NEIGHBOURS: usize = 24;
+
+/// The nearest neighbours whose shifted coordinates (and similar pixels) are
+/// candidates; farther ones only take part in the comparison.
+pub const CANDIDATE_SOURCES: usize = 8;
+
+/// Settings of [`coherent_synthesis`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoherentSettings {
+    /// Correction passes per level, ≥ 0.
+    pub passes: u32,
+    /// Similar exemplar pixels per pixel (k-coherence); 0 = pure coherence.
+    pub k: usize,
+    /// Appearance-space components, `1..=8`.
+    pub dims: usize,
+    /// Appearance window points per side (odd, ≥ 1).
+    pub window: u32,
+    /// Mesh rings compared, `1..=3`.
+    pub ring: u32,
+    /// Jitter after upsampling, in level spacings (pixels `r_L`), ≥ 0.
+    pub jitter: f32,
+    /// Weight of the occurrence penalty that spreads the synthesis over the
+    /// whole exemplar, ≥ 0 (0 = plain nearest neighbourhood).
+    pub spread: f32,
+    /// Extra cost of a jump to a similar pixel over a coherent shift, in mean
+    /// neighbourhood errors, ≥ 0 (larger: larger coherent patches).
+    pub coherence: f32,
+    /// Exemplar pixels per world unit; 0 = one per finest vertex spacing.
+    pub scale: f32,
+    /// Seed of the random coordinates, jitter and orders.
+    pub seed: u64,
+    /// Exemplar addressing.
+    pub wrap: Wrap,
+}
+
+impl Default for CoherentSettings {
+    fn default() -> Self {
+        Self {
+            passes: 3,
+            k: 4,
+            dims: 8,
+            window: 5,
+            ring: 3,
+            jitter: 0.0,
+            spread: 0.5,
+            coherence: 2.0,
+            scale: 0.0,
+            seed: 0,
+            wrap: Wrap::Repeat,
+        }
+    }
+}
+
+/// What happened on one level.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct CoherentLevelReport {
+    /// Pyramid level (0 finest).
+    pub level: usize,
+    /// Vertices synthesised.
+    pub vertices: usize,
+    /// Vertex spacing `d_L = √(2A)` in world units.
+    pub spacing: f32,
+    /// Exemplar pixels between neighbouring vertices (`r_L = τ·d_L`).
+    pub texels_per_spacing: f32,
+    /// Gaussian stack level compared.
+    pub stack_level: usize,
+    /// Mean neighbours compared per vertex.
+    pub mean_neighbours: f32,
+    /// Mean per-neighbour appearance error `E(u(v)) / |N(v)|` over the
+    /// vertices: after initialisation and jitter, then after every pass.
+    pub energy: Vec<f32>,
+    /// Of the last pass's choices, the fractions that kept the coordinate,
+    /// took a neighbour's shifted coordinate, or a similar pixel's.
+    pub picks: [f32; 3],
+    /// Batches per pass.
+    pub batches: Vec<usize>,
+    /// Wall time of the level (appearance space included), seconds.
+    pub seconds: f64,
+}
+
+/// Coordinates of one level.
+#[derive(Clone, Debug, Default)]
+pub struct CoherentLevel {
+    /// Per vertex, its exemplar coordinate (level-0 pixels, continuous).
+    pub coords: Vec<Vec2>,
+    /// Statistics.
+    pub report: CoherentLevelReport,
+}
+
+/// Neighbours of every vertex of a level with their pixel offsets, CSR.
+struct Neighbourhoods {
+    start: Vec<u32>,
+    vertex: Vec<u32>,
+    offset: Vec<Vec2>,
+}
+
+impl Neighbourhoods {
+    #[inline]
+    fn of(&self, v: u32) -> (&[u32], &[Vec2]) {
+        let (a, b) = (
+            self.start[v as usize] as usize,
+            self.start[v as usize + 1] as usize,
+        );
+        (&self.vertex[a..b], &self.offset[a..b])
+    }
+}
+
+/// The `ring`-ring of every vertex (at most [`MAX_NEIGHBOURS`], nearest
+/// first, ties by id) with offsets in the vertex's frame at `scale`.
+fn neighbourhoods(
+    topology: &Topology,
+    positions: &[Vec3],
+    frames: &[TangentFrame],
+    ring: u32,
+    scale: f32,
+) -> Neighbourhoods {
+    let n = positions.len();
+    let lists: Vec<Vec<(u32, Vec2)>> = (0..n as u32)
+        .into_par_iter()
+        .map_init(Vec::new, |found: &mut Vec<u32>, v| {
+            found.clear();
+            found.push(v);
+            let mut frontier = 0;
+            for _ in 0..ring {
+                let end = found.len();
+                for i in frontier..end {
+                    for &w in topology.neighbours(found[i]) {
+                        if !found.contains(&w) {
+                            found.push(w);
+                        }
+                    }
+                }
+                frontier = end;
+            }
+            let x = positions[v as usize];
+            let mut near: Vec<(f32, u32)> = found[1..]
+                .iter()
+                .map(|&w| ((positions[w as usize] - x).length_squared(), w))
+                .collect();
+            near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            near.truncate(MAX_NEIGHBOURS);
+            let f = frames[v as usize];
+            near.into_iter()
+                .map(|(_, w)| (w, f.texel_offset(positions[w as usize] - x, scale)))
+                .collect()
+        })
+        .collect();
+    let mut start = Vec::with_capacity(n + 1);
+    start.push(0u32);
+    let mut vertex = Vec::new();
+    let mut offset = Vec::new();
+    for list in lists {
+        for (w, d) in list {
+            vertex.push(w);
+            offset.push(d);
+        }
+        start.push(vertex.len() as u32);
+    }
+    Neighbourhoods {
+        start,
+        vertex,
+        offset,
+    }
+}
+
+/// Exemplar addressing of coordinates: wrap a tileable exemplar, reject a
+/// coordinate outside a clamped one.
+#[derive(Clone, Copy)]
+struct Domain {
+    width: f32,
+    height: f32,
+    w: u32,
+    h: u32,
+    wrap: Wrap,
+}
+
+impl Domain {
+    /// The coordinate inside the exemplar, or `None` (clamped exemplar).
+    #[inline]
+    fn admit(&self, c: Vec2) -> Option<Vec2> {
+        match self.wrap {
+            Wrap::Repeat => Some(Vec2::new(
+                c.x.rem_euclid(self.width).min(self.width - 1e-3),
+                c.y.rem_euclid(self.height).min(self.height - 1e-3),
+            )),
+            Wrap::Clamp => {
+                (c.x >= 0.0 && c.y >= 0.0 && c.x < self.width && c.y < self.height).then_some(c)
+            }
+        }
+    }
+
+    /// The coordinate moved inside the exemplar (clamped or wrapped).
+    #[inline]
+    fn confine(&self, c: Vec2) -> Vec2 {
+        self.admit(c).unwrap_or_else(|| {
+            Vec2::new(
+                c.x.clamp(0.0, self.width - 1e-3),
+                c.y.clamp(0.0, self.height - 1e-3),
+            )
+        })
+    }
+
+    /// The pixel index under a coordinate anywhere (addressed by `wrap`).
+    #[inline]
+    fn pixel(&self, c: Vec2) -> u32 {
+        let ix = c.x.floor() as i64;
+        let iy = c.y.floor() as i64;
+        let (x, y) = match self.wrap {
+            Wrap::Repeat => (
+                ix.rem_euclid(self.w as i64) as u32,
+                iy.rem_euclid(self.h as i64) as u32,
+            ),
+            Wrap::Clamp => (
+                ix.clamp(0, self.w as i64 - 1) as u32,
+                iy.clamp(0, self.h as i64 - 1) as u32,
+            ),
+        };
+        y * self.w + x
+    }
+
+    /// The centre of pixel index `p`.
+    #[inline]
+    fn centre(&self, p: u32) -> Vec2 {
+        Vec2::new((p % self.w) as f32 + 0.5, (p / self.w) as f32 + 0.5)
+    }
+}
+
+#[inline]
+fn dist2(a: &[f32; APPEARANCE_DIMS], b: &[f32; APPEARANCE_DIMS]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+}
+
+/// The neighbourhood cost of coordinate `c` against `targets`, stopping once
+/// it exceeds `bound`.
+#[inline]
+fn cost(
+    app: &AppearanceLevel,
+    domain: &Domain,
+    c: Vec2,
+    offsets: &[Vec2],
+    targets: &[[f32; APPEARANCE_DIMS]],
+    bound: f32,
+) -> f32 {
+    let mut e = 0.0;
+    for (d, t) in offsets.iter().zip(targets) {
+        e += dist2(&app.vectors[domain.pixel(c + *d) as usize], t);
+        if e > bound {
+            break;
+        }
+    }
+    e
+}
+
+/// How often the level's coordinates use each cell of the exemplar: the
+/// occurrence penalty (an extension, as the occurrence maps of Kaspar et al.
+/// 2015) makes a candidate in an over-used cell cost more, so the synthesis
+/// spreads over all of the exemplar's content instead of settling on its
+/// easiest-to-match parts.
+struct Occupancy {
+    cell: f32,
+    cols: u32,
+    rows: u32,
+    counts: Vec<u32>,
+    /// Mean count per cell.
+    expected: f32,
+}
+
+impl Occupancy {
+    fn new(coords: &[Vec2], domain: &Domain, cell: f32) -> Self {
+        let cell = cell.max(1.0);
+        let cols = ((domain.width / cell).ceil() as u32).max(1);
+        let rows = ((domain.height / cell).ceil() as u32).max(1);
+        let mut occ = Self {
+            cell,
+            cols,
+            rows,
+            counts: vec![0; (cols * rows) as usize],
+            expected: (coords.len() as f32 / (cols * rows) as f32).max(1e-6),
+        };
+        for &c in coords {
+            let i = occ.index(c);
+            occ.counts[i] += 1;
+        }
+        occ
+    }
+
+    #[inline]
+    fn index(&self, c: Vec2) -> usize {
+        let x = ((c.x / self.cell) as u32).min(self.cols - 1);
+        let y = ((c.y / self.cell) as u32).min(self.rows - 1);
+        (y * self.cols + x) as usize
+    }
+
+    fn moved(&mut self, from: Vec2, to: Vec2) {
+        let (a, b) = (self.index(from), self.index(to));
+        if a != b {
+            self.counts[a] -= 1;
+            self.counts[b] += 1;
+        }
+    }
+
+    /// Uses of `c`'s cell by the other vertices, relative to the mean.
+    #[inline]
+    fn load(&self, c: Vec2, here: Vec2) -> f32 {
+        let i = self.index(c);
+        let own = u32::from(i == self.index(here));
+        self.counts[i].saturating_sub(own) as f32 / self.expected
+    }
+}
+
+/// What one batch of corrections reads besides the coordinates.
+struct Corrector<'a> {
+    nbs: &'a Neighbourhoods,
+    app: &'a AppearanceLevel,
+    domain: &'a Domain,
+    occ: &'a Occupancy,
+    /// Occurrence penalty per compared neighbour.
+    weight: f32,
+    /// Extra cost of a jump to a similar pixel per compared neighbour.
+    jump: f32,
+}
+
+/// The best coordinate for `v` given the current coordinates, and how it was
+/// found (0 kept, 1 coherent, 2 similar).
+fn correct(v: u32, coords: &[Vec2], k: &Corrector) -> (Vec2, u8) {
+    let Corrector {
+        nbs,
+        app,
+        domain,
+        occ,
+        weight,
+        jump,
+    } = *k;
+    let (ws, offsets) = nbs.of(v);
+    let here = coords[v as usize];
+    if ws.is_empty() {
+        return (here, 0);
+    }
+    let weight = weight * ws.len() as f32;
+    let jump = jump * ws.len() as f32;
+    let mut targets = [[0.0f32; APPEARANCE_DIMS]; MAX_NEIGHBOURS];
+    let mut sources = [0u32; MAX_NEIGHBOURS];
+    for (i, &w) in ws.iter().enumerate() {
+        let p = domain.pixel(coords[w as usize]);
+        sources[i] = p;
+        targets[i] = app.vectors[p as usize];
+    }
+    let targets = &targets[..ws.len()];
+    let penalty = |c: Vec2| weight * occ.load(c, here);
+    let mut best = (
+        cost(app, domain, here, offsets, targets, f32::INFINITY) + penalty(here),
+        here,
+        0u8,
+    );
+    let mut tried = [u32::MAX; CANDIDATE_SOURCES * 17 + 1];
+    let mut tried_len = 0;
+    tried[0] = domain.pixel(here);
+    tried_len += 1;
+    for (i, &w) in ws.iter().enumerate().take(CANDIDATE_SOURCES) {
+        let uw = coords[w as usize];
+        let frac = uw - domain.centre(sources[i]);
+        let similar = app.similar_of(sources[i]);
+        for (j, &s) in std::iter::once(&sources[i]).chain(similar).enumerate() {
+            let Some(c) = domain.admit(domain.centre(s) + frac - offsets[i]) else {
+                continue;
+            };
+            let p = domain.pixel(c);
+            if tried[..tried_len].contains(&p) {
+                continue;
+            }
+            if tried_len < tried.len() {
+                tried[tried_len] = p;
+                tried_len += 1;
+            }
+            let pen = penalty(c) + if j == 0 { 0.0 } else { jump };
+            if pen >= best.0 {
+                continue;
+            }
+            let e = cost(app, domain, c, offsets, targets, best.0 - pen) + pen;
+            if e < best.0 {
+                best = (e, c, if j == 0 { 1 } else { 2 });
+            }
+        }
+    }
+    (best.1, best.2)
+}
+
+/// Mean per-neighbour cost of the current coordinates.
+fn energy(coords: &[Vec2], nbs: &Neighbourhoods, app: &AppearanceLevel, domain: &Domain) -> f32 {
+    let (sum, count) = (0..coords.len() as u32)
+        .into_par_iter()
+        .map(|v| {
+            let (ws, offsets) = nbs.of(v);
+            let c = coords[v as usize];
+            ws.iter()
+                .zip(offsets)
+                .map(|(&w, d)| {
+                    let t = &app.vectors[domain.pixel(coords[w as usize]) as usize];
+                    dist2(&app.vectors[domain.pixel(c + *d) as usize], t) as f64
+                })
+                .fold((0.0f64, 0usize), |(s, n), e| (s + e, n + 1))
+        })
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    (sum / count.max(1) as f64) as f32
+}
+
+/// Per-level geometry.
+struct LevelGeometry {
+    adjacency: TriangleAdjacency,
+    spacing: f32,
+}
+
+/// Synthesises exemplar coordinates on every level of `levels` (finest
+/// first), coarse to fine. Returns one [`CoherentLevel`] per level.
+///
+/// # Errors
+/// [`WlError`] for no levels, an empty exemplar, a level without faces
+/// or with the wrong number of frames.
+pub fn coherent_synthesis(
+    levels: &[SynthesisLevel],
+    exemplar: &Image,
+    settings: &CoherentSettings,
+    progress: &Progress,
+) -> Result<Vec<CoherentLevel>, WlError> {
+    if levels.is_empty() {
+        return Err(WlError::NoLevels);
+    }
+    if exemplar.pixel_count() == 0 || exemplar.channels == 0 {
+        return Err(WlError::EmptyExemplar);
+    }
+    validate_levels(levels)?;
+    let geometry: Vec<LevelGeometry> = levels
+        .iter()
+        .map(|lv| {
+            let adjacency = TriangleAdjacency::new(lv.mesh);
+            let spacing = template_spacing(adjacency.mean_triangle_area(&lv.mesh.positions))
+                .max(f32::MIN_POSITIVE);
+            LevelGeometry { adjacency, spacing }
+        })
+        .collect();
+    let scale = if settings.scale > 0.0 {
+        settings.scale
+    } else {
+        1.0 / geometry[0].spacing
+    };
+    let (w, h) = (exemplar.width, exemplar.height);
+    let domain = Domain {
+        width: w as f32,
+        height: h as f32,
+        w,
+        h,
+        wrap: settings.wrap,
+    };
+    // Stack levels up to where the window spans the exemplar.
+    let max_stack = (w.min(h) as f32).log2().floor().max(0.0) as usize;
+    let stack_of = |r: f32| (r.max(1.0).log2().round() as usize).min(max_stack);
+    let ratios: Vec<f32> = geometry.iter().map(|g| g.spacing * scale).collect();
+    let stack_count = ratios.iter().map(|&r| stack_of(r)).max().unwrap_or(0) + 1;
+    let stack = gaussian_stack(exemplar, stack_count, settings.wrap);
+    let window_cap = w.min(h) as f32 / settings.window.max(1) as f32;
+
+    let mut out: Vec<CoherentLevel> = vec![CoherentLevel::default(); levels.len()];
+    for l in (0..levels.len()).rev() {
+        let _span = tracing::info_span!("coherent_level", level = l).entered();
+        let started = Instant::now();
+        let lv = &levels[l];
+        let positions = &lv.mesh.positions;
+        let nv = positions.len();
+        let ratio = ratios[l];
+        let stack_level = stack_of(ratio);
+        let app = appearance_level(
+            &stack[stack_level],
+            &AppearanceSpec {
+                window: settings.window,
+                spacing: ratio.clamp(1.0, window_cap.max(1.0)),
+                dims: settings.dims,
+                k: settings.k,
+                seed: settings.seed ^ l as u64,
+                wrap: settings.wrap,
+            },
+        );
+        let topology = Topology::build(lv.mesh);
+        let nbs = neighbourhoods(&topology, positions, lv.frames, settings.ring.max(1), scale);
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(crate::stages::world::mix(
+            settings.seed,
+            l as u64,
+            1,
+        ));
+        // 1. Initialise.
+        let mut coords: Vec<Vec2> = if l + 1 == levels.len() {
+            (0..nv)
+                .map(|_| {
+                    Vec2::new(
+                        rng.random::<f32>() * domain.width,
+                        rng.random::<f32>() * domain.height,
+                    )
+                })
+                .map(|c| domain.confine(c))
+                .collect()
+        } else {
+            let coarse = &levels[l + 1];
+            let cgeo = &geometry[l + 1];
+            let parent_coords = &out[l + 1].coords;
+            let bvh = TriangleBvh::new(&cgeo.adjacency, &coarse.mesh.positions);
+            positions
+                .par_iter()
+                .map(|&x| {
+                    let Some(hit) = bvh.nearest_point(x) else {
+                        return Vec2::splat(0.5);
+                    };
+                    let tri = cgeo.adjacency.tris[hit.tri as usize];
+                    let k = (0..3)
+                        .max_by(|&a, &b| hit.weights[a].total_cmp(&hit.weights[b]).then(b.cmp(&a)))
+                        .unwrap_or(0);
+                    let p = tri[k] as usize;
+                    let d = x - coarse.mesh.positions[p];
+                    domain.confine(parent_coords[p] + coarse.frames[p].texel_offset(d, scale))
+                })
+                .collect()
+        };
+        // 2. Jitter.
+        if settings.jitter > 0.0 && l + 1 < levels.len() {
+            let amp = settings.jitter * ratio;
+            for c in coords.iter_mut() {
+                let j = Vec2::new(
+                    rng.random::<f32>() * 2.0 - 1.0,
+                    rng.random::<f32>() * 2.0 - 1.0,
+                );
+                *c = domain.confine(*c + j * amp);
+            }
+        }
+        // 3. Correction passes.
+        let mut report = CoherentLevelReport {
+            level: l,
+            vertices: nv,
+            spacing: geometry[l].spacing,
+            texels_per_spacing: ratio,
+            stack_level,
+            mean_neighbours: nbs.vertex.len() as f32 / nv.max(1) as f32,
+            ..Default::default()
+        };
+        report.energy.push(energy(&coords, &nbs, &app, &domain));
+        let cell = (4.0 * ratio).min(w.min(h) as f32 / 2.0);
+        let mut occ = Occupancy::new(&coords, &domain, cell);
+        for pass in 0..settings.passes {
+            let mean_error = report.energy.last().copied().unwrap_or(0.0);
+            let (weight, jump) = (
+                settings.spread * mean_error,
+                settings.coherence * mean_error,
+            );
+            let order = random_order(
+                nv,
+                crate::stages::world::mix(settings.seed, l as u64, 2 + pass as u64),
+            );
+            let batches = dependency_batches(&order, |v| nbs.of(v).0);
+            report.batches.push(batches.len());
+            let mut picks = [0usize; 3];
+            for batch in &batches {
+                let chosen: Vec<(Vec2, u8)> = batch
+                    .par_iter()
+                    .with_min_len(256)
+                    .map(|&v| {
+                        let k = Corrector {
+                            nbs: &nbs,
+                            app: &app,
+                            domain: &domain,
+                            occ: &occ,
+                            weight,
+                            jump,
+                        };
+                        correct(v, &coords, &k)
+                    })
+                    .collect();
+                for (&v, (c, how)) in batch.iter().zip(chosen) {
+                    occ.moved(coords[v as usize], c);
+                    coords[v as usize] = c;
+                    picks[how as usize] += 1;
+                }
+            }
+            report.energy.push(energy(&coords, &nbs, &app, &domain));
+            let total = nv.max(1) as f32;
+            report.picks = picks.map(|p| p as f32 / total);
+            progress.inc(1);
+        }
+        report.seconds = started.elapsed().as_secs_f64();
+        out[l] = CoherentLevel { coords, report };
+    }
+    Ok(out)
+}
+
+/// The exemplar pixel centre under each coordinate (what the colours copy).
+pub fn pixel_centres(coords: &[Vec2], width: u32, height: u32, wrap: Wrap) -> Vec<Vec2> {
+    let domain = Domain {
+        width: width as f32,
+        height: height as f32,
+        w: width,
+        h: height,
+        wrap,
+    };
+    coords
+        .iter()
+        .map(|&c| domain.centre(domain.pixel(c)))
+        .collect()
+}

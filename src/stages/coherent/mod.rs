@@ -1,0 +1,245 @@
+//! Stage `coherent`: coherent per-vertex synthesis of exemplar coordinates
+//! over the mesh pyramid (an extension; [`crate::kernels::coherent`]):
+//! upsampled through the tangent frames, jittered, and corrected by
+//! k-coherent candidates compared in appearance space. Colours are the
+//! exemplar pixels at the coordinates, so every exemplar channel follows.
+//!
+//! Works on whatever mesh levels exist, as `match` does: the non-source
+//! `MeshLevel` entities (`retile`, `builtin_pyramid` or `subdivide_sqrt2`),
+//! or the source mesh alone as a one-level pyramid. Level 0 becomes the
+//! active mesh.
+
+use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::coherent::{CoherentSettings, coherent_synthesis, pixel_centres};
+use crate::kernels::wl_match::SynthesisLevel;
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::progress::Progress;
+use crate::stages::wl_match::{DataQuery, LevelQuery, PyramidInput, frames_missing, pyramid_input};
+use crate::stages::world::*;
+use bevy_ecs::prelude::*;
+use bevy_ecs::schedule::ScheduleConfigs;
+use bevy_ecs::system::ScheduleSystem;
+use serde::{Deserialize, Serialize};
+
+/// Settings of `coherent`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CoherentStageSettings {
+    /// Correction passes per level.
+    pub passes: u32,
+    /// Similar exemplar pixels per pixel (k-coherence).
+    pub k: u32,
+    /// Appearance-space components.
+    pub appearance_dims: u32,
+    /// Appearance window points per side.
+    pub window: u32,
+    /// Mesh rings compared.
+    pub ring: u32,
+    /// Jitter after upsampling, in vertex spacings.
+    pub jitter: f32,
+    /// Weight of the occurrence penalty.
+    pub spread: f32,
+    /// Extra cost of a jump over a coherent shift.
+    pub coherence: f32,
+    /// Exemplar pixels per world unit; 0 = one per finest vertex spacing.
+    pub scale: f32,
+}
+
+impl Default for CoherentStageSettings {
+    fn default() -> Self {
+        let k = CoherentSettings::default();
+        Self {
+            passes: k.passes,
+            k: k.k as u32,
+            appearance_dims: k.dims as u32,
+            window: k.window,
+            ring: k.ring,
+            jitter: k.jitter,
+            spread: k.spread,
+            coherence: k.coherence,
+            scale: k.scale,
+        }
+    }
+}
+
+impl StageSettings for CoherentStageSettings {
+    const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "passes",
+            unit: "passes per level",
+            range: ParamRange::Int(0, 16),
+            doc: "correction passes per mesh level, each in a seeded random vertex order",
+        },
+        ParamDoc {
+            name: "k",
+            unit: "exemplar pixels",
+            range: ParamRange::Int(0, 16),
+            doc: "similar exemplar pixels per pixel offered as candidates (k-coherence); 0 = shifted neighbour coordinates only",
+        },
+        ParamDoc {
+            name: "appearance_dims",
+            unit: "components",
+            range: ParamRange::Int(1, 8),
+            doc: "principal components of the exemplar neighbourhoods compared (appearance space)",
+        },
+        ParamDoc {
+            name: "window",
+            unit: "points per side",
+            range: ParamRange::Int(1, 15),
+            doc: "odd window of the appearance vectors, its points one vertex spacing apart",
+        },
+        ParamDoc {
+            name: "ring",
+            unit: "mesh rings",
+            range: ParamRange::Int(1, 3),
+            doc: "mesh neighbours compared per vertex: its 1-, 2- or 3-ring (the nearest 24 at most)",
+        },
+        ParamDoc {
+            name: "jitter",
+            unit: "vertex spacings",
+            range: ParamRange::Float(0.0, 4.0),
+            doc: "random shift of each upsampled coordinate per axis, breaking up copied patches",
+        },
+        ParamDoc {
+            name: "spread",
+            unit: "× mean neighbourhood error",
+            range: ParamRange::Float(0.0, 100.0),
+            doc: "occurrence penalty: a candidate in an exemplar cell (4 vertex spacings wide) used n times more than average costs spread·n mean errors more, so all of the exemplar is used; 0 = off",
+        },
+        ParamDoc {
+            name: "coherence",
+            unit: "× mean neighbourhood error",
+            range: ParamRange::Float(0.0, 100.0),
+            doc: "extra cost of jumping to a similar exemplar pixel rather than shifting a neighbour's coordinate: larger gives larger coherent patches (Ashikhmin's coherence bias)",
+        },
+        ParamDoc {
+            name: "scale",
+            unit: "exemplar pixels per world unit",
+            range: ParamRange::Float(0.0, 1e9),
+            doc: "texture scale; 0 = one exemplar pixel per vertex spacing √(2·mean triangle area) of the finest level",
+        },
+    ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if self.window.is_multiple_of(2) {
+            return Err((
+                "window".into(),
+                format!(
+                    "{} is even; the window needs a centre point (1, 3, 5, …)",
+                    self.window
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The `coherent` stage.
+pub struct Coherent;
+
+impl Stage for Coherent {
+    const KIND: &'static str = "coherent";
+    const SUMMARY: &'static str = "coherent synthesis of exemplar coordinates: upsampled, jittered, corrected by k-coherent candidates in appearance space";
+    const PAPER: &'static str =
+        "extension: Lefebvre & Hoppe 2005/2006, Tong et al. 2002 on the Wei & Levoy mesh pyramid";
+    type Settings = CoherentStageSettings;
+
+    fn requires(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Mesh, Datum::Frames]
+    }
+    fn produces(_: &Self::Settings) -> Vec<Datum> {
+        vec![Datum::Colours]
+    }
+    fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
+        (move |mut commands: Commands,
+               seed: Res<RunSeed>,
+               exemplar: Res<Exemplar>,
+               active: Res<ActiveMesh>,
+               mut spacing_res: ResMut<TexelSpacing>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
+               levels: LevelQuery,
+               data: DataQuery| {
+            let fail = |message: String| PipelineError::Stage {
+                index: ctx.index + 1,
+                kind: Self::KIND.into(),
+                message,
+            };
+            let PyramidInput {
+                entities,
+                meshes,
+                given,
+                frames,
+            } = match pyramid_input(&levels, &data, active.0) {
+                Ok(p) => p,
+                Err(m) => {
+                    failure.0 = Some(fail(m));
+                    return;
+                }
+            };
+            let inputs: Vec<SynthesisLevel> = meshes
+                .iter()
+                .zip(&frames)
+                .map(|(m, f)| SynthesisLevel { mesh: m, frames: f })
+                .collect();
+            let kernel = CoherentSettings {
+                passes: settings.passes,
+                k: settings.k as usize,
+                dims: settings.appearance_dims as usize,
+                window: settings.window,
+                ring: settings.ring,
+                jitter: settings.jitter,
+                spread: settings.spread,
+                coherence: settings.coherence,
+                scale: settings.scale,
+                seed: seed.derive(ctx.index, 0),
+                wrap: exemplar.wrap,
+            };
+            let progress = Progress::new(
+                (inputs.len() as u64 * settings.passes as u64).max(1),
+                Self::KIND,
+            );
+            let results = match coherent_synthesis(&inputs, &exemplar.image, &kernel, &progress) {
+                Ok(r) => r,
+                Err(e) => {
+                    failure.0 = Some(fail(e.to_string()));
+                    return;
+                }
+            };
+            progress.finish();
+            let reports: Vec<_> = results.iter().map(|r| r.report.clone()).collect();
+            metrics.record(ctx.index, "levels", &reports);
+            if let Some(r) = reports.first() {
+                let texels_per_unit = r.texels_per_spacing / r.spacing;
+                metrics.record(ctx.index, "texels_per_world_unit", texels_per_unit);
+                metrics.record(
+                    ctx.index,
+                    "energy_finest",
+                    r.energy.last().copied().unwrap_or(0.0),
+                );
+                spacing_res.0 = 1.0 / texels_per_unit;
+            }
+            let img = &exemplar.image;
+            let ch = img.channels as usize;
+            for (l, (e, r)) in entities.iter().zip(results).enumerate() {
+                let texels = pixel_centres(&r.coords, img.width, img.height, exemplar.wrap);
+                let mut values = Vec::with_capacity(texels.len() * ch);
+                for t in &texels {
+                    values.extend_from_slice(img.pixel(t.x as u32, t.y as u32));
+                }
+                commands.entity(*e).insert((
+                    VertexColours {
+                        channels: ch,
+                        values,
+                    },
+                    SourceTexels(texels),
+                ));
+                if frames_missing(&given, l) {
+                    commands.entity(*e).insert(Frames(frames[l].clone()));
+                }
+            }
+            commands.insert_resource(ActiveMesh(entities[0]));
+        })
+        .into_configs()
+    }
+}

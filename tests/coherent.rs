@@ -1,0 +1,255 @@
+//! The coherent coordinate synthesis (issue 12, `kernels::coherent`, stage
+//! `coherent`): at the peer's quality on the planar benchmark, colours that
+//! are exactly the exemplar at the recorded coordinates, determinism across
+//! thread counts, falling energy, and any mesh pyramid (builtin planes,
+//! √2 levels, meshes with boundaries and several components).
+
+mod common;
+
+use glam::{Vec2, Vec3};
+use surfsynth::image::sample::Wrap;
+use surfsynth::image::{Image, load_image};
+use surfsynth::kernels::coherent::{
+    CoherentLevel, CoherentSettings, coherent_synthesis, pixel_centres,
+};
+use surfsynth::kernels::frames::TangentFrame;
+use surfsynth::kernels::wl_match::SynthesisLevel;
+use surfsynth::mesh::PolyMesh;
+use surfsynth::progress::Progress;
+use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
+
+/// Frames with texture up = +y (s = +x on a plane facing +z).
+fn frames_up_y(mesh: &PolyMesh) -> Vec<TangentFrame> {
+    mesh.vertex_normals()
+        .iter()
+        .map(|&n| TangentFrame::from_up(n, Vec3::Y))
+        .collect()
+}
+
+/// The builtin plane pyramid of the planar configs at `side`² vertices, one
+/// world unit apart, and 4 levels.
+fn plane_pyramid(side: u32) -> Vec<PolyMesh> {
+    builtin_pyramid(&BuiltinPyramidSettings {
+        mesh: "plane".into(),
+        levels: 4,
+        subdivisions: 0,
+        resolution: [side, side],
+        size: (side - 1) as f32,
+        ..Default::default()
+    })
+    .expect("a valid builtin pyramid")
+}
+
+fn synthesise(
+    meshes: &[PolyMesh],
+    exemplar: &Image,
+    settings: &CoherentSettings,
+) -> Vec<CoherentLevel> {
+    let frames: Vec<Vec<TangentFrame>> = meshes.iter().map(frames_up_y).collect();
+    let levels: Vec<SynthesisLevel> = meshes
+        .iter()
+        .zip(&frames)
+        .map(|(mesh, frames)| SynthesisLevel { mesh, frames })
+        .collect();
+    coherent_synthesis(&levels, exemplar, settings, &Progress::hidden()).expect("synthesis runs")
+}
+
+fn texture(name: &str) -> Image {
+    load_image(&common::shared(&format!("textures/{name}.png")))
+        .unwrap_or_else(|e| panic!("shared texture {name}: {e}"))
+}
+
+/// The colours the stage writes: the exemplar pixel under each coordinate.
+fn colours_of(coords: &[Vec2], exemplar: &Image, wrap: Wrap) -> (Vec<f32>, Vec<Vec2>) {
+    let texels = pixel_centres(coords, exemplar.width, exemplar.height, wrap);
+    let mut values = Vec::new();
+    for t in &texels {
+        values.extend_from_slice(exemplar.pixel(t.x as u32, t.y as u32));
+    }
+    (values, texels)
+}
+
+fn settings(seed: u64) -> CoherentSettings {
+    CoherentSettings {
+        seed,
+        wrap: Wrap::Clamp,
+        ..Default::default()
+    }
+}
+
+/// Issue 12's gate (`common::gates::AT_PEER`) on every shared texture: a
+/// 256² result from the whole 128² exemplar (the planar benchmark's size) on the planar pyramid (one
+/// vertex per exemplar pixel), against the peer's 256² synthesis of the same
+/// exemplar. The planar benchmark (`cargo bench --bench quality`) runs the
+/// same method through `configs/plane/coherent.toml`. (At 160² the stones
+/// histogram distance varies with the seed between 0.019 and 0.038 against
+/// the peer's 0.0084, around its bound of 0.027: the exemplar's dark top-left
+/// corner is under-used when the result is barely larger than the exemplar.)
+#[test]
+fn planar_synthesis_is_at_the_peers_quality_on_every_shared_texture() {
+    const SIDE: u32 = 256;
+    let meshes = plane_pyramid(SIDE);
+    let mut results = Vec::new();
+    for name in ["brick", "grass", "planks", "stones", "water"] {
+        let exemplar = texture(name);
+        let r = synthesise(&meshes, &exemplar, &settings(1));
+        let (values, texels) = colours_of(&r[0].coords, &exemplar, Wrap::Clamp);
+        let sources: Vec<[f32; 2]> = texels.iter().map(|t| [t.x, t.y]).collect();
+        let (img, map) = common::gates::grid_image(
+            &values,
+            exemplar.channels as usize,
+            SIDE,
+            SIDE,
+            Some(&sources),
+        );
+        let ours = common::gates::quality_of(&img, map.as_ref(), &exemplar);
+        let peer = common::gates::peer_quality(&exemplar, SIDE, SIDE);
+        results.push((name.to_string(), ours, peer));
+    }
+    common::gates::assert_all_near_peer(&results, &common::gates::AT_PEER);
+}
+
+/// Every vertex's colour is the exemplar pixel at its recorded coordinate,
+/// on every level, so normal, roughness and height maps follow exactly.
+#[test]
+fn colours_are_the_exemplar_at_the_recorded_coordinates() {
+    let meshes = plane_pyramid(48);
+    let exemplar = texture("stones");
+    let r = synthesise(&meshes, &exemplar, &settings(3));
+    assert_eq!(r.len(), meshes.len());
+    for (level, (lv, mesh)) in r.iter().zip(&meshes).enumerate() {
+        assert_eq!(lv.coords.len(), mesh.vertex_count(), "level {level}");
+        let (values, texels) = colours_of(&lv.coords, &exemplar, Wrap::Clamp);
+        for (v, (t, c)) in texels.iter().zip(&lv.coords).enumerate() {
+            // Inside the clamped exemplar, at the pixel under the coordinate.
+            assert!(
+                c.x >= 0.0 && c.y >= 0.0 && c.x < 128.0 && c.y < 128.0,
+                "level {level} vertex {v}: {c}"
+            );
+            assert_eq!((t.x - 0.5, t.y - 0.5), (c.x.floor(), c.y.floor()));
+            let px = exemplar.pixel(t.x as u32, t.y as u32);
+            assert_eq!(&values[v * 3..v * 3 + 3], px);
+        }
+    }
+}
+
+/// Same seed, same coordinates, bit for bit, at 1 and 2 threads.
+#[test]
+fn synthesis_is_deterministic_at_one_and_two_threads() {
+    let meshes = plane_pyramid(40);
+    let exemplar = texture("brick");
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool")
+            .install(|| synthesise(&meshes, &exemplar, &settings(11)))
+    };
+    let (a, b) = (run(1), run(2));
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!(x.coords, y.coords, "level {}", x.report.level);
+    }
+    // A different seed gives a different result.
+    let c = synthesise(&meshes, &exemplar, &settings(12));
+    assert_ne!(a[0].coords, c[0].coords);
+}
+
+/// The correction passes lower the level's appearance-space energy: every
+/// pass ends at or below where it started (each vertex only takes a
+/// candidate cheaper than its current coordinate, up to the occurrence
+/// penalty, which is off here), and the finest level ends well below its
+/// upsampled start.
+#[test]
+fn correction_passes_lower_the_energy() {
+    let meshes = plane_pyramid(64);
+    let exemplar = texture("water");
+    let plain = CoherentSettings {
+        spread: 0.0,
+        ..settings(5)
+    };
+    let r = synthesise(&meshes, &exemplar, &plain);
+    for lv in &r {
+        let e = &lv.report.energy;
+        assert_eq!(e.len(), plain.passes as usize + 1);
+        for w in e.windows(2) {
+            assert!(
+                w[1] <= w[0] * 1.02,
+                "level {}: energy rose {e:?}",
+                lv.report.level
+            );
+        }
+    }
+    let e0 = &r[0].report.energy;
+    assert!(e0[e0.len() - 1] < 0.8 * e0[0], "finest level: {e0:?}");
+}
+
+/// A mesh with a boundary and two components (two separate planes side by
+/// side) and a √2 hierarchy (`subdivide_sqrt2` levels, shared vertex ids)
+/// both synthesise: every vertex gets a coordinate inside the exemplar, and
+/// the result is coherent (neighbouring vertices mostly keep their exemplar
+/// offsets) on both components.
+#[test]
+fn works_on_several_components_and_on_sqrt2_levels() {
+    use surfsynth::kernels::sqrt2::sqrt2_subdivide;
+    let exemplar = texture("stones");
+    // Two 24² planes, the second shifted by 40 units in x.
+    let base = plane_pyramid(24);
+    let two: Vec<PolyMesh> = base
+        .iter()
+        .map(|m| {
+            let n = m.vertex_count() as u32;
+            let mut positions = m.positions.clone();
+            positions.extend(m.positions.iter().map(|p| *p + Vec3::new(40.0, 0.0, 0.0)));
+            let tris: Vec<[u32; 3]> = m
+                .triangulated()
+                .faces()
+                .map(|f| [f[0], f[1], f[2]])
+                .collect();
+            let both: Vec<[u32; 3]> = tris
+                .iter()
+                .copied()
+                .chain(tris.iter().map(|t| t.map(|v| v + n)))
+                .collect();
+            PolyMesh::from_triangles(positions, &both)
+        })
+        .collect();
+    let r = synthesise(&two, &exemplar, &settings(2));
+    let coherent = |mesh: &PolyMesh, lv: &CoherentLevel| {
+        let (coords, scale) = (&lv.coords, lv.report.texels_per_spacing / lv.report.spacing);
+        let topo = surfsynth::mesh::Topology::build(mesh);
+        let frames = frames_up_y(mesh);
+        let (mut kept, mut total) = (0usize, 0usize);
+        for v in 0..mesh.vertex_count() as u32 {
+            for &w in topo.neighbours(v) {
+                let d = frames[v as usize].texel_offset(
+                    mesh.positions[w as usize] - mesh.positions[v as usize],
+                    scale,
+                );
+                total += 1;
+                if (coords[w as usize] - coords[v as usize] - d).length() < 0.5 {
+                    kept += 1;
+                }
+            }
+        }
+        kept as f32 / total as f32
+    };
+    let c = coherent(&two[0], &r[0]);
+    assert!(c > 0.5, "two components: coherent fraction {c}");
+    let n = two[0].vertex_count() / 2;
+    for half in [&r[0].coords[..n], &r[0].coords[n..]] {
+        assert!(
+            half.iter()
+                .all(|p| p.x >= 0.0 && p.x < 128.0 && p.y >= 0.0 && p.y < 128.0)
+        );
+    }
+
+    // √2 levels of a coarse plane.
+    let mut meshes = vec![plane_pyramid(12)[0].clone()];
+    for _ in 0..5 {
+        let finer = sqrt2_subdivide(&meshes[0]).mesh;
+        meshes.insert(0, finer);
+    }
+    let r = synthesise(&meshes, &exemplar, &settings(4));
+    let c = coherent(&meshes[0], &r[0]);
+    assert!(c > 0.3, "√2 finest level: coherent fraction {c}");
+}
