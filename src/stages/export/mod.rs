@@ -229,7 +229,7 @@ impl Stage for Export {
                         uvs: &p.4.0,
                     })
                     .collect();
-                let background = plane::to_rgb(&ex.mean());
+                let background = crate::image::pixel_rgb(&ex.mean());
                 let signal = match (uvs, colours) {
                     (Some(u), _) => Some(Ok(plane::PlaneSignal::Uvs {
                         uvs: &u.0,
