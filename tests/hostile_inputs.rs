@@ -301,6 +301,25 @@ fn a_256_corner_face_exports_to_ply() {
     );
 }
 
+/// The catalogue's 10⁶-corner face: triangulated on load in linear time
+/// (the full pipeline runs on the 10⁵-corner face below).
+#[test]
+fn a_million_corner_face_is_triangulated_on_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("million.obj");
+    std::fs::write(&mesh, ngon_obj(1_000_000)).unwrap();
+    let started = std::time::Instant::now();
+    let (m, report) = load_mesh(&mesh, &LoadOptions::default()).unwrap();
+    assert_eq!((m.vertex_count(), m.face_count()), (1_000_000, 999_998));
+    assert!(m.is_triangle_mesh());
+    assert_eq!(report.triangulated_faces, 1);
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(60),
+        "loading took {:?}",
+        started.elapsed()
+    );
+}
+
 #[test]
 fn a_100000_corner_face_loads_and_jump_surface_finishes() {
     let dir = tempfile::tempdir().unwrap();
