@@ -142,6 +142,68 @@ height = 32768
     );
 }
 
+/// The other sizes a stage takes with legal maxima far over the budget:
+/// refused at validation naming the stage and the key, not aborted mid-run.
+#[test]
+fn other_stage_sizes_over_the_memory_budget_are_refused_at_validation() {
+    let pyramid = BASE.replace(
+        "[[stage]]\nkind = \"orientation\"",
+        "[[stage]]\nkind = \"builtin_pyramid\"\nmesh = \"plane\"\nresolution = [4096, 4096]\n\n[[stage]]\nkind = \"orientation\"",
+    );
+    common::expect_refused(
+        &pyramid,
+        &[],
+        &[
+            "stage 1 (builtin_pyramid) resolution",
+            "4096x4096",
+            "budget",
+        ],
+    );
+    for (kind, line, needles) in [
+        (
+            "retile",
+            "vertices = 50000000",
+            ["stage 1 (retile) vertices", "50000000 vertices", "budget"],
+        ),
+        (
+            "subdivide_sqrt2",
+            "target_vertices = 67108864",
+            [
+                "stage 1 (subdivide_sqrt2) target_vertices",
+                "67108864 vertices",
+                "budget",
+            ],
+        ),
+    ] {
+        let config = BASE.replace(
+            "[[stage]]\nkind = \"orientation\"",
+            &format!("[[stage]]\nkind = \"{kind}\"\n{line}\n\n[[stage]]\nkind = \"orientation\""),
+        );
+        common::expect_refused(&config, &[], &needles);
+    }
+    // A retile by edge length depends on the mesh and is not estimated.
+    let by_edge = BASE.replace(
+        "[[stage]]\nkind = \"orientation\"",
+        "[[stage]]\nkind = \"retile\"\nvertices = 50000000\nedge_length = 0.5\nlevels = 1\n\n[[stage]]\nkind = \"orientation\"",
+    );
+    let source = surfsynth::config::ConfigSource::from_text("by_edge.toml", &by_edge);
+    surfsynth::pipeline::Pipeline::from_source(source).expect("validates");
+    common::expect_refused(
+        BASE,
+        &[
+            "--set",
+            "input.mesh=builtin:plane",
+            "--set",
+            "input.mesh_options={resolution = [8, 8]}",
+            "--set",
+            "stage.3.formats=[\"plane\"]",
+            "--set",
+            "stage.3.plane_size=[16384, 16384]",
+        ],
+        &["stage 3 (export) plane_size", "16384x16384", "budget"],
+    );
+}
+
 /// The same mesh in every text format (a unit square as two triangles).
 const TEXT_MESHES: &[(&str, &str)] = &[
     (
@@ -236,6 +298,25 @@ fn a_256_corner_face_exports_to_ply() {
         back.face_count(),
         254,
         "the 256-gon is triangulated on load"
+    );
+}
+
+/// The catalogue's 10⁶-corner face: triangulated on load in linear time
+/// (the full pipeline runs on the 10⁵-corner face below).
+#[test]
+fn a_million_corner_face_is_triangulated_on_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("million.obj");
+    std::fs::write(&mesh, ngon_obj(1_000_000)).unwrap();
+    let started = std::time::Instant::now();
+    let (m, report) = load_mesh(&mesh, &LoadOptions::default()).unwrap();
+    assert_eq!((m.vertex_count(), m.face_count()), (1_000_000, 999_998));
+    assert!(m.is_triangle_mesh());
+    assert_eq!(report.triangulated_faces, 1);
+    assert!(
+        started.elapsed() < std::time::Duration::from_secs(60),
+        "loading took {:?}",
+        started.elapsed()
     );
 }
 

@@ -1,6 +1,7 @@
 //! Issue 16, logs and library use: no colour codes in piped logs, one log
 //! line per stage start and end, trace spans named after the stage kind,
-//! floats printed shortest in `stages` and the resolved config, and the
+//! floats printed shortest in `stages`, the resolved config and
+//! `metrics.json`, and the
 //! library example and the Python driver running as documented.
 
 use std::path::Path;
@@ -184,6 +185,51 @@ fn stages_prints_floats_shortest() {
         "pca_variance           = 0.97 [fraction]",
     ] {
         assert!(text.contains(line), "`stages` lacks {line:?}");
+    }
+}
+
+/// Every float under `value`, with its path.
+fn floats(value: &serde_json::Value, path: &str, out: &mut Vec<(String, f64)>) {
+    match value {
+        serde_json::Value::Number(n) if n.is_f64() => out.push((path.into(), n.as_f64().unwrap())),
+        serde_json::Value::Array(a) => a
+            .iter()
+            .enumerate()
+            .for_each(|(i, v)| floats(v, &format!("{path}[{i}]"), out)),
+        serde_json::Value::Object(m) => m
+            .iter()
+            .for_each(|(k, v)| floats(v, &format!("{path}.{k}"), out)),
+        _ => {}
+    }
+}
+
+#[test]
+fn metrics_json_prints_f32_metrics_shortest() {
+    let dir = tempfile::tempdir().expect("temp dir");
+    run_cli(dir.path(), RUN, &["--quiet"], &[]);
+    let text = std::fs::read_to_string(dir.path().join("out/metrics.json")).expect("metrics");
+    let metrics: serde_json::Value = serde_json::from_str(&text).expect("JSON");
+    // The result measures are `f32`s: each is written as the `f32`'s own
+    // shortest text (0.2, not the 0.20000000298023224 of its widening).
+    let mut found = Vec::new();
+    floats(&metrics["result"]["quality"], "result.quality", &mut found);
+    assert!(
+        found
+            .iter()
+            .any(|(p, _)| p.ends_with("texture_energy.spacing_world_units")),
+        "{found:?}"
+    );
+    // An `f32`'s shortest text has at most 9 significant digits; its
+    // widening to `f64` needs 16 or 17.
+    for (path, x) in &found {
+        let text = x.to_string();
+        let mantissa = text.split('e').next().unwrap_or_default();
+        let digits = mantissa
+            .chars()
+            .filter(char::is_ascii_digit)
+            .skip_while(|&c| c == '0')
+            .count();
+        assert!(digits <= 9, "{path} = {text}: written as a widened f32");
     }
 }
 

@@ -177,14 +177,27 @@ fn baked_obj_is_smooth_and_its_mtl_marks_non_colour_maps() {
         "norm result_atlas_normal.png",
         "map_Bump -bm 1 result_atlas_normal.png",
         "map_Pr result_atlas_roughness.png",
-        "disp result_atlas_height.png",
+        "disp -mm 0 0 result_atlas_height.png",
     ] {
         assert!(mtl.lines().any(|l| l == line), "{line:?} missing:\n{mtl}");
+    }
+    // Every map a statement names (its last word, after any options) is a
+    // file next to the MTL.
+    for line in mtl.lines().filter(|l| !l.starts_with('#')) {
+        let mut words = line.split_whitespace();
+        let statement = words.next().unwrap_or("");
+        if ["map_", "norm", "disp", "bump"]
+            .iter()
+            .any(|p| statement.starts_with(p))
+        {
+            let file = words.next_back().expect("a file name");
+            assert!(dir.path().join(file).is_file(), "{line}: {file} missing");
+        }
     }
 }
 
 /// The vertex count and RGB(A) bytes of a binary PLY written by surfsynth
-/// (`float x y z`, then `uchar red green blue [alpha]`).
+/// (`float x y z nx ny nz`, then `uchar red green blue [alpha]`).
 fn read_ply_colours(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
     let end = b"end_header\n";
     let header_len = bytes
@@ -203,10 +216,15 @@ fn read_ply_colours(bytes: &[u8]) -> (usize, usize, Vec<u8>) {
         .iter()
         .filter(|c| header.contains(&format!("property uchar {c}\n")))
         .count();
-    let stride = 12 + channels;
+    assert!(
+        header.contains(
+            "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n"
+        )
+    );
+    let stride = 24 + channels;
     let colours = (0..count)
         .flat_map(|v| {
-            let at = header_len + v * stride + 12;
+            let at = header_len + v * stride + 24;
             bytes[at..at + channels].to_vec()
         })
         .collect();

@@ -125,6 +125,18 @@ pub fn to_table<T: Serialize>(value: &T) -> toml::Table {
         .unwrap_or_default()
 }
 
+/// `value` as JSON whose floats are written shortest, the same text round
+/// trip as [`to_table`]: `serde_json::to_value` widens an `f32` (0.2 becomes
+/// `0.20000000298023224`), while serde_json's writer prints an `f32` with
+/// its own shortest form, which reads back as the nearest `f64`. Used for
+/// everything `metrics.json` holds.
+pub fn to_json<T: Serialize + ?Sized>(value: &T) -> serde_json::Value {
+    serde_json::to_string(value)
+        .ok()
+        .and_then(|text| serde_json::from_str(&text).ok())
+        .unwrap_or(serde_json::Value::Null)
+}
+
 /// Renders a TOML value compactly for tables and messages.
 pub fn value_text(v: &toml::Value) -> String {
     match v {

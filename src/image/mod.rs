@@ -12,6 +12,18 @@ pub use builtin::{BUILTIN_EXEMPLARS, ExemplarOptions, builtin_exemplar, check_ex
 pub use error::ImageError;
 pub use io::{exemplar_from_spec, load_image};
 
+/// The first three channels of a pixel as RGB, grey (with or without alpha)
+/// replicated; black for an empty slice. [`Image::to_rgb`] applies it to
+/// every pixel.
+#[inline]
+pub fn pixel_rgb(px: &[f32]) -> [f32; 3] {
+    match px.len() {
+        0 => [0.0; 3],
+        1 | 2 => [px[0]; 3],
+        _ => [px[0], px[1], px[2]],
+    }
+}
+
 /// A row-major image of `f32` values with interleaved channels, values
 /// nominally in `[0, 1]`.
 ///
@@ -78,20 +90,13 @@ impl Image {
     }
 
     /// The image with 3 channels: the first three kept, grey (with or without
-    /// alpha) replicated.
+    /// alpha) replicated ([`pixel_rgb`] of every pixel).
     pub fn to_rgb(&self) -> Image {
         let c = self.channels.max(1) as usize;
         if c == 3 {
             return self.clone();
         }
-        let data = self
-            .data
-            .chunks_exact(c)
-            .flat_map(|p| match c {
-                1 | 2 => [p[0]; 3],
-                _ => [p[0], p[1], p[2]],
-            })
-            .collect();
+        let data = self.data.chunks_exact(c).flat_map(pixel_rgb).collect();
         Image {
             width: self.width,
             height: self.height,

@@ -254,12 +254,17 @@ pub fn write_baked_obj(
 ///   `normalMap`, assimp as its normals texture) and `map_Bump -bm 1 NAME`,
 ///   which Blender's OBJ importer (3.x and 4.x) reads as a tangent-space
 ///   Normal Map node of strength `-bm` with a Non-Color image. three.js also
-///   takes `map_Bump` as a bump (height) map: with `norm` present, drop the
-///   `map_Bump` line there.
+///   takes `map_Bump` as a `bumpMap`, but its shaders use the normal map
+///   when a material has both, so the bump map goes unused there.
 /// - roughness: `map_Pr NAME` (Blender: Roughness input, Non-Color;
 ///   three.js' stock loader ignores it).
-/// - height: `disp NAME` (three.js: `displacementMap`, linear; Blender reads
-///   no displacement from MTL).
+/// - height: `disp -mm 0 0 NAME`: the map with a displacement range of zero
+///   (`-mm base gain`). three.js reads it as a linear `displacementMap` with
+///   `displacementBias` 0 and `displacementScale` 0; without `-mm` its scale
+///   would be 1 model unit, pushing every vertex out by up to a model unit
+///   (10 % of the bunny's height), where the preview and the GLB show the
+///   mesh undisplaced. Set `displacementScale` to use it; Blender reads no
+///   displacement from MTL.
 ///
 /// three.js marks only `map_Kd` and `map_Ke` as sRGB, so the maps above are
 /// linear there; MeshLab reads `map_Kd` only.
@@ -267,7 +272,7 @@ pub fn non_colour_map_lines(role: &str, name: &str) -> Option<String> {
     match role {
         "normal" => Some(format!("norm {name}\nmap_Bump -bm 1 {name}\n")),
         "roughness" => Some(format!("map_Pr {name}\n")),
-        "height" => Some(format!("disp {name}\n")),
+        "height" => Some(format!("disp -mm 0 0 {name}\n")),
         _ => None,
     }
 }

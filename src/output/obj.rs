@@ -76,12 +76,7 @@ pub fn encode_obj(
     for (v, p) in mesh.positions.iter().enumerate() {
         let _ = write!(s, "v {} {} {}", p.x, p.y, p.z);
         if let Some((values, channels)) = vertex_colours {
-            let c = &values[v * channels..(v + 1) * channels];
-            let rgb = if channels < 3 {
-                [c[0]; 3]
-            } else {
-                [c[0], c[1], c[2]]
-            };
+            let rgb = crate::image::pixel_rgb(&values[v * channels..(v + 1) * channels]);
             let _ = write!(s, " {} {} {}", rgb[0], rgb[1], rgb[2]);
         }
         s.push('\n');

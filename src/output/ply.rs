@@ -1,8 +1,12 @@
 //! Binary little-endian PLY writer, by hand: the format is simple and this
 //! keeps the output byte-deterministic (same mesh, same bytes).
 //!
-//! Layout: `vertex` with `float x y z`, then optional `uchar red green blue`
-//! (and `alpha`), then optional extra `float` properties; `face` with
+//! Layout: `vertex` with `float x y z`, `float nx ny nz` (the area-weighted
+//! unit vertex normals of [`PolyMesh::vertex_normals`], the normals the OBJ
+//! writer's `vn` lines carry: three.js' `PLYLoader` and Blender read them and
+//! shade smooth, where without them three.js has no normals at all), then
+//! optional `uchar red green blue` (and `alpha`), then optional extra `float`
+//! properties; `face` with
 //! `list uchar int vertex_indices`, or `list uint int vertex_indices` when a
 //! face has 256 corners or more (so small meshes keep the common layout every
 //! reader knows, and any polygon still fits).
@@ -49,7 +53,8 @@ pub fn encode_ply(
     let mut header =
         String::from("ply\nformat binary_little_endian 1.0\ncomment written by surfsynth\n");
     header.push_str(&format!(
-        "element vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n"
+        "element vertex {nv}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float nx\nproperty float ny\nproperty float nz\n"
     ));
     if let Some((values, channels)) = colours {
         if !(1..=4).contains(&channels) {
@@ -69,7 +74,9 @@ pub fn encode_ply(
             header.push_str("property uchar alpha\n");
         }
     }
-    let mut names: Vec<&str> = vec!["x", "y", "z", "red", "green", "blue", "alpha"];
+    let mut names: Vec<&str> = vec![
+        "x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha",
+    ];
     for (name, values) in extra {
         let ok = !name.is_empty()
             && name.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_')
@@ -96,12 +103,13 @@ pub fn encode_ply(
     ));
 
     let colour_bytes = colours.map_or(0, |(_, c)| if c % 2 == 0 { 4 } else { 3 });
-    let vertex_bytes = 12 + colour_bytes + 4 * extra.len();
+    let vertex_bytes = 24 + colour_bytes + 4 * extra.len();
+    let normals = mesh.vertex_normals();
     let mut out =
         Vec::with_capacity(header.len() + nv * vertex_bytes + nf + 4 * mesh.corner_count());
     out.extend_from_slice(header.as_bytes());
-    for (v, p) in mesh.positions.iter().enumerate() {
-        for x in p.to_array() {
+    for (v, (p, n)) in mesh.positions.iter().zip(&normals).enumerate() {
+        for x in p.to_array().into_iter().chain(n.to_array()) {
             out.extend_from_slice(&x.to_le_bytes());
         }
         if let Some((values, channels)) = colours {
@@ -189,8 +197,12 @@ mod tests {
         let text = String::from_utf8_lossy(&a);
         assert!(text.contains("property uchar alpha\n"));
         let header_len = text.find("end_header\n").unwrap() + "end_header\n".len();
-        assert_eq!(a.len(), header_len + 5 * 16 + (1 + 16) + (1 + 12));
-        assert_eq!(a[header_len + 12], 128);
+        assert!(text.contains("property float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\n"));
+        assert_eq!(a.len(), header_len + 5 * 28 + (1 + 16) + (1 + 12));
+        assert_eq!(a[header_len + 24], 128);
+        // The normal of vertex 0 (in the xy-plane quad only) is +z.
+        let nz = f32::from_le_bytes(a[header_len + 20..header_len + 24].try_into().unwrap());
+        assert_eq!(nz, 1.0);
     }
 
     #[test]

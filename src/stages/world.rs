@@ -152,12 +152,13 @@ pub struct Metrics {
 }
 
 impl Metrics {
-    /// Records `key = value` for stage `index` (0-based).
+    /// Records `key = value` for stage `index` (0-based); floats are kept
+    /// shortest ([`crate::config::params::to_json`]).
     pub fn record(&mut self, index: usize, key: &str, value: impl serde::Serialize) {
         if self.stages.len() <= index {
             self.stages.resize_with(index + 1, Default::default);
         }
-        let v = serde_json::to_value(value).unwrap_or(serde_json::Value::Null);
+        let v = crate::config::params::to_json(&value);
         self.stages[index].insert(key.to_string(), v);
     }
 }

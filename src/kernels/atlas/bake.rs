@@ -24,7 +24,7 @@
 //! the result is the same at any thread count.
 
 use super::raster::barycentric;
-use crate::image::{Image, sample::Wrap};
+use crate::image::{Image, pixel_rgb, sample::Wrap};
 use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
 use crate::kernels::retile::SurfaceProjector;
 use glam::{Vec2, Vec3};
@@ -160,16 +160,6 @@ pub struct BakeTarget<'a> {
     pub padding_px: u32,
 }
 
-/// Reads RGB out of a look-up of any channel count.
-#[inline]
-fn rgb_of(px: &[f32]) -> [f32; 3] {
-    match px.len() {
-        0 => [0.0; 3],
-        1 | 2 => [px[0]; 3],
-        _ => [px[0], px[1], px[2]],
-    }
-}
-
 /// A row index, its colour row and its row of every map.
 type RowSlices<'r> = (usize, &'r mut [f32], Vec<&'r mut [f32]>);
 
@@ -269,7 +259,7 @@ pub fn bake_channels_with_patches(
                     let w = if k.texture == 0 { wrap } else { Wrap::Clamp };
                     let buf = &mut px[..tex.channels as usize];
                     tex.sample_uv(k.uv.x, k.uv.y, w, buf);
-                    let rgb = rgb_of(buf);
+                    let rgb = pixel_rgb(buf);
                     for i in 0..3 {
                         c[i] += k.weight * rgb[i];
                     }
@@ -290,7 +280,7 @@ pub fn bake_channels_with_patches(
                         },
                     };
                     m.image.sample_uv(uv.x, uv.y, wrap, buf);
-                    let rgb = rgb_of(buf);
+                    let rgb = pixel_rgb(buf);
                     let v = match m.kind {
                         // The synthesis frame is the atlas frame turned by
                         // `angle`: in `reorient_normal`'s terms the atlas
@@ -475,7 +465,7 @@ impl ContributionSource for VertexColourSource<'_> {
         let mut rgb = [0.0f32; 3];
         for (k, &v) in rt.iter().enumerate() {
             let vals = &self.colours[v as usize * c..v as usize * c + c];
-            let px = rgb_of(vals);
+            let px = pixel_rgb(vals);
             for i in 0..3 {
                 rgb[i] += w[k] * px[i];
             }
@@ -575,7 +565,7 @@ impl<'a> LappedSource<'a> {
             let (mut sum, mut w) = ([0.0f64; 3], 0.0f64);
             for px in t.data.chunks_exact(t.channels.max(1) as usize) {
                 let a = if px.len() >= 4 { px[3] as f64 } else { 1.0 };
-                let rgb = rgb_of(px);
+                let rgb = pixel_rgb(px);
                 for k in 0..3 {
                     sum[k] += rgb[k] as f64 * a;
                 }

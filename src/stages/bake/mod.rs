@@ -14,7 +14,7 @@
 //! `SourceTexels`, `Frames`, `CornerUvs`, `BlendUvs`, lapped pastes),
 //! `Exemplar`. Writes: the `BakedAsset` resource, metrics.
 
-use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
 use crate::image::Image;
 use crate::kernels::atlas::bake::{
     AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
@@ -365,23 +365,17 @@ fn bake_world(
     };
     let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
     let record = vec![
-        ("bake_method", serde_json::json!(method)),
-        ("atlas_charts", serde_json::json!(atlas.charts.count)),
-        ("atlas_fill", serde_json::json!(atlas.fill)),
-        (
-            "atlas_texels_per_unit",
-            serde_json::json!(atlas.texels_per_unit),
-        ),
-        ("atlas_mean_stretch", serde_json::json!(d.mean_stretch)),
-        (
-            "atlas_density_ratio_p95",
-            serde_json::json!(d.density_ratio_p95),
-        ),
-        ("baked_maps", serde_json::json!(roles)),
+        ("bake_method", to_json(&method)),
+        ("atlas_charts", to_json(&atlas.charts.count)),
+        ("atlas_fill", to_json(&atlas.fill)),
+        ("atlas_texels_per_unit", to_json(&atlas.texels_per_unit)),
+        ("atlas_mean_stretch", to_json(&d.mean_stretch)),
+        ("atlas_density_ratio_p95", to_json(&d.density_ratio_p95)),
+        ("baked_maps", to_json(&roles)),
     ];
     let mut record = record;
     if !maps_note.is_empty() {
-        record.push(("baked_maps_note", serde_json::json!(maps_note)));
+        record.push(("baked_maps_note", to_json(&maps_note)));
     }
     let tri_mesh = PolyMesh::from_triangles(mesh.positions.clone(), &tris);
     let asset = BakedAsset {

@@ -5,8 +5,8 @@
 //! interpolated, corner UVs blended as the preview renderer does, lapped
 //! pastes composited in paste order (`kernels::lapped::composite`).
 
-use crate::image::Image;
 use crate::image::sample::Wrap;
+use crate::image::{Image, pixel_rgb};
 use crate::kernels::lapped::composite::LappedComposite;
 use crate::kernels::plane_raster::{
     PixelHit, PlaneGrid, check_planar_xy, dominant_corner, rasterise_xy, snap_source,
@@ -50,15 +50,6 @@ pub enum PlaneSignal<'a> {
         /// Per texture patch, its top-left exemplar pixel.
         origins: &'a [[i64; 2]],
     },
-}
-
-/// The first three channels of a pixel as RGB (grey replicated).
-pub fn to_rgb(px: &[f32]) -> [f32; 3] {
-    match px.len() {
-        0 => [0.0; 3],
-        1 | 2 => [px[0]; 3],
-        _ => [px[0], px[1], px[2]],
-    }
 }
 
 /// Why a mesh cannot give a plane image, as the message of a stage failure.
@@ -106,7 +97,7 @@ pub fn plane_from_surface(
                 let mut c = [0.0f32; 3];
                 for (k, &v) in vertex_tris[t].iter().enumerate() {
                     let s = v as usize * channels;
-                    let px = to_rgb(values.get(s..s + channels).unwrap_or(&[]));
+                    let px = pixel_rgb(values.get(s..s + channels).unwrap_or(&[]));
                     for i in 0..3 {
                         c[i] += b[k] * px[i];
                     }
@@ -129,7 +120,7 @@ pub fn plane_from_surface(
                 for (base, l) in layers.iter().enumerate() {
                     let uv = l[0] * b[0] + l[1] * b[1] + l[2] * b[2];
                     texture.sample_uv(uv.x, uv.y, *wrap, &mut out);
-                    let px = to_rgb(&out);
+                    let px = pixel_rgb(&out);
                     for i in 0..3 {
                         c[i] += b[base] * px[i];
                     }
@@ -199,11 +190,7 @@ pub fn plane_from_image(
     if [img.width, img.height] != size {
         return Err(size_message(img.width, img.height, size));
     }
-    let c = img.channels as usize;
-    let mut image = Image::new(img.width, img.height, 3);
-    for (o, px) in image.data.chunks_exact_mut(3).zip(img.data.chunks_exact(c)) {
-        o.copy_from_slice(&to_rgb(px));
-    }
+    let image = img.to_rgb();
     let [ew, eh] = exemplar_size;
     let sources = synth
         .sources

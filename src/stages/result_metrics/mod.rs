@@ -8,6 +8,7 @@
 //! every template point (the renderer's compositing) and measured in the
 //! frames of the topmost paste at each vertex.
 
+use crate::config::params::to_json;
 use crate::image::Image;
 use crate::kernels::frames::frames_from_global_direction;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
@@ -157,8 +158,8 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
         metrics.result.insert(
             "texture_energy".into(),
             serde_json::json!({
-                "mean": stats.mean, "p90": stats.p90, "samples": stats.samples,
-                "neighbourhood": n, "spacing_world_units": spacing.0,
+                "mean": to_json(&stats.mean), "p90": to_json(&stats.p90), "samples": stats.samples,
+                "neighbourhood": n, "spacing_world_units": to_json(&spacing.0),
             }),
         );
         // The measures that see what the energy forgives (kernels/metrics).
@@ -177,10 +178,10 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             &settings,
             sources,
         );
-        let json = |v: f32| serde_json::json!(if v.is_finite() { Some(v) } else { None });
+        let json = |v: f32| to_json(&v.is_finite().then_some(v));
         metrics.result.insert(
             "coherence".into(),
-            serde_json::json!({ "mean": stats.mean, "p90": stats.p90 }),
+            serde_json::json!({ "mean": to_json(&stats.mean), "p90": to_json(&stats.p90) }),
         );
         metrics
             .result
@@ -189,12 +190,12 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
         metrics.result.insert("structure".into(), json(q.structure));
         metrics.result.insert(
             "templates".into(),
-            serde_json::json!({ "small": q.templates, "structure": q.structure_templates }),
+            serde_json::json!({ "small": to_json(&q.templates), "structure": to_json(&q.structure_templates) }),
         );
         if let Some(v) = q.verbatim {
             metrics
                 .result
-                .insert("verbatim".into(), serde_json::json!(v));
+                .insert("verbatim".into(), to_json(&v));
         }
         let values = match (colours, &composite) {
             (Some(c), _) => Some((c.values.clone(), c.channels)),
@@ -218,10 +219,10 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                 let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
                 metrics
                     .result
-                    .insert("histogram_wasserstein".into(), serde_json::json!(w));
+                    .insert("histogram_wasserstein".into(), to_json(&w));
                 metrics
                     .result
-                    .insert("histogram".into(), serde_json::json!(mean));
+                    .insert("histogram".into(), to_json(&mean));
             }
         }
     })
@@ -254,7 +255,5 @@ fn plane_quality(
         texels: t.clone(),
     });
     let q = image_quality(img, &rgb, sources.as_ref(), settings);
-    metrics
-        .result
-        .insert("plane".into(), serde_json::to_value(q).unwrap_or_default());
+    metrics.result.insert("plane".into(), to_json(&q));
 }

@@ -11,7 +11,7 @@
 //! Lapped textures work on triangles: a polygon mesh is fan-triangulated
 //! into a new active mesh level first.
 
-use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
 use crate::kernels::lapped::TriMesh;
 use crate::kernels::lapped::tangent_field::{
     FieldConstraint, field_from_vertex_frames, global_up_field, nearest_face, rbf_field,
@@ -284,10 +284,10 @@ pub fn face_field(
     let (lo, hi) = lengths
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(a, b), &l| (a.min(l), b.max(l)));
-    metrics.insert("patch_size_world".into(), scale.into());
+    metrics.insert("patch_size_world".into(), to_json(&scale));
     metrics.insert("scale_mean".into(), mean.into());
-    metrics.insert("scale_min".into(), lo.into());
-    metrics.insert("scale_max".into(), hi.into());
+    metrics.insert("scale_min".into(), to_json(&lo));
+    metrics.insert("scale_max".into(), to_json(&hi));
     Ok((
         FaceField {
             t,
