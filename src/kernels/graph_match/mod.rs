@@ -44,6 +44,10 @@ use crate::mesh::Topology;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
+/// Smallest region radius with graph cut on: a k-region of radius 1 has no
+/// vertex between the target and the border ring, so its cut is trivial.
+pub const MIN_CUT_K: u32 = 2;
+
 /// At most this many vertices are matched as one parallel batch.
 const MAX_BATCH: usize = 64;
 
@@ -62,7 +66,8 @@ pub struct GraphMatchSettings {
     /// Oversampling averaging of §3.3.3 (same result, fewer comparisons).
     pub averaging: bool,
     /// Graph-cut transfer of the matched neighbourhood onto the region
-    /// (§3.4); when off only the matched vertex is coloured.
+    /// (§3.4); when off only the matched vertex is coloured. When on,
+    /// regions have radius at least [`MIN_CUT_K`] whatever `k_min`.
     pub graph_cut: bool,
     /// `σ` of eq. 1; > 0.
     pub cut_sigma: f32,
@@ -406,6 +411,14 @@ fn plan_vertex(
         settings.k_min,
         settings.k_max,
     );
+    // A cut needs vertices between the target and the border ring: at k = 1
+    // every region vertex but the target is on the border, tied to the
+    // surface, and the transfer could never colour more than the target.
+    let k = if settings.graph_cut {
+        k.max(MIN_CUT_K)
+    } else {
+        k
+    };
     let mut region = KRegion::default();
     k_region(
         level.positions,
