@@ -57,10 +57,11 @@ use surfsynth::output::{write_bytes_atomic, write_png};
 use surfsynth::pipeline::{Pipeline, RunOptions};
 
 /// The methods of `configs/plane/<method>.toml` (a public interface).
-const METHODS: [&str; 8] = [
+const METHODS: [&str; 9] = [
     "jump_pixel",
     "jump_patch",
     "jump_surface",
+    "jump_surface_coherent",
     "lapped",
     "wei_levoy",
     "coherent",

@@ -37,6 +37,11 @@ fn small(method: &str) -> Vec<String> {
             "stage.1.size=63.0",
             "stage.5.plane_size=[64,64]",
         ],
+        "jump_surface_coherent" => &[
+            "input.mesh_options.resolution=[64,64]",
+            "input.mesh_options.size=63.0",
+            "stage.5.plane_size=[64,64]",
+        ],
         "coherent" => &[
             "stage.1.resolution=[64,64]",
             "stage.1.size=63.0",
@@ -53,10 +58,11 @@ fn small(method: &str) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
 }
 
-const METHODS: [&str; 8] = [
+const METHODS: [&str; 9] = [
     "jump_pixel",
     "jump_patch",
     "jump_surface",
+    "jump_surface_coherent",
     "lapped",
     "wei_levoy",
     "coherent",

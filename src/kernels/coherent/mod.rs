@@ -477,6 +477,11 @@ struct LevelGeometry {
 /// Synthesises exemplar coordinates on every level of `levels` (finest
 /// first), coarse to fine. Returns one [`CoherentLevel`] per level.
 ///
+/// With `start` (one coordinate per vertex of the finest level: another
+/// method's result, e.g. `SourceTexels` of `jump_surface` or `match`), only
+/// the finest level is synthesised, from those coordinates: correction
+/// passes that refine a result instead of growing one; one level returned.
+///
 /// # Errors
 /// [`WlError`] for no levels, an empty exemplar, a level without faces
 /// or with the wrong number of frames.
@@ -484,6 +489,7 @@ pub fn coherent_synthesis(
     levels: &[SynthesisLevel],
     exemplar: &Image,
     settings: &CoherentSettings,
+    start: Option<&[Vec2]>,
     progress: &Progress,
 ) -> Result<Vec<CoherentLevel>, WlError> {
     if levels.is_empty() {
@@ -493,6 +499,19 @@ pub fn coherent_synthesis(
         return Err(WlError::EmptyExemplar);
     }
     validate_levels(levels)?;
+    if let Some(st) = start
+        && st.len() != levels[0].mesh.vertex_count()
+    {
+        return Err(WlError::StartCount {
+            given: st.len(),
+            vertices: levels[0].mesh.vertex_count(),
+        });
+    }
+    let levels = if start.is_some() {
+        &levels[..1]
+    } else {
+        levels
+    };
     let geometry: Vec<LevelGeometry> = levels
         .iter()
         .map(|lv| {
@@ -551,7 +570,9 @@ pub fn coherent_synthesis(
             1,
         ));
         // 1. Initialise.
-        let mut coords: Vec<Vec2> = if l + 1 == levels.len() {
+        let mut coords: Vec<Vec2> = if let Some(st) = start {
+            st.iter().map(|&c| domain.confine(c)).collect()
+        } else if l + 1 == levels.len() {
             (0..nv)
                 .map(|_| {
                     Vec2::new(
@@ -583,7 +604,7 @@ pub fn coherent_synthesis(
                 .collect()
         };
         // 2. Jitter.
-        if settings.jitter > 0.0 && l + 1 < levels.len() {
+        if settings.jitter > 0.0 && l + 1 < levels.len() && start.is_none() {
             let amp = settings.jitter * ratio;
             for c in coords.iter_mut() {
                 let j = Vec2::new(

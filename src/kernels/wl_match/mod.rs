@@ -188,6 +188,14 @@ pub enum WlError {
         /// Vertices of the level.
         vertices: usize,
     },
+    /// Starting coordinates and finest-level vertices differ in number.
+    #[error("{given} starting coordinates for {vertices} vertices of the finest level")]
+    StartCount {
+        /// Coordinates given.
+        given: usize,
+        /// Vertices of the finest level.
+        vertices: usize,
+    },
     /// A neighbourhood entry is out of range.
     #[error(
         "neighbourhood {index} = [{size}, {levels}] is not allowed: size must be odd in 1..=31 and levels in 1..=8"

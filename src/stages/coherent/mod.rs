@@ -21,10 +21,25 @@ use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use serde::{Deserialize, Serialize};
 
+/// Where the coordinates start.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Start {
+    /// Random coordinates on the coarsest level, grown coarse to fine.
+    #[default]
+    Random,
+    /// The finest level's `SourceTexels` from an earlier stage (`jump_surface`,
+    /// `match`, `graph_match`, `coherent`): only correction passes on the
+    /// finest level, refining that result.
+    Sources,
+}
+
 /// Settings of `coherent`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct CoherentStageSettings {
+    /// Where the coordinates start.
+    pub start: Start,
     /// Correction passes per level.
     pub passes: u32,
     /// Similar exemplar pixels per pixel (k-coherence).
@@ -49,6 +64,7 @@ impl Default for CoherentStageSettings {
     fn default() -> Self {
         let k = CoherentSettings::default();
         Self {
+            start: Start::Random,
             passes: k.passes,
             k: k.k as u32,
             appearance_dims: k.dims as u32,
@@ -64,6 +80,12 @@ impl Default for CoherentStageSettings {
 
 impl StageSettings for CoherentStageSettings {
     const PARAMS: &'static [ParamDoc] = &[
+        ParamDoc {
+            name: "start",
+            unit: "",
+            range: ParamRange::OneOf(&["random", "sources"]),
+            doc: "random: grow coordinates coarse to fine from random ones; sources: refine an earlier stage's result (its source texels on the finest level) with correction passes there only",
+        },
         ParamDoc {
             name: "passes",
             unit: "passes per level",
@@ -195,11 +217,30 @@ impl Stage for Coherent {
                 seed: seed.derive(ctx.index, 0),
                 wrap: exemplar.wrap,
             };
+            let synthesised = if settings.start == Start::Sources { 1 } else { inputs.len() };
             let progress = Progress::new(
-                (inputs.len() as u64 * settings.passes as u64).max(1),
+                (synthesised as u64 * settings.passes as u64).max(1),
                 Self::KIND,
             );
-            let results = match coherent_synthesis(&inputs, &exemplar.image, &kernel, &progress) {
+            let start = match settings.start {
+                Start::Random => None,
+                Start::Sources => {
+                    let st = data
+                        .get(entities[0])
+                        .ok()
+                        .and_then(|d| d.3)
+                        .map(|t| &t.0[..])
+                        .filter(|t| t.len() == meshes[0].vertex_count());
+                    if st.is_none() {
+                        failure.0 = Some(fail(
+                            "start = \"sources\" needs source texels on the finest mesh level: put a stage that records them (jump_surface, match, graph_match, coherent) before it".into(),
+                        ));
+                        return;
+                    }
+                    st
+                }
+            };
+            let results = match coherent_synthesis(&inputs, &exemplar.image, &kernel, start, &progress) {
                 Ok(r) => r,
                 Err(e) => {
                     failure.0 = Some(fail(e.to_string()));
@@ -227,6 +268,8 @@ impl Stage for Coherent {
                 for t in &texels {
                     values.extend_from_slice(img.pixel(t.x as u32, t.y as u32));
                 }
+                // The vertex colours replace an earlier per-corner result.
+                commands.entity(*e).remove::<CornerUvs>();
                 commands.entity(*e).insert((
                     VertexColours {
                         channels: ch,
