@@ -161,7 +161,7 @@ pub struct Coherent;
 
 impl Stage for Coherent {
     const KIND: &'static str = "coherent";
-    const SUMMARY: &'static str = "coherent synthesis of exemplar coordinates: upsampled, jittered, corrected by k-coherent candidates in appearance space";
+    const SUMMARY: &'static str = "coherent synthesis of exemplar coordinates: upsampled through the frames, corrected by k-coherent candidates in appearance space (or refining an earlier result)";
     const PAPER: &'static str =
         "extension: Lefebvre & Hoppe 2005/2006, Tong et al. 2002 on the Wei & Levoy mesh pyramid";
     type Settings = CoherentStageSettings;
