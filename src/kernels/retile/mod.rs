@@ -277,8 +277,8 @@ pub enum RetileError {
     /// The topology needs more vertices than a level asked for.
     #[error(
         "retile: level {level} has {reached} vertices but should have {target} (±5%); \
-         the surface's topology needs more vertices than that — ask for fewer levels \
-         or more vertices at level 0"
+         the surface's topology needs more vertices than that — ask for more vertices \
+         at level 0"
     )]
     TargetUnreachable {
         level: u32,
@@ -296,8 +296,11 @@ pub enum RetileError {
 /// two CPU-seconds.
 ///
 /// # Errors
-/// See [`RetileError`]: bad settings, unusable input, or a level whose
-/// vertex count cannot come within 5% of its target.
+/// See [`RetileError`]: bad settings, unusable input, or a finest level
+/// whose vertex count cannot come within 5% of its target. Coarser levels
+/// that the topology keeps above their target are kept (a warning is
+/// logged); the pyramid ends early, with fewer levels than asked, at a level
+/// that would not shrink below half the finer one.
 pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyramid, RetileError> {
     settings.validate()?;
     let prep = prepare::prepare(input)?;
@@ -339,13 +342,38 @@ pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyra
         }
         mesh.compact();
         let reached = mesh.live_vertices;
-        if (reached as f64 - target as f64).abs() > RetileSettings::COUNT_TOLERANCE * target as f64
-        {
+        let off = (reached as f64 - target as f64).abs()
+            > RetileSettings::COUNT_TOLERANCE * target as f64;
+        if off && level == 0 {
             return Err(RetileError::TargetUnreachable {
                 level,
                 target,
                 reached,
             });
+        }
+        // A coarser level the topology keeps above its target (thin parts,
+        // many components, high genus need a minimum of vertices each) is
+        // kept as it is: a level between its neighbours is still a pyramid
+        // level. One that no longer shrinks ends the pyramid early.
+        let previous = levels.last().map(|l: &RetiledLevel| l.mesh.vertex_count());
+        if off {
+            tracing::warn!(
+                level,
+                target,
+                reached,
+                "retile: the surface's topology keeps this level above its target vertex count"
+            );
+        }
+        if let Some(p) = previous
+            && 2 * reached > p
+        {
+            tracing::warn!(
+                level,
+                reached,
+                previous = p,
+                "retile: level does not shrink below half the finer level; the pyramid ends here"
+            );
+            break;
         }
         levels.push(export_level(&mesh, &prep, target, len));
         len *= 2.0;
