@@ -138,6 +138,22 @@ fn every_plane_config_writes_plane_png_and_sources_of_the_requested_size() {
         let out = run_small(method, &dir.path().join(method), &[]);
         let (plane, sources) = read_outputs(&out);
         assert_eq!(plane.dimensions(), (64, 64), "{method}: plane.png size");
+        // Every plane config synthesises at one exemplar pixel per world unit
+        // (a 64-pixel plane of side 63), and metrics.json says so for every
+        // method on a mesh (issue 14: the effective scale, comparable across
+        // methods); the jump-map image methods have no mesh scale.
+        let metrics: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
+        let scale = metrics["result"]["scale"]["texels_per_world_unit"].as_f64();
+        eprintln!("{method}: texels per world unit {scale:?}");
+        if !matches!(method, "jump_pixel" | "jump_patch") {
+            let scale =
+                scale.unwrap_or_else(|| panic!("{method}: no result.scale.texels_per_world_unit"));
+            assert!(
+                (scale - 1.0).abs() <= 0.05,
+                "{method}: {scale} texels per world unit, want 1"
+            );
+        }
         assert_eq!(
             sources.dimensions(),
             (64, 64),

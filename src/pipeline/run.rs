@@ -215,6 +215,21 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         .get::<Geometry>(active)
         .map(|g| serde_json::json!({"vertices": g.0.vertex_count(), "faces": g.0.face_count()}))
         .unwrap_or(serde_json::Value::Null);
+    // The texture scale the method used (issue 14): exemplar texels per world
+    // unit (the `TexelSpacing` the synthesis stages set) and per bounding-box
+    // diagonal of the result mesh, so two methods or two mesh sizes compare.
+    let texels_per_unit = 1.0 / world.resource::<TexelSpacing>().0.max(f32::MIN_POSITIVE);
+    let scale = world
+        .get::<Geometry>(active)
+        .and_then(|g| g.0.bounding_box())
+        .map(|(lo, hi)| {
+            serde_json::json!({
+                "texels_per_world_unit": crate::config::params::to_json(&texels_per_unit),
+                "texels_per_bbox_diagonal":
+                    crate::config::params::to_json(&(texels_per_unit * (hi - lo).length())),
+            })
+        })
+        .unwrap_or(serde_json::Value::Null);
     let stages: Vec<serde_json::Value> = pipeline
         .stages
         .iter()
@@ -235,6 +250,7 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         "input": input_counts,
         "result": {
             "mesh": result_counts,
+            "scale": scale,
             "quality": metrics_res.result,
         },
         "stages": stages,
