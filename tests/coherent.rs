@@ -363,3 +363,55 @@ fn refining_a_jump_map_result_lowers_its_errors() {
         );
     }
 }
+
+/// Refining keeps the scale of the result it refines: after `jump_surface`
+/// at 0.5 exemplar pixels per world unit, `coherent` with `start =
+/// "sources"` and its default `scale = 0` works at 0.5 too (not at its own
+/// default of one pixel per vertex spacing, 1 on this plane).
+#[test]
+fn refinement_works_at_the_scale_of_the_result_it_refines() {
+    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs/plane/jump_surface_coherent.toml");
+    let tmp = tempfile::tempdir().expect("a temporary folder");
+    let out = tmp.path().join("half");
+    let (code, _, stderr) = common::run_cli(&[
+        "run",
+        config.to_str().expect("utf-8"),
+        "--set",
+        "input.mesh_options.resolution=[64,64]",
+        "--set",
+        "input.mesh_options.size=63.0",
+        "--set",
+        "stage.3.scale=0.5",
+        "--set",
+        "stage.5.plane_size=[64,64]",
+        "--out",
+        out.to_str().expect("utf-8"),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let m: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("metrics.json")).expect("metrics.json"))
+            .expect("json");
+    let stage = m["stages"]
+        .as_array()
+        .expect("stages")
+        .iter()
+        .find(|s| s["kind"] == "coherent")
+        .expect("a coherent stage");
+    let used = stage["metrics"]["texels_per_world_unit"]
+        .as_f64()
+        .expect("a scale");
+    assert!(
+        (used - 0.5).abs() < 1e-3,
+        "refined at {used} texels per unit"
+    );
+    assert!(
+        (m["result"]["scale"]["texels_per_world_unit"]
+            .as_f64()
+            .unwrap()
+            - 0.5)
+            .abs()
+            < 1e-3
+    );
+}

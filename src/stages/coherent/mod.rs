@@ -138,7 +138,7 @@ impl StageSettings for CoherentStageSettings {
             name: "scale",
             unit: "exemplar pixels per world unit",
             range: ParamRange::Float(0.0, 1e9),
-            doc: "texture scale; 0 = one exemplar pixel per vertex spacing √(2·mean triangle area) of the finest level",
+            doc: "texture scale; 0 = one exemplar pixel per vertex spacing √(2·mean triangle area) of the finest level (start = random), or the scale of the result being refined (start = sources)",
         },
     ];
 
@@ -213,7 +213,13 @@ impl Stage for Coherent {
                 jitter: settings.jitter,
                 spread: settings.spread,
                 coherence: settings.coherence,
-                scale: settings.scale,
+                // Refining keeps the scale of the result it refines (the
+                // texel spacing the earlier stage set).
+                scale: if settings.scale == 0.0 && settings.start == Start::Sources {
+                    1.0 / spacing_res.0.max(f32::MIN_POSITIVE)
+                } else {
+                    settings.scale
+                },
                 seed: seed.derive(ctx.index, 0),
                 wrap: exemplar.wrap,
             };
