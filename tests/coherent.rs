@@ -261,36 +261,19 @@ fn works_on_several_components_and_on_sqrt2_levels() {
 /// back, and the same bytes at 1 and 2 threads.
 #[test]
 fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
-    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("configs/19_coherent_bunny_brick.toml");
     let tmp = tempfile::tempdir().expect("a temporary folder");
     let run = |threads: &str| {
         let out = tmp.path().join(format!("t{threads}"));
-        let (code, _, stderr) = common::run_cli(&[
-            "run",
-            config.to_str().expect("utf-8 path"),
-            "--set",
-            "stage.1.vertices=6144",
-            "--threads",
-            threads,
-            "--out",
-            out.to_str().expect("utf-8 path"),
-            "-q",
-        ]);
-        assert_eq!(code, 0, "{stderr}");
-        out
+        let m = run_config(
+            "19_coherent_bunny_brick.toml",
+            &["--set", "stage.1.vertices=6144", "--threads", threads],
+            &out,
+        );
+        (out, m)
     };
-    let (a, b) = (run("1"), run("2"));
-    let metrics: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(a.join("metrics.json")).expect("metrics.json"))
-            .expect("json");
-    let stage = metrics["stages"]
-        .as_array()
-        .expect("stages")
-        .iter()
-        .find(|s| s["kind"] == "coherent")
-        .expect("a coherent stage");
-    let levels = stage["metrics"]["levels"].as_array().expect("levels");
+    let ((a, metrics), (b, _)) = (run("1"), run("2"));
+    let stage = coherent_metrics(&metrics);
+    let levels = stage["levels"].as_array().expect("levels");
     assert_eq!(levels.len(), 4);
     for l in levels {
         let e: Vec<f64> = l["energy"]
@@ -301,7 +284,7 @@ fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
             .collect();
         assert!(e.last().unwrap() < &e[0], "level {}: {e:?}", l["level"]);
     }
-    assert!(stage["metrics"]["texels_per_world_unit"].as_f64().unwrap() > 0.0);
+    assert!(stage["texels_per_world_unit"].as_f64().unwrap() > 0.0);
     for f in ["result.ply", "result_original.ply"] {
         assert_eq!(
             std::fs::read(a.join(f)).expect("written"),
@@ -319,26 +302,15 @@ fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
 /// completeness than the jump-map result alone, for stones and brick.
 #[test]
 fn refining_a_jump_map_result_lowers_its_errors() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane");
     let tmp = tempfile::tempdir().expect("a temporary folder");
     let quality = |config: &str, texture: &str| {
-        let out = tmp.path().join(format!("{config}_{texture}"));
         let exemplar = common::shared(&format!("textures/{texture}.png"));
-        let (code, _, stderr) = common::run_cli(&[
-            "run",
-            root.join(format!("{config}.toml")).to_str().expect("utf-8"),
-            "--set",
-            &format!("input.exemplar={}", exemplar.display()),
-            "--set",
-            "seed=1",
-            "--out",
-            out.to_str().expect("utf-8"),
-            "-q",
-        ]);
-        assert_eq!(code, 0, "{config}: {stderr}");
-        let m: serde_json::Value =
-            serde_json::from_slice(&std::fs::read(out.join("metrics.json")).expect("metrics.json"))
-                .expect("json");
+        let set = format!("input.exemplar={}", exemplar.display());
+        let m = run_config(
+            &format!("plane/{config}.toml"),
+            &["--set", &set, "--set", "seed=1"],
+            &tmp.path().join(format!("{config}_{texture}")),
+        );
         let q = &m["result"]["quality"]["plane"];
         let f = |k: &str| q[k].as_f64().unwrap_or_else(|| panic!("{config}: no {k}"));
         (f("coherence_mean"), f("coherence_p90"), f("completeness"))
@@ -370,38 +342,23 @@ fn refining_a_jump_map_result_lowers_its_errors() {
 /// default of one pixel per vertex spacing, 1 on this plane).
 #[test]
 fn refinement_works_at_the_scale_of_the_result_it_refines() {
-    let config = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("configs/plane/jump_surface_coherent.toml");
     let tmp = tempfile::tempdir().expect("a temporary folder");
-    let out = tmp.path().join("half");
-    let (code, _, stderr) = common::run_cli(&[
-        "run",
-        config.to_str().expect("utf-8"),
-        "--set",
-        "input.mesh_options.resolution=[64,64]",
-        "--set",
-        "input.mesh_options.size=63.0",
-        "--set",
-        "stage.3.scale=0.5",
-        "--set",
-        "stage.5.plane_size=[64,64]",
-        "--out",
-        out.to_str().expect("utf-8"),
-        "-q",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let m: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.join("metrics.json")).expect("metrics.json"))
-            .expect("json");
-    let stage = m["stages"]
-        .as_array()
-        .expect("stages")
-        .iter()
-        .find(|s| s["kind"] == "coherent")
-        .expect("a coherent stage");
-    let used = stage["metrics"]["texels_per_world_unit"]
-        .as_f64()
-        .expect("a scale");
+    let m = run_config(
+        "plane/jump_surface_coherent.toml",
+        &[
+            "--set",
+            "input.mesh_options.resolution=[64,64]",
+            "--set",
+            "input.mesh_options.size=63.0",
+            "--set",
+            "stage.3.scale=0.5",
+            "--set",
+            "stage.5.plane_size=[64,64]",
+        ],
+        &tmp.path().join("half"),
+    );
+    let stage = coherent_metrics(&m);
+    let used = stage["texels_per_world_unit"].as_f64().expect("a scale");
     assert!(
         (used - 0.5).abs() < 1e-3,
         "refined at {used} texels per unit"
@@ -414,4 +371,29 @@ fn refinement_works_at_the_scale_of_the_result_it_refines() {
             .abs()
             < 1e-3
     );
+}
+
+/// Runs `configs/<config>` with `args` (`--set`s, `--threads`) into `out`
+/// through the CLI, asserts exit 0, and returns its metrics.json.
+fn run_config(config: &str, args: &[&str], out: &std::path::Path) -> serde_json::Value {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("configs")
+        .join(config);
+    let mut argv = vec!["run", path.to_str().expect("utf-8 path")];
+    argv.extend_from_slice(args);
+    argv.extend_from_slice(&["--out", out.to_str().expect("utf-8 path"), "-q"]);
+    let (code, _, stderr) = common::run_cli(&argv);
+    assert_eq!(code, 0, "{config}: {stderr}");
+    serde_json::from_slice(&std::fs::read(out.join("metrics.json")).expect("metrics.json"))
+        .expect("json")
+}
+
+/// The metrics of the run's `coherent` stage.
+fn coherent_metrics(m: &serde_json::Value) -> &serde_json::Value {
+    &m["stages"]
+        .as_array()
+        .expect("stages")
+        .iter()
+        .find(|s| s["kind"] == "coherent")
+        .expect("a coherent stage")["metrics"]
 }
