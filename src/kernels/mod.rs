@@ -25,3 +25,15 @@ pub mod sweep;
 pub mod vertex_colours_from_uvs;
 pub mod vertex_order;
 pub mod wl_match;
+
+/// SplitMix64-style mixing of three words into one seed: every random
+/// stream (per stage, level, vertex, pass) derives its seed with it, so
+/// results never depend on thread count or scheduling.
+pub fn mix(a: u64, b: u64, c: u64) -> u64 {
+    let mut z = a
+        .wrapping_add(b.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+        .wrapping_add(c.wrapping_mul(0xD1B5_4A32_D192_ED03));
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}

@@ -24,6 +24,7 @@
 //! way, otherwise not at all. So `E` never increases, and the result does
 //! not depend on the thread count.
 
+use crate::kernels::mix;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -200,17 +201,6 @@ fn random_frames(normals: &[Vec3], seed: u64, level: u64) -> Vec<TangentFrame> {
         let r = mix(seed, level, v as u64);
         (r >> 40) as f32 / (1u64 << 24) as f32 * std::f32::consts::TAU
     })
-}
-
-/// SplitMix64-style mixing of three words (the same as the stages' `mix`,
-/// kept here so the kernel does not depend on the world model).
-fn mix(a: u64, b: u64, c: u64) -> u64 {
-    let mut z = a
-        .wrapping_add(b.wrapping_mul(0x9E37_79B9_7F4A_7C15))
-        .wrapping_add(c.wrapping_mul(0xD1B5_4A32_D192_ED03));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// Base frame of a normal: deterministic, from which angles are measured.

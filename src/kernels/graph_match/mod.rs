@@ -39,6 +39,7 @@ pub use stack::{ImageLevels, MatchImages};
 use crate::image::sample::Wrap;
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
+use crate::kernels::mix;
 use crate::kernels::sqrt2::Parents;
 use crate::mesh::Topology;
 use glam::{Vec2, Vec3};
@@ -251,17 +252,6 @@ struct Outcome {
     writes: Vec<(u32, Vec2, u8)>,
     colours: Vec<f32>,
     stats: PassStats,
-}
-
-/// SplitMix64-style mixing (the same as `stages::world::mix`, kept here so
-/// kernels do not depend on stages).
-fn mix(a: u64, b: u64, c: u64) -> u64 {
-    let mut z = a
-        .wrapping_add(b.wrapping_mul(0x9E37_79B9_7F4A_7C15))
-        .wrapping_add(c.wrapping_mul(0xD1B5_4A32_D192_ED03));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// How closely a pass must follow its vertex order.

@@ -353,7 +353,7 @@ mod tests {
         // perturbed start: the optimum is the similarity (zero residual).
         let mut mesh = grid(12, 0.25);
         for (i, p) in mesh.positions.iter_mut().enumerate() {
-            let h = crate::stages::world::mix(3, i as u64, 0);
+            let h = crate::kernels::mix(3, i as u64, 0);
             p.x += ((h & 0xFFFF) as f32 / 65535.0 - 0.5) * 0.08;
             p.y += (((h >> 16) & 0xFFFF) as f32 / 65535.0 - 0.5) * 0.08;
         }

@@ -39,6 +39,7 @@ pub mod parents;
 pub mod schedule;
 pub mod search;
 
+use crate::kernels::mix;
 use std::time::Instant;
 
 use glam::Vec3;
@@ -684,16 +685,6 @@ fn coarse_row(
         resample_stencil(stencil, &results[c].colours, ch, &cg.default, dst);
     }
     misses
-}
-
-/// SplitMix64-style mixing of three words into one seed.
-fn mix(a: u64, b: u64, c: u64) -> u64 {
-    let mut z = a
-        .wrapping_add(b.wrapping_mul(0x9E37_79B9_7F4A_7C15))
-        .wrapping_add(c.wrapping_mul(0xD1B5_4A32_D192_ED03));
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 #[cfg(test)]
