@@ -564,11 +564,8 @@ pub fn coherent_synthesis(
         );
         let topology = Topology::build(lv.mesh);
         let nbs = neighbourhoods(&topology, positions, lv.frames, settings.ring.max(1), scale);
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(crate::stages::world::mix(
-            settings.seed,
-            l as u64,
-            1,
-        ));
+        let mut rng =
+            rand_pcg::Pcg64Mcg::seed_from_u64(crate::kernels::mix(settings.seed, l as u64, 1));
         // 1. Initialise.
         let mut coords: Vec<Vec2> = if let Some(st) = start {
             st.iter().map(|&c| domain.confine(c)).collect()
@@ -635,26 +632,24 @@ pub fn coherent_synthesis(
             );
             let order = random_order(
                 nv,
-                crate::stages::world::mix(settings.seed, l as u64, 2 + pass as u64),
+                crate::kernels::mix(settings.seed, l as u64, 2 + pass as u64),
             );
             let batches = dependency_batches(&order, |v| nbs.of(v).0);
             report.batches.push(batches.len());
             let mut picks = [0usize; 3];
             for batch in &batches {
+                let k = Corrector {
+                    nbs: &nbs,
+                    app: &app,
+                    domain: &domain,
+                    occ: &occ,
+                    weight,
+                    jump,
+                };
                 let chosen: Vec<(Vec2, u8)> = batch
                     .par_iter()
                     .with_min_len(256)
-                    .map(|&v| {
-                        let k = Corrector {
-                            nbs: &nbs,
-                            app: &app,
-                            domain: &domain,
-                            occ: &occ,
-                            weight,
-                            jump,
-                        };
-                        correct(v, &coords, &k)
-                    })
+                    .map(|&v| correct(v, &coords, &k))
                     .collect();
                 for (&v, (c, how)) in batch.iter().zip(chosen) {
                     occ.moved(coords[v as usize], c);
