@@ -212,6 +212,7 @@ up = [0.0, 1.0, 0.0]
 [[stage]]
 kind = "displace"
 amplitude = {amplitude}
+amplitude_unit = "world"
 "#
     )
 }
@@ -348,6 +349,7 @@ kind = "init_colours"
 [[stage]]
 kind = "displace"
 amplitude = 0.2
+amplitude_unit = "world"
 "#,
         obj.display().to_string()
     );
@@ -495,7 +497,7 @@ fn displaced_config_runs_end_to_end_at_small_size() {
         "--set",
         "stage.1.target_vertices=3000",
         "--set",
-        "stage.4.amplitude=0.05",
+        "stage.4.amplitude=8",
     ]);
     assert_eq!(code, 0, "{stderr}");
     for name in ["result.ply", "result.obj", "preview_0.png", "metrics.json"] {
@@ -508,8 +510,14 @@ fn displaced_config_runs_end_to_end_at_small_size() {
     assert_eq!(m["stages"][3]["kind"], "displace");
     assert_eq!(d["coordinates"], "source_texels");
     let max = d["max_offset"].as_f64().unwrap();
-    // amplitude 0.05 times at most one unit of height.
-    assert!(max > 0.005 && max <= 0.05 + 1e-6, "{max}");
+    // 8 texels at the config's 160 texels per unit is 0.05 units, times at
+    // most one unit of height.
+    let world = d["amplitude_world"].as_f64().unwrap();
+    let tpu = m["result"]["scale"]["requested_texels_per_world_unit"]
+        .as_f64()
+        .unwrap();
+    assert!((world * tpu - 8.0).abs() < 1e-3, "{world} x {tpu}");
+    assert!(max > 0.1 * world && max <= world + 1e-6, "{max} vs {world}");
 }
 
 #[test]

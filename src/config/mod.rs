@@ -355,10 +355,71 @@ pub struct RawInput {
     /// height difference of 1 spans; 0..=100, default 4.
     #[serde(default = "default_normal_strength")]
     pub normal_strength: f32,
+    /// The one texture scale every method uses (see [`TextureScaleUnit`]):
+    /// how large the exemplar appears on the surface. Default 0.5 with
+    /// `texture_scale_unit = "diagonal"`: the exemplar's width spans half
+    /// the input mesh's bounding-box diagonal, whatever the mesh's units.
+    /// Stage parameters that set a scale (`jump_surface.scale`,
+    /// `graph_match.r_scale`, `coherent.scale`, `tangent_field.patch_size`,
+    /// `retile.vertices`, `subdivide_sqrt2.target_vertices`, `bake.size`)
+    /// override it for their stage when given.
+    #[serde(default = "default_texture_scale")]
+    pub texture_scale: f64,
+    /// Unit of `texture_scale`.
+    #[serde(default)]
+    pub texture_scale_unit: TextureScaleUnit,
 }
 
 fn default_normal_strength() -> f32 {
     4.0
+}
+
+fn default_texture_scale() -> f64 {
+    DEFAULT_TEXTURE_SCALE
+}
+
+/// Default `[input] texture_scale`: the exemplar's width spans half the
+/// bounding-box diagonal. With a 128-pixel exemplar a compact object (sphere,
+/// bunny) then needs about 70 000 vertices for one exemplar pixel per vertex
+/// spacing (the per-vertex methods' resolution), and a jump-map or lapped
+/// result shows the exemplar two to three times across the object.
+pub const DEFAULT_TEXTURE_SCALE: f64 = 0.5;
+
+/// Largest `[input] texture_scale` value in any unit (and smallest: its
+/// reciprocal), so derived vertex counts and atlas sizes stay finite.
+pub const TEXTURE_SCALE_LIMIT: f64 = 1e9;
+
+/// What `[input] texture_scale` measures.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TextureScaleUnit {
+    /// The exemplar's width as a fraction of the input mesh's bounding-box
+    /// diagonal (scale-free: the same config suits a mesh in millimetres or
+    /// kilometres).
+    #[default]
+    Diagonal,
+    /// The exemplar's width in world units.
+    World,
+    /// Exemplar pixels per world unit (the planar benchmark's 1 pixel per
+    /// unit).
+    PixelsPerUnit,
+}
+
+impl TextureScaleUnit {
+    /// The allowed spellings, for messages.
+    pub const ALLOWED: &'static str = "\"diagonal\", \"world\", \"pixels_per_unit\"";
+
+    /// Exemplar pixels per world unit for `value` in this unit, an exemplar
+    /// `exemplar_width` pixels wide and a mesh of bounding-box diagonal
+    /// `diagonal` world units.
+    pub fn texels_per_unit(self, value: f64, exemplar_width: u32, diagonal: f64) -> f64 {
+        let w = f64::from(exemplar_width.max(1));
+        match self {
+            Self::Diagonal => w / (value * diagonal).max(f64::MIN_POSITIVE),
+            Self::World => w / value.max(f64::MIN_POSITIVE),
+            Self::PixelsPerUnit => value,
+        }
+    }
 }
 
 /// `[output]`: the output folder and run-wide output settings.

@@ -110,6 +110,19 @@ impl Pipeline {
                 ),
             ));
         }
+        let scale = raw.input.texture_scale;
+        let limit = crate::config::TEXTURE_SCALE_LIMIT;
+        if !(scale.is_finite() && (1.0 / limit..=limit).contains(&scale)) {
+            return Err(value_err(
+                "input.texture_scale",
+                format!(
+                    "{scale} is out of range; allowed: {}..={limit:e} (in texture_scale_unit = {:?}: {})",
+                    1.0 / limit,
+                    raw.input.texture_scale_unit,
+                    crate::config::TextureScaleUnit::ALLOWED
+                ),
+            ));
+        }
         let all = registry();
         let allowed_kinds = all.iter().map(|s| s.kind).collect::<Vec<_>>().join(", ");
         let mut stages = Vec::with_capacity(raw.stage.len());

@@ -50,6 +50,13 @@ fn no_failure(failure: Res<StageFailure>) -> bool {
 /// Adds the world's resources and the source mesh entity.
 pub fn setup_world(pipeline: &Pipeline, world: &mut World, input: LoadedInput) {
     let spacing = input.mesh.average_edge_length().max(f32::MIN_POSITIVE);
+    let scale = TextureScale::resolve(
+        pipeline.input.texture_scale,
+        pipeline.input.texture_scale_unit,
+        input.exemplar.width,
+        crate::mesh::repair::bounding_box_diagonal(&input.mesh.positions),
+    );
+    world.insert_resource(scale);
     world.insert_resource(Exemplar {
         image: input.exemplar,
         name: input.exemplar_name,
@@ -219,14 +226,20 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
     // unit (the `TexelSpacing` the synthesis stages set) and per bounding-box
     // diagonal of the result mesh, so two methods or two mesh sizes compare.
     let texels_per_unit = 1.0 / world.resource::<TexelSpacing>().0.max(f32::MIN_POSITIVE);
+    // Beside it, what `[input] texture_scale` asked for, in the same units.
+    let requested = *world.resource::<TextureScale>();
     let scale = world
         .get::<Geometry>(active)
         .and_then(|g| g.0.bounding_box())
         .map(|(lo, hi)| {
+            use crate::config::params::to_json;
             serde_json::json!({
-                "texels_per_world_unit": crate::config::params::to_json(&texels_per_unit),
-                "texels_per_bbox_diagonal":
-                    crate::config::params::to_json(&(texels_per_unit * (hi - lo).length())),
+                "texels_per_world_unit": to_json(&texels_per_unit),
+                "texels_per_bbox_diagonal": to_json(&(texels_per_unit * (hi - lo).length())),
+                "requested_texels_per_world_unit": to_json(&requested.texels_per_unit),
+                "requested_texels_per_bbox_diagonal": to_json(&requested.texels_per_diagonal()),
+                "effective_over_requested":
+                    to_json(&(texels_per_unit / requested.texels_per_unit.max(f32::MIN_POSITIVE))),
             })
         })
         .unwrap_or(serde_json::Value::Null);

@@ -134,6 +134,96 @@ pub struct ActiveMesh(pub Entity);
 #[derive(Resource, Clone, Copy, Debug)]
 pub struct TexelSpacing(pub f32);
 
+/// The run's one texture scale: `[input] texture_scale` resolved against the
+/// input mesh's bounding-box diagonal and the exemplar's width. Every stage
+/// whose own scale parameter is left at its default takes its scale from
+/// here (jump maps' pixels per unit, Bangay–Morkel's `r_scale`, coherent's
+/// scale, lapped patch size, retiling density, √2 depth, bake density).
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct TextureScale {
+    /// Exemplar pixels per world unit.
+    pub texels_per_unit: f32,
+    /// Bounding-box diagonal of the input mesh, world units.
+    pub diagonal: f32,
+    /// The exemplar's width, pixels.
+    pub exemplar_width: u32,
+    /// `[input] texture_scale` as written, for messages.
+    pub value: f64,
+    /// `[input] texture_scale_unit`.
+    pub unit: crate::config::TextureScaleUnit,
+}
+
+impl TextureScale {
+    /// Resolves `value` in `unit` for an input mesh of bounding-box diagonal
+    /// `diagonal` and an exemplar `exemplar_width` pixels wide.
+    pub fn resolve(
+        value: f64,
+        unit: crate::config::TextureScaleUnit,
+        exemplar_width: u32,
+        diagonal: f64,
+    ) -> Self {
+        Self {
+            texels_per_unit: unit.texels_per_unit(value, exemplar_width, diagonal) as f32,
+            diagonal: diagonal as f32,
+            exemplar_width,
+            value,
+            unit,
+        }
+    }
+
+    /// Exemplar pixels per bounding-box diagonal of the input mesh.
+    pub fn texels_per_diagonal(&self) -> f32 {
+        self.texels_per_unit * self.diagonal
+    }
+
+    /// Vertices a surface of `area` square world units needs for one vertex
+    /// per exemplar pixel² (a vertex spacing √(2 · mean triangle area) of one
+    /// exemplar pixel: the resolution of the per-vertex methods).
+    pub fn vertices_for_area(&self, area: f64) -> f64 {
+        area * f64::from(self.texels_per_unit).powi(2)
+    }
+
+    /// [`Self::vertices_for_area`], checked before any remeshing: at least
+    /// `MIN_DERIVED_VERTICES` and within the memory budget, else a message
+    /// naming the scale, the count it asks for, and the two ways out
+    /// (`[input] texture_scale` or the stage's own `key`).
+    pub fn derived_vertices(&self, area: f64, key: &str) -> Result<usize, String> {
+        let n = self.vertices_for_area(area);
+        let max = crate::pipeline::memory_budget::MEMORY_BUDGET
+            / crate::pipeline::memory_budget::BYTES_PER_MESH_VERTEX;
+        if n.is_finite() && (MIN_DERIVED_VERTICES as f64..=max as f64).contains(&n) {
+            return Ok(n.round() as usize);
+        }
+        Err(format!(
+            "[input] texture_scale = {} ({:?}) is {} exemplar pixels per world unit, which asks for {n:.0} vertices on this surface of area {area:.4e} (one per exemplar pixel²); allowed {MIN_DERIVED_VERTICES}..={max} (the memory budget): {} texture_scale, or set `{key}`",
+            self.value,
+            self.unit,
+            self.texels_per_unit,
+            match (n < MIN_DERIVED_VERTICES as f64, self.unit) {
+                (true, crate::config::TextureScaleUnit::PixelsPerUnit) => "raise",
+                (true, _) => "lower",
+                (false, crate::config::TextureScaleUnit::PixelsPerUnit) => "lower",
+                (false, _) => "raise",
+            }
+        ))
+    }
+}
+
+/// Fewest vertices a texture scale may ask of a remeshing or subdivision
+/// stage (below it there is no texture to speak of).
+pub const MIN_DERIVED_VERTICES: usize = 12;
+
+impl TextureScale {
+    /// A human-readable line for logs: the scale and where it comes from.
+    pub fn describe(&self) -> String {
+        format!(
+            "texture scale {} exemplar pixels per world unit ({} per bounding-box diagonal)",
+            self.texels_per_unit,
+            self.texels_per_diagonal()
+        )
+    }
+}
+
 /// Per-stage metrics, written to `metrics.json` under `stages[i].metrics`.
 #[derive(Resource, Debug, Default)]
 pub struct Metrics {

@@ -36,7 +36,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct BakeSettings {
-    /// Side of the square atlas texture, pixels.
+    /// Side of the square atlas texture, pixels; 0 = from the texture scale
+    /// ([`auto_atlas_size`]).
     pub size: u32,
     /// Gutter around every chart, pixels.
     pub padding: u32,
@@ -47,7 +48,7 @@ pub struct BakeSettings {
 impl Default for BakeSettings {
     fn default() -> Self {
         Self {
-            size: 1024,
+            size: 0,
             padding: 4,
             normal_cone: 60.0,
         }
@@ -59,8 +60,8 @@ impl StageSettings for BakeSettings {
         ParamDoc {
             name: "size",
             unit: "pixels",
-            range: ParamRange::Int(256, 8192),
-            doc: "side of the square atlas texture the result is baked into",
+            range: ParamRange::Int(0, 8192),
+            doc: "side of the square atlas texture the result is baked into (256..=8192); 0 = about one atlas texel per exemplar pixel at the scale the result was synthesised (its texels per world unit × √(area / 0.5), the next power of two in 256..=8192)",
         },
         ParamDoc {
             name: "padding",
@@ -75,6 +76,31 @@ impl StageSettings for BakeSettings {
             doc: "largest angle between a chart face's normal and its chart seed's: smaller gives more, flatter charts (less distortion, more seams)",
         },
     ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if (1..256).contains(&self.size) {
+            return Err((
+                "size".into(),
+                format!("{} is too small; allowed: 0 (from the texture scale) or 256..=8192", self.size),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Share of the atlas the charts are assumed to fill when the size is
+/// derived (the packer reaches 0.5-0.7 on closed meshes).
+pub const ASSUMED_ATLAS_FILL: f64 = 0.5;
+
+/// Atlas side for `texels_per_unit` (exemplar pixels per world unit) on a
+/// surface of `area`: one atlas texel per exemplar pixel at
+/// [`ASSUMED_ATLAS_FILL`], rounded up to a power of two in 256..=8192.
+pub fn auto_atlas_size(texels_per_unit: f64, area: f64) -> u32 {
+    let side = texels_per_unit * (area / ASSUMED_ATLAS_FILL).sqrt();
+    if !side.is_finite() {
+        return 8192;
+    }
+    (side.clamp(256.0, 8192.0).ceil() as u32).next_power_of_two().min(8192)
 }
 
 /// What the bake reads of a mesh entity.
@@ -120,6 +146,7 @@ impl Stage for Bake {
         (move |mut commands: Commands,
                active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
+               spacing: Res<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                sources: Query<Entity, With<SourceMesh>>,
@@ -151,6 +178,12 @@ impl Stage for Bake {
                 patches,
                 origins,
             };
+            let mut settings = settings.clone();
+            if settings.size == 0 {
+                let texels_per_unit = 1.0 / f64::from(spacing.0.max(f32::MIN_POSITIVE));
+                settings.size = auto_atlas_size(texels_per_unit, f64::from(geometry.0.area()));
+                metrics.record(ctx.index, "size_from_texture_scale", settings.size);
+            }
             match bake_world(
                 &settings,
                 source,

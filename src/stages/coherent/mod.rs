@@ -56,7 +56,8 @@ pub struct CoherentStageSettings {
     pub spread: f32,
     /// Extra cost of a jump over a coherent shift.
     pub coherence: f32,
-    /// Exemplar pixels per world unit; 0 = one per finest vertex spacing.
+    /// Exemplar pixels per world unit; 0 = `[input] texture_scale` (or, when
+    /// refining, the scale of the result refined).
     pub scale: f32,
 }
 
@@ -138,7 +139,7 @@ impl StageSettings for CoherentStageSettings {
             name: "scale",
             unit: "exemplar pixels per world unit",
             range: ParamRange::Float(0.0, 1e9),
-            doc: "texture scale; 0 = one exemplar pixel per vertex spacing √(2·mean triangle area) of the finest level (start = random), or the scale of the result being refined (start = sources)",
+            doc: "texture scale; 0 = the run's `[input] texture_scale` (start = random; `retile` / `subdivide_sqrt2` derive their density from the same scale, one exemplar pixel per finest vertex spacing √(2·mean triangle area)), or the scale of the result being refined (start = sources); a value here overrides it for this stage",
         },
     ];
 
@@ -177,6 +178,7 @@ impl Stage for Coherent {
                seed: Res<RunSeed>,
                exemplar: Res<Exemplar>,
                active: Res<ActiveMesh>,
+               texture_scale: Res<TextureScale>,
                mut spacing_res: ResMut<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
@@ -215,10 +217,10 @@ impl Stage for Coherent {
                 coherence: settings.coherence,
                 // Refining keeps the scale of the result it refines (the
                 // texel spacing the earlier stage set).
-                scale: if settings.scale == 0.0 && settings.start == Start::Sources {
-                    1.0 / spacing_res.0.max(f32::MIN_POSITIVE)
-                } else {
-                    settings.scale
+                scale: match (settings.scale, settings.start) {
+                    (s, _) if s > 0.0 => s,
+                    (_, Start::Sources) => 1.0 / spacing_res.0.max(f32::MIN_POSITIVE),
+                    (_, Start::Random) => texture_scale.texels_per_unit,
                 },
                 seed: seed.derive(ctx.index, 0),
                 wrap: exemplar.wrap,

@@ -52,12 +52,27 @@ impl HeightCoordinates {
     }
 }
 
+/// Unit of `displace.amplitude`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum AmplitudeUnit {
+    /// World units per exemplar pixel at the scale the result was
+    /// synthesised (so relief keeps its proportion to the texture on a mesh
+    /// of any size).
+    #[default]
+    Texels,
+    /// World (model) units.
+    World,
+}
+
 /// Settings of `displace`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DisplaceSettings {
-    /// Displacement per unit of height, model units.
+    /// Displacement per unit of height, in `amplitude_unit`.
     pub amplitude: f64,
+    /// Unit of `amplitude`.
+    pub amplitude_unit: AmplitudeUnit,
     /// Which recorded coordinates address the height map.
     pub coordinates: HeightCoordinates,
     /// Passes of one-ring averaging of the sampled heights.
@@ -67,7 +82,8 @@ pub struct DisplaceSettings {
 impl Default for DisplaceSettings {
     fn default() -> Self {
         Self {
-            amplitude: 0.1,
+            amplitude: 4.0,
+            amplitude_unit: AmplitudeUnit::Texels,
             coordinates: HeightCoordinates::Auto,
             smoothing: 0,
         }
@@ -78,9 +94,15 @@ impl StageSettings for DisplaceSettings {
     const PARAMS: &'static [ParamDoc] = &[
         ParamDoc {
             name: "amplitude",
-            unit: "model units",
+            unit: "amplitude_unit",
             range: ParamRange::Float(-1000.0, 1000.0),
-            doc: "offset along the normal per unit of height above the map's mean (negative carves in); a few texel spacings (1 / r_scale) reads as relief",
+            doc: "offset along the normal per unit of height above the map's mean (negative carves in); a few texel spacings reads as relief (default 4 texels)",
+        },
+        ParamDoc {
+            name: "amplitude_unit",
+            unit: "",
+            range: ParamRange::OneOf(&["texels", "world"]),
+            doc: "unit of amplitude: texels = world units per exemplar pixel at the scale the result was synthesised (scale-free), world = model units",
         },
         ParamDoc {
             name: "coordinates",
@@ -131,6 +153,7 @@ impl Stage for Displace {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,
                channels: Res<ExemplarChannels>,
+               spacing: Res<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                meshes: ActiveQuery| {
@@ -173,7 +196,11 @@ impl Stage for Displace {
             }
             let mean = mean_height(height);
             let normals = mesh.vertex_normals();
-            let amplitude = settings.amplitude as f32;
+            let amplitude = match settings.amplitude_unit {
+                AmplitudeUnit::World => settings.amplitude as f32,
+                AmplitudeUnit::Texels => settings.amplitude as f32 * spacing.0,
+            };
+            metrics.record(ctx.index, "amplitude_world", amplitude);
             let positions =
                 displace_along_normals(&mesh.positions, &normals, &heights, &moved, mean, amplitude);
             let max_offset = mesh

@@ -58,8 +58,7 @@ pub enum CoarseOrder {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct GraphMatchStageSettings {
-    /// Texels of the exemplar per world unit; 0 = one texel per mean edge
-    /// of the finest level.
+    /// Texels of the exemplar per world unit; 0 = `[input] texture_scale`.
     pub r_scale: f32,
     /// Edge of the square neighbourhood in texels (`n` of §3.3.2); 0 =
     /// derived from the exemplar ([`default_region`]).
@@ -109,7 +108,7 @@ impl StageSettings for GraphMatchStageSettings {
             name: "r_scale",
             unit: "texels per world unit",
             range: ParamRange::Float(0.0, 1e9),
-            doc: "texture scale r_scale (§3.3.2); 0 = one texel per mean edge length of the finest level",
+            doc: "texture scale r_scale (§3.3.2); 0 = the run's `[input] texture_scale` (with `subdivide_sqrt2` deriving its depth from the same scale, about one texel per finest vertex spacing); a value here overrides it for this stage",
         },
         ParamDoc {
             name: "region",
@@ -282,6 +281,7 @@ impl Stage for GraphMatch {
                pyramid: Option<Res<Sqrt2Pyramid>>,
                exemplar: Res<Exemplar>,
                seed: Res<RunSeed>,
+               texture_scale: Res<TextureScale>,
                mut spacing: ResMut<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
@@ -304,7 +304,7 @@ impl Stage for GraphMatch {
             let r_scale = if settings.r_scale > 0.0 {
                 settings.r_scale
             } else {
-                1.0 / finest_geometry.0.average_edge_length().max(f32::MIN_POSITIVE)
+                texture_scale.texels_per_unit
             };
             let img = &exemplar.image;
             let level_count = if settings.image_level_count > 0 {

@@ -23,7 +23,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct JumpSurfaceSettings {
-    /// Exemplar pixels per world unit; 0 = automatic.
+    /// Exemplar pixels per world unit; 0 = `[input] texture_scale`.
     pub scale: f32,
     /// Scale multipliers at the lowest and highest vertex along `height_axis`.
     pub scale_by_height: [f32; 2],
@@ -56,7 +56,7 @@ impl StageSettings for JumpSurfaceSettings {
             name: "scale",
             unit: "pixels per world unit",
             range: ParamRange::Float(0.0, 1e9),
-            doc: "texture scale (§6.1); 0 = automatic: the exemplar's side spans a quarter of the bounding-box diagonal",
+            doc: "texture scale (§6.1); 0 = the run's `[input] texture_scale` (default: the exemplar's width spans half the bounding-box diagonal); a value here overrides it for this stage",
         },
         ParamDoc {
             name: "scale_by_height",
@@ -98,17 +98,18 @@ impl StageSettings for JumpSurfaceSettings {
     }
 }
 
-/// Per-vertex scale (pixels per world unit) for a mesh.
+/// Per-vertex scale (pixels per world unit) for a mesh: `settings.scale`,
+/// or `texture_scale` (the run's `[input] texture_scale`, pixels per unit)
+/// when it is 0, times the `scale_by_height` ramp.
 pub fn vertex_scales(
     positions: &[Vec3],
     settings: &JumpSurfaceSettings,
-    exemplar_side: f32,
-    bbox_diagonal: f32,
+    texture_scale: f32,
 ) -> Vec<f32> {
     let base = if settings.scale > 0.0 {
         settings.scale
     } else {
-        4.0 * exemplar_side / bbox_diagonal.max(1e-12)
+        texture_scale
     };
     let [lo_f, hi_f] = settings.scale_by_height;
     if (lo_f - 1.0).abs() < 1e-9 && (hi_f - 1.0).abs() < 1e-9 {
@@ -150,6 +151,7 @@ impl Stage for JumpSurface {
                active: Res<ActiveMesh>,
                seed: Res<RunSeed>,
                map: Res<ExemplarJumpMap>,
+               texture_scale: Res<TextureScale>,
                mut spacing: ResMut<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
@@ -175,12 +177,7 @@ impl Stage for JumpSurface {
             }
             let started = std::time::Instant::now();
             let map = &*map.0;
-            let side = ((map.width() as f32) * (map.height() as f32)).sqrt();
-            let diag = mesh
-                .bounding_box()
-                .map(|(lo, hi)| (hi - lo).length())
-                .unwrap_or(1.0);
-            let scales = vertex_scales(&mesh.positions, &settings, side, diag);
+            let scales = vertex_scales(&mesh.positions, &settings, texture_scale.texels_per_unit);
             let topo = {
                 let _s = tracing::info_span!("topology").entered();
                 Topology::build(mesh)

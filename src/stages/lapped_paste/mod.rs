@@ -33,6 +33,7 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use components::*;
+use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -133,14 +134,14 @@ impl StageSettings for LappedPasteSettings {
         ParamDoc {
             name: "patches",
             unit: "",
-            range: ParamRange::Int(1, 64),
-            doc: "number of texture patches (each paste picks one at random); extra ones are cut at random places with their own splotch",
+            range: ParamRange::Int(0, 64),
+            doc: "number of texture patches (each paste picks one at random); extra ones are cut at random places with their own splotch; 0 = 1 with an explicit tangent_field patch_size, else enough patches to hold the exemplar's area, (w·h)/patch_pixels², at most 16",
         },
         ParamDoc {
             name: "patch_pixels",
             unit: "pixels",
             range: ParamRange::Int(0, 4096),
-            doc: "side of the square exemplar region of a predefined shape; 0 = the exemplar's smaller side",
+            doc: "side of the square exemplar region of a predefined shape; 0 = the exemplar's smaller side with an explicit tangent_field patch_size, else the pixels spanning 0.15 of the mesh's bounding-box diagonal at the texture scale (patches small against the object, as Praun et al. paste), clamped to 16..=the smaller side",
         },
         ParamDoc {
             name: "falloff",
@@ -264,6 +265,50 @@ impl LappedPasteSettings {
             seed,
         }
     }
+}
+
+/// Largest share of the mesh's bounding-box diagonal a texture patch spans
+/// when its size follows `[input] texture_scale` (the default of an explicit
+/// `patch_size` in diagonals before the shared scale existed).
+pub const AUTO_PATCH_DIAGONAL: f32 = 0.15;
+
+/// Smallest side of a texture patch chosen automatically, pixels.
+pub const AUTO_PATCH_MIN_PIXELS: u32 = 16;
+
+/// Most texture patches chosen automatically.
+pub const AUTO_PATCHES_MAX: u32 = 16;
+
+/// Mean exemplar pixels per world unit of a per-pixel field (lengths are
+/// world units per pixel).
+fn field_pixels_per_unit(t: &[Vec3]) -> f32 {
+    let mean = t.iter().map(|v| v.length() as f64).sum::<f64>() / t.len().max(1) as f64;
+    (1.0 / mean.max(f64::MIN_POSITIVE)) as f32
+}
+
+/// `patch_pixels` and `patches` when they are 0 and the field follows the
+/// texture scale: a patch spans at most [`AUTO_PATCH_DIAGONAL`] of the
+/// diagonal (at least [`AUTO_PATCH_MIN_PIXELS`], at most the exemplar's
+/// smaller side), and enough patches are cut to hold the exemplar's area.
+pub fn auto_patches(
+    settings: &LappedPasteSettings,
+    (w, h): (u32, u32),
+    pixels_per_unit: f32,
+    diagonal: f32,
+) -> (u32, u32) {
+    let side = w.min(h);
+    let pixels = if settings.patch_pixels > 0 {
+        settings.patch_pixels
+    } else {
+        let fit = (AUTO_PATCH_DIAGONAL * diagonal * pixels_per_unit).round();
+        (fit.clamp(0.0, side as f32) as u32).clamp(AUTO_PATCH_MIN_PIXELS.min(side), side)
+    };
+    let patches = if settings.patches > 0 {
+        settings.patches
+    } else {
+        let need = (f64::from(w) * f64::from(h)) / f64::from(pixels.max(1)).powi(2);
+        (need.ceil() as u32).clamp(1, AUTO_PATCHES_MAX)
+    };
+    (pixels, patches)
 }
 
 /// Cuts the texture patches of `settings` out of the exemplar. `mask` is
@@ -464,6 +509,27 @@ impl Stage for LappedPaste {
                     return;
                 }
             };
+            // With a field in world units per pixel (`[input] texture_scale`)
+            // the patch size and count follow the mesh; T is then scaled
+            // by the patch image's side, below.
+            let mut settings = settings.clone();
+            if field.per_pixel {
+                let diagonal = geometry
+                    .0
+                    .bounding_box()
+                    .map_or(0.0, |(lo, hi)| (hi - lo).length());
+                let (pixels, patches) = auto_patches(
+                    &settings,
+                    (exemplar.image.width, exemplar.image.height),
+                    field_pixels_per_unit(&field.t),
+                    diagonal,
+                );
+                metrics.record(ctx.index, "patch_pixels", pixels);
+                metrics.record(ctx.index, "patches", patches);
+                (settings.patch_pixels, settings.patches) = (pixels, patches);
+            } else if settings.patches == 0 {
+                settings.patches = 1;
+            }
             let textures = match texture_patches(
                 &exemplar.image,
                 exemplar.wrap,
@@ -478,8 +544,14 @@ impl Stage for LappedPaste {
                 }
             };
             let paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
+            let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
+            let per_patch: Vec<Vec3> = if field.per_pixel {
+                field.t.iter().map(|t| *t * unit_px).collect()
+            } else {
+                Vec::new()
+            };
             let view = FieldView {
-                t: &field.t,
+                t: if field.per_pixel { &per_patch } else { &field.t },
                 isotropic: field.isotropic,
             };
             let progress = Progress::new(tri.face_count() as u64, "lapped_paste");
@@ -493,8 +565,7 @@ impl Stage for LappedPaste {
 
             // World units per exemplar texel, for the quality metrics.
             let mean_scale =
-                field.t.iter().map(|t| t.length() as f64).sum::<f64>() / field.t.len().max(1) as f64;
-            let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
+                view.t.iter().map(|t| t.length() as f64).sum::<f64>() / view.t.len().max(1) as f64;
             spacing.0 = (mean_scale as f32 / unit_px).max(f32::MIN_POSITIVE);
 
             if settings.atlas_size > 0 {

@@ -18,7 +18,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RetileStageSettings {
-    /// Vertices of the finest level (used when `edge_length` is 0).
+    /// Vertices of the finest level (used when `edge_length` is 0); 0 = one
+    /// per exemplar pixel² of surface at `[input] texture_scale`.
     pub vertices: u32,
     /// Target edge length of the finest level, world units; 0 = use `vertices`.
     pub edge_length: f32,
@@ -31,7 +32,7 @@ pub struct RetileStageSettings {
 impl Default for RetileStageSettings {
     fn default() -> Self {
         Self {
-            vertices: 24_576,
+            vertices: 0,
             edge_length: 0.0,
             levels: 4,
             iterations: 10,
@@ -44,8 +45,8 @@ impl StageSettings for RetileStageSettings {
         ParamDoc {
             name: "vertices",
             unit: "vertices",
-            range: ParamRange::Int(12, 50_000_000),
-            doc: "vertices of the finest level; the density sets the texture scale (Wei & Levoy Fig. 2)",
+            range: ParamRange::Int(0, 50_000_000),
+            doc: "vertices of the finest level (the density sets the texture scale of `match`, Wei & Levoy Fig. 2); 0 = derived from `[input] texture_scale`: surface area × (exemplar pixels per unit)², one exemplar pixel per finest vertex spacing; 1..=11 is refused",
         },
         ParamDoc {
             name: "edge_length",
@@ -66,6 +67,19 @@ impl StageSettings for RetileStageSettings {
             doc: "isotropic remeshing iterations per level (split, collapse, flip, relax, project)",
         },
     ];
+
+    fn check(&self) -> Result<(), (String, String)> {
+        if (1..MIN_DERIVED_VERTICES as u32).contains(&self.vertices) {
+            return Err((
+                "vertices".into(),
+                format!(
+                    "{} is too few; allowed: 0 (derived from [input] texture_scale) or {MIN_DERIVED_VERTICES}..=50000000",
+                    self.vertices
+                ),
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// Where each vertex of a retiled level lies on the input surface: a face
@@ -111,6 +125,7 @@ impl Stage for Retile {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,
                seed: Res<RunSeed>,
+               texture_scale: Res<TextureScale>,
                mut spacing: ResMut<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
@@ -126,8 +141,25 @@ impl Stage for Retile {
             };
             let target = if settings.edge_length > 0.0 {
                 RetileTarget::EdgeLength(settings.edge_length)
-            } else {
+            } else if settings.vertices > 0 {
                 RetileTarget::Vertices(settings.vertices)
+            } else {
+                let area = f64::from(source.0.area());
+                match texture_scale.derived_vertices(area, "retile.vertices") {
+                    Ok(n) => {
+                        metrics.record(ctx.index, "vertices_from_texture_scale", n);
+                        tracing::info!(
+                            "retile: {} vertices for the {}",
+                            n,
+                            texture_scale.describe()
+                        );
+                        RetileTarget::Vertices(n as u32)
+                    }
+                    Err(message) => {
+                        fail(&mut failure, ctx.index, Self::KIND, message);
+                        return;
+                    }
+                }
             };
             let rs = RetileSettings {
                 target,

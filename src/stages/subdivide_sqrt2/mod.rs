@@ -33,8 +33,9 @@ use std::ops::{Add, Mul};
 pub struct SubdivideSqrt2Settings {
     /// Uniform √2 steps; 0 = as many as `target_vertices` needs.
     pub levels: u32,
-    /// Stop at the first level with at least this many vertices; 0 = no
-    /// budget (then `levels` decides).
+    /// Vertices the finest level should have (the level closest to it in
+    /// ratio is the finest); 0 = with `levels` = 0, derived from `[input]
+    /// texture_scale`; with `levels` > 0, no budget.
     pub target_vertices: u64,
     /// Adaptive passes on the coarse mesh before the uniform steps (§3.2.2).
     pub adaptive_passes: u32,
@@ -50,7 +51,7 @@ impl Default for SubdivideSqrt2Settings {
     fn default() -> Self {
         Self {
             levels: 0,
-            target_vertices: 50_000,
+            target_vertices: 0,
             adaptive_passes: 0,
             adaptive_factor: 1.5,
             vertex_relaxation: 0.5,
@@ -64,13 +65,13 @@ impl StageSettings for SubdivideSqrt2Settings {
             name: "levels",
             unit: "steps",
             range: ParamRange::Int(0, MAX_HIERARCHY_LEVELS as i64),
-            doc: "uniform √2 steps (each about doubles the vertices); 0 = as many as target_vertices needs",
+            doc: "uniform √2 steps (each about doubles the vertices); 0 = as many as target_vertices (or the texture scale) needs",
         },
         ParamDoc {
             name: "target_vertices",
             unit: "vertices",
             range: ParamRange::Int(0, MAX_HIERARCHY_VERTICES as i64),
-            doc: "stop at the first level with at least this many vertices; 0 = no budget (levels decides)",
+            doc: "vertices of the finest level: steps stop at the level closest to it in ratio (within √2); 0 = with levels = 0, surface area × (exemplar pixels per unit at [input] texture_scale)², one vertex per exemplar pixel²; with levels > 0, no budget",
         },
         ParamDoc {
             name: "adaptive_passes",
@@ -93,10 +94,13 @@ impl StageSettings for SubdivideSqrt2Settings {
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
-        if self.levels == 0 && self.target_vertices == 0 {
+        if (1..MIN_DERIVED_VERTICES as u64).contains(&self.target_vertices) {
             return Err((
-                "levels".into(),
-                "give `levels` > 0 or `target_vertices` > 0 (both are 0: no stopping rule)".into(),
+                "target_vertices".into(),
+                format!(
+                    "{} is too few; allowed: 0 (derived from [input] texture_scale) or {MIN_DERIVED_VERTICES}..={MAX_HIERARCHY_VERTICES}",
+                    self.target_vertices
+                ),
             ));
         }
         Ok(())
@@ -243,6 +247,7 @@ impl Stage for SubdivideSqrt2 {
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,
+               texture_scale: Res<TextureScale>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                meshes: SourceQuery| {
@@ -292,7 +297,27 @@ impl Stage for SubdivideSqrt2 {
             } else {
                 MAX_HIERARCHY_LEVELS
             };
-            let target = settings.target_vertices as usize;
+            let target = match (settings.levels, settings.target_vertices) {
+                (_, t) if t > 0 => t as usize,
+                (0, _) => {
+                    let area = f64::from(coarse.area());
+                    match texture_scale.derived_vertices(area, "subdivide_sqrt2.target_vertices") {
+                        Ok(n) => {
+                            metrics.record(idx, "target_vertices_from_texture_scale", n);
+                            n
+                        }
+                        Err(message) => {
+                            failure.0 = Some(crate::pipeline::PipelineError::Stage {
+                                index: ctx.index + 1,
+                                kind: Self::KIND.into(),
+                                message,
+                            });
+                            return;
+                        }
+                    }
+                }
+                _ => 0,
+            };
             let mut levels: Vec<(crate::mesh::PolyMesh, Option<Parents>, Attributes)> =
                 vec![(coarse, None, attrs)];
             for _ in 0..max_steps {
@@ -304,6 +329,22 @@ impl Stage for SubdivideSqrt2 {
                 let sub = sqrt2_subdivide_with(current, &step_settings);
                 let next_attrs = current_attrs.carried(&sub.parents, &sub.mesh);
                 levels.push((sub.mesh, Some(sub.parents), next_attrs));
+            }
+            // The finest level is the one closest to the target in ratio: the
+            // step past it may overshoot by up to 2x (V' = V + F).
+            if target > 0 && levels.len() >= 2 {
+                let n = |i: usize| levels[i].0.vertex_count() as f64;
+                let (last, prev) = (n(levels.len() - 1), n(levels.len() - 2));
+                if last >= target as f64 && last / target as f64 > target as f64 / prev {
+                    levels.pop();
+                }
+            }
+            if target > 0 && levels.len() == 1 {
+                let n = levels[0].0.vertex_count();
+                tracing::warn!(
+                    "subdivide_sqrt2: the mesh already has {n} vertices for a target of {target}: the hierarchy has one level (no coarse-to-fine synthesis); give `levels` to force steps, or a smaller texture scale"
+                );
+                metrics.record(idx, "warning", format!("one-level hierarchy: {n} vertices for a target of {target}"));
             }
             let count = levels.len();
             let sizes: Vec<usize> = levels.iter().map(|l| l.0.vertex_count()).collect();

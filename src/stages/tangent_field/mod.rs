@@ -34,6 +34,11 @@ pub struct FaceField {
     pub t: Vec<Vec3>,
     /// Isotropic texture: only the lengths matter.
     pub isotropic: bool,
+    /// The lengths are world units per exemplar PIXEL (the field follows
+    /// `[input] texture_scale`; `lapped_paste` multiplies by the patch
+    /// image's side, so the texture shows at that scale whatever the patch
+    /// size), rather than per texture patch (an explicit `patch_size`).
+    pub per_pixel: bool,
 }
 
 /// Where the field comes from.
@@ -98,7 +103,8 @@ pub struct TangentFieldSettings {
     pub up: [f32; 3],
     /// Isotropic texture (orientation propagated per paste).
     pub isotropic: bool,
-    /// World size of one texture patch, in `units`.
+    /// World size of one texture patch, in `units`; 0 = the texture scale
+    /// of `[input] texture_scale`.
     pub patch_size: f64,
     /// Unit of `patch_size` and of constraint radii.
     pub units: LengthUnit,
@@ -114,7 +120,7 @@ impl Default for TangentFieldSettings {
             mode: FieldMode::Global,
             up: [0.0, 1.0, 0.0],
             isotropic: false,
-            patch_size: 0.15,
+            patch_size: 0.0,
             units: LengthUnit::Diagonal,
             constraints: Vec::new(),
             background_weight: 0.05,
@@ -145,8 +151,8 @@ impl StageSettings for TangentFieldSettings {
         ParamDoc {
             name: "patch_size",
             unit: "units",
-            range: ParamRange::Float(1e-6, 1e6),
-            doc: "world size of one texture patch (its larger side), the length of T",
+            range: ParamRange::Float(0.0, 1e6),
+            doc: "world size of one texture patch (its larger side), the length of T; 0 = from the run's `[input] texture_scale`: a patch of p exemplar pixels spans p / (exemplar pixels per unit), the same scale as every other method; a value here overrides it",
         },
         ParamDoc {
             name: "units",
@@ -174,8 +180,11 @@ impl StageSettings for TangentFieldSettings {
         if Vec3::from(self.up).length_squared() < 1e-12 {
             return Err(("up".into(), "must not be the zero vector".into()));
         }
-        if self.patch_size.is_nan() || self.patch_size <= 0.0 {
-            return Err(("patch_size".into(), "must be positive".into()));
+        if !(self.patch_size.is_finite() && self.patch_size >= 0.0) {
+            return Err((
+                "patch_size".into(),
+                "must be positive, or 0 for [input] texture_scale".into(),
+            ));
         }
         if self.mode == FieldMode::Constraints && self.constraints.is_empty() {
             return Err((
@@ -212,12 +221,15 @@ impl StageSettings for TangentFieldSettings {
 }
 
 /// Computes the field of `settings` on a triangle mesh; `frames` are the
-/// per-vertex frames for `frames` mode. Errors name what to fix.
+/// per-vertex frames for `frames` mode; `texels_per_unit` is the run's
+/// texture scale (exemplar pixels per world unit), used when
+/// `patch_size` is 0. Errors name what to fix.
 pub fn face_field(
     mesh: &crate::mesh::PolyMesh,
     tri: &TriMesh,
     settings: &TangentFieldSettings,
     frames: Option<&[crate::kernels::frames::TangentFrame]>,
+    texels_per_unit: f32,
 ) -> Result<(FaceField, serde_json::Map<String, serde_json::Value>), String> {
     let mut metrics = serde_json::Map::new();
     let diagonal = mesh
@@ -227,7 +239,12 @@ pub fn face_field(
         LengthUnit::Diagonal => diagonal,
         LengthUnit::World => 1.0,
     };
-    let scale = settings.patch_size as f32 * unit;
+    let per_pixel = settings.patch_size == 0.0;
+    let scale = if per_pixel {
+        1.0 / texels_per_unit.max(f32::MIN_POSITIVE)
+    } else {
+        settings.patch_size as f32 * unit
+    };
     let up = Vec3::from(settings.up);
     let t = match settings.mode {
         FieldMode::Global => global_up_field(tri, up, scale),
@@ -284,7 +301,10 @@ pub fn face_field(
     let (lo, hi) = lengths
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(a, b), &l| (a.min(l), b.max(l)));
-    metrics.insert("patch_size_world".into(), to_json(&scale));
+    metrics.insert(
+        if per_pixel { "world_units_per_pixel" } else { "patch_size_world" }.into(),
+        to_json(&scale),
+    );
     metrics.insert("scale_mean".into(), mean.into());
     metrics.insert("scale_min".into(), to_json(&lo));
     metrics.insert("scale_max".into(), to_json(&hi));
@@ -292,6 +312,7 @@ pub fn face_field(
         FaceField {
             t,
             isotropic: settings.isotropic,
+            per_pixel,
         },
         metrics,
     ))
@@ -319,6 +340,7 @@ impl Stage for TangentField {
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,
+               texture_scale: Res<TextureScale>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                meshes: Query<(&Geometry, Option<&Frames>)>| {
@@ -342,7 +364,13 @@ impl Stage for TangentField {
                 }
             };
             let frames = frames.map(|f| f.0.as_slice());
-            let (field, stage_metrics) = match face_field(mesh, &tri, &settings, frames) {
+            let (field, stage_metrics) = match face_field(
+                mesh,
+                &tri,
+                &settings,
+                frames,
+                texture_scale.texels_per_unit,
+            ) {
                 Ok(x) => x,
                 Err(message) => {
                     failure.0 = Some(fail(message));
