@@ -127,15 +127,21 @@ impl PolyMesh {
         self.face_start.windows(2).all(|w| w[1] - w[0] == 3)
     }
 
-    /// Area-weighted normal of face `f` by Newell's method; its length is twice the area.
+    /// Area-weighted normal of face `f` by Newell's method; its length is
+    /// twice the area. Corners are taken relative to the first one, so a
+    /// mesh far from the origin (a scan at z = -1000) loses no precision to
+    /// cancellation: the result depends only on the face's shape.
     #[inline]
     pub fn face_normal_scaled(&self, f: usize) -> Vec3 {
         let face = self.face(f);
+        let Some(&first) = face.first() else {
+            return Vec3::ZERO;
+        };
+        let origin = self.positions[first as usize];
         let mut n = Vec3::ZERO;
-        for (i, &a) in face.iter().enumerate() {
-            let b = face[(i + 1) % face.len()];
-            let p = self.positions[a as usize];
-            let q = self.positions[b as usize];
+        for w in face.windows(2).skip(1) {
+            let p = self.positions[w[0] as usize] - origin;
+            let q = self.positions[w[1] as usize] - origin;
             n += p.cross(q);
         }
         n
