@@ -185,7 +185,9 @@ pub fn distortion(
         let area3 = 0.5 * e1.cross(e2).length();
         let q = uvs[f];
         let area2 = 0.5 * raster::signed_area2(&q).abs();
-        if area3 <= f32::EPSILON || area2 <= 0.0 {
+        // Degenerate faces only: an absolute threshold would drop every
+        // face of a mesh in small units (a 1 mm triangle in metres).
+        if !(area3 > 0.0 && area2 > 0.0) {
             continue;
         }
         let c = charts.chart_of_face[f] as usize;

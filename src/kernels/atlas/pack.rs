@@ -58,7 +58,8 @@ fn flat_min_area_rotation(pts: &[DVec2]) -> DVec2 {
         // Rotate the edge onto the x axis.
         let rot = DVec2::new(dir.x, -dir.y);
         let size = extent(rot);
-        if size.x * size.y < best.0 - 1e-12 {
+        // Relative tie margin: chart extents are in the mesh's own units.
+        if size.x * size.y < best.0 * (1.0 - 1e-12) {
             best = (size.x * size.y, rot);
         }
     }
