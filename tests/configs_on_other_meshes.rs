@@ -135,7 +135,11 @@ fn check_all(configs: &[PathBuf], meshes: &[PathBuf]) {
         }
     }
     eprintln!("{}", lines.join("\n"));
-    assert!(failures.is_empty(), "out of bounds:\n{}", failures.join("\n"));
+    assert!(
+        failures.is_empty(),
+        "out of bounds:\n{}",
+        failures.join("\n")
+    );
 }
 
 #[test]

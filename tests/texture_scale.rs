@@ -346,3 +346,105 @@ fn every_method_synthesises_at_the_requested_scale() {
     }
     assert!(hi / lo <= 1.10, "methods disagree: {got:?}");
 }
+
+/// The stages that size themselves from the scale: retile lands on one
+/// vertex per exemplar pixel² of surface, √2 subdivision stops at the level
+/// closest (in ratio) to that count, and the bake's atlas is the power of
+/// two holding the surface at the scale at half fill.
+#[test]
+fn derived_sizes_follow_the_texture_scale() {
+    let metrics_of = |stages: &str, scale: f64| {
+        let text = format!("{HEADER}{stages}")
+            .replace("texture_scale = 0.6", &format!("texture_scale = {scale}"));
+        let p = Pipeline::from_source(ConfigSource::from_text("derived.toml", &text)).unwrap();
+        let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+        let area = f64::from(input.mesh.area());
+        let mut w = World::new();
+        run_in_world(&p, &mut w, input).expect("runs");
+        let ts = *w.resource::<TextureScale>();
+        let m = w.resource::<Metrics>().stages.clone();
+        (m, area * f64::from(ts.texels_per_unit).powi(2), ts)
+    };
+    let number = |v: &serde_json::Value| v.as_f64().unwrap();
+
+    // retile: the finest level lands within 5 % of area · p².
+    for scale in [0.3, 0.6] {
+        let (m, want, _) = metrics_of("[[stage]]\nkind = \"retile\"\nlevels = 1\n", scale);
+        let asked = number(&m[0]["vertices_from_texture_scale"]);
+        assert!((asked - want).abs() <= 1.0, "{asked} vs {want}");
+        let got = m[0]["level_vertices"]
+            .as_array()
+            .map_or_else(|| number(&m[0]["vertices"]), |a| number(a.first().unwrap()));
+        assert!((got / want - 1.0).abs() <= 0.05, "retile {got} for {want}");
+    }
+
+    // subdivide_sqrt2: the finest level is the closest to area · p² in
+    // ratio (one √2 step multiplies the count by 2..3).
+    for scale in [0.3, 0.6] {
+        let (m, want, _) = metrics_of("[[stage]]\nkind = \"subdivide_sqrt2\"\n", scale);
+        assert_eq!(
+            number(&m[0]["target_vertices_from_texture_scale"]),
+            want.round()
+        );
+        let sizes: Vec<f64> = m[0]["level_vertices_coarse_to_fine"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(number)
+            .collect();
+        let finest = *sizes.last().unwrap();
+        let ratio = |n: f64| (n / want).ln().abs();
+        assert!(sizes.len() >= 2, "{sizes:?}");
+        assert!(
+            sizes.iter().all(|&n| ratio(finest) <= ratio(n) + 1e-12) || sizes.len() == 1,
+            "the finest of {sizes:?} is not the closest to {want}"
+        );
+        assert!(m[0].get("warning").is_none(), "{:?}", m[0]);
+    }
+    // A mesh already finer than the scale asks: one level, with a warning.
+    let (m, want, _) = metrics_of("[[stage]]\nkind = \"subdivide_sqrt2\"\n", 3.0);
+    assert!(want < 288.0, "{want}");
+    let warning = m[0]["warning"].as_str().expect("a warning");
+    assert!(warning.contains("one-level"), "{warning}");
+
+    // bake: the atlas side is the power of two holding area · p² texels at
+    // half fill (at least 256).
+    let (m, want, _) = metrics_of(METHODS[5].1, 0.1);
+    let side = number(&m[3]["size_from_texture_scale"]);
+    let need = (want / 0.5).sqrt().max(256.0);
+    assert!(side >= need && side < 2.0 * need, "{side} for {need}");
+}
+
+/// A texture scale that would ask for too few or too many vertices, or is
+/// out of range, or names an unknown unit, is refused before any work,
+/// naming the key.
+#[test]
+fn bad_texture_scales_are_refused_naming_the_key() {
+    let config = |value: &str, stages: &str| {
+        format!("{HEADER}{stages}").replace("texture_scale = 0.6", value)
+    };
+    common::expect_refused(
+        &config("texture_scale = 0.0", METHODS[0].1),
+        &[],
+        &["input.texture_scale"],
+    );
+    common::expect_refused(
+        &config("texture_scale = 1e12", METHODS[0].1),
+        &[],
+        &["input.texture_scale"],
+    );
+    common::expect_refused(
+        &config(
+            "texture_scale = 0.5\ntexture_scale_unit = \"inches\"",
+            METHODS[0].1,
+        ),
+        &[],
+        &["texture_scale_unit", "pixels_per_unit"],
+    );
+    // 1e-7 of the diagonal per exemplar width: ~1e17 vertices.
+    common::expect_refused(
+        &config("texture_scale = 1e-7", "[[stage]]\nkind = \"retile\"\n"),
+        &[],
+        &["texture_scale", "retile.vertices"],
+    );
+}
