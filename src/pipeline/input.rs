@@ -123,7 +123,25 @@ pub fn load_input_from(
         let mesh = crate::mesh::builtin::builtin_mesh(name, &opts)?;
         (mesh, format!("builtin mesh {name}"))
     } else {
-        if !input.mesh_options.is_empty() {
+        // `--set input.mesh=FILE` replacing a config's builtin mesh: the
+        // config's options were for that builtin, so they are dropped (and
+        // said so); options given on the command line are still refused.
+        let replaced_builtin = source.is_command_line_key("input.mesh")
+            && !source
+                .command_line_keys
+                .iter()
+                .any(|k| k.starts_with("input.mesh_options"));
+        if !input.mesh_options.is_empty() && replaced_builtin {
+            tracing::warn!(
+                "input.mesh_options ({}) ignored: they apply to the builtin mesh that --set input.mesh replaced",
+                input
+                    .mesh_options
+                    .keys()
+                    .cloned()
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        } else if !input.mesh_options.is_empty() {
             return Err(ConfigError::Value {
                 file: file.to_string(),
                 key: "input.mesh_options".into(),
