@@ -77,3 +77,4 @@ pub fn expect_refused(config: &str, extra: &[&str], needles: &[&str]) {
         files_under(&out)
     );
 }
+pub mod messy;
