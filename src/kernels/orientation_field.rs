@@ -23,7 +23,8 @@ pub struct Singularity {
     pub at: Vec3,
     /// +1 for a source (up points away), −1 for a sink (up points toward it).
     pub sign: f32,
-    /// Relative strength.
+    /// Relative strength: at `strength` bounding-box diagonals from it, its
+    /// pull has the length of one anchor's vector.
     pub strength: f32,
 }
 
@@ -33,9 +34,15 @@ pub struct Singularity {
 /// Anchors blend by inverse squared edge-path distance (Dijkstra from each
 /// anchor's nearest vertex), so each anchor dominates near itself and the
 /// field varies smoothly between them. Singularities add
-/// `sign · strength · (x − p) / |x − p|²` (a 2-D point-charge field, decaying
-/// with distance). Each vertex's sum is projected onto its tangent plane;
-/// where it vanishes, `fallback_up` is used.
+/// `sign · strength · D · (x − p) / |x − p|²` (a 2-D point-charge field,
+/// decaying with distance; `D` the bounding-box diagonal of `positions`, so
+/// the balance of anchors and singularities does not depend on the mesh's
+/// units). Each vertex's sum is projected onto its tangent plane; where it
+/// vanishes, `fallback_up` is used.
+///
+/// An anchor reaches only the connected component it is on; the caller
+/// gives every component an anchor (`component_fallback::fallback_keys`)
+/// where that matters.
 pub fn up_field(
     positions: &[Vec3],
     normals: &[Vec3],
@@ -46,10 +53,10 @@ pub fn up_field(
 ) -> Vec<TangentFrame> {
     let n = positions.len();
     let mut field = vec![Vec3::ZERO; n];
+    let scale = bbox_diagonal(positions).max(1e-12);
     if !anchors.is_empty() {
         let mut weighted = vec![Vec3::ZERO; n];
         let mut total = vec![0.0f32; n];
-        let scale = bbox_diagonal(positions).max(1e-12);
         for a in anchors {
             let Some(src) = nearest_vertex(positions, a.at) else {
                 continue;
@@ -74,7 +81,7 @@ pub fn up_field(
         for (v, f) in field.iter_mut().enumerate() {
             let r = positions[v] - s.at;
             let d2 = r.length_squared().max(1e-12);
-            *f += r * (s.sign * s.strength / d2);
+            *f += r * (s.sign * s.strength * scale / d2);
         }
     }
     field
