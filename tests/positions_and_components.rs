@@ -50,11 +50,15 @@ fn metric(w: &World, stage: usize, key: &str) -> serde_json::Value {
         .clone()
 }
 
-/// The world point of bounding-box fractions `f` on the builtin mesh of
-/// `config`, written as a TOML array.
-fn world_point(config: &str, f: [f32; 3]) -> String {
-    let p = pipeline(config);
-    let (lo, hi) = loaded(&p).mesh.bounding_box().expect("a mesh");
+/// The world point of bounding-box fractions `f` on the torus of
+/// [`TORUS`], written as a TOML array.
+fn world_point(f: [f32; 3]) -> String {
+    let opts = BuiltinOptions {
+        resolution: [48, 16],
+        ..Default::default()
+    };
+    let torus = builtin_mesh("torus", &opts).expect("torus");
+    let (lo, hi) = torus.bounding_box().expect("a mesh");
     let q = lo + (hi - lo) * Vec3::from(f);
     format!("[{:?}, {:?}, {:?}]", q.x, q.y, q.z)
 }
@@ -63,31 +67,46 @@ fn bbox_array(f: [f32; 3]) -> String {
     format!("[{:?}, {:?}, {:?}]", f[0], f[1], f[2])
 }
 
-/// Scaled by 100 and moved by 1000 on every axis.
+/// Scaled by 100 and moved by 1000 on every axis. Positions near 1000 keep
+/// about 1e-4 in f32, so normals differ by up to ~5e-4 and the frames by a
+/// few 1e-3 (the tolerance below); a field that depended on the mesh's
+/// units would differ by far more.
 fn scale_and_move(mesh: &mut PolyMesh) {
     for p in &mut mesh.positions {
         *p = *p * 100.0 + Vec3::splat(1000.0);
     }
 }
 
-fn assert_same_frames(a: &[surfsynth::kernels::frames::TangentFrame], b: &[surfsynth::kernels::frames::TangentFrame], tol: f32, what: &str) {
+fn assert_same_frames(
+    a: &[surfsynth::kernels::frames::TangentFrame],
+    b: &[surfsynth::kernels::frames::TangentFrame],
+    tol: f32,
+    what: &str,
+) {
     assert_eq!(a.len(), b.len(), "{what}: vertex counts");
     let worst = a
         .iter()
         .zip(b)
         .map(|(x, y)| (x.t - y.t).length().max((x.n - y.n).length()))
         .fold(0.0f32, f32::max);
-    assert!(worst <= tol, "{what}: frames differ by up to {worst} (allowed {tol})");
+    assert!(
+        worst <= tol,
+        "{what}: frames differ by up to {worst} (allowed {tol})"
+    );
 }
 
-const ORIENTATION: &str = r#"
+/// The input of the position tests: a torus, so that nothing is symmetric
+/// about the bounding box's centre in all three axes.
+const TORUS: &str = r#"
 seed = 3
 [input]
 mesh = "builtin:torus"
 exemplar = "builtin:noise"
 [input.mesh_options]
 resolution = [48, 16]
+"#;
 
+const ORIENTATION: &str = r#"
 [[stage]]
 kind = "orientation"
 mode = "field"
@@ -97,13 +116,6 @@ singularities = [{ POS_S, kind = "source", strength = 0.2 }]
 "#;
 
 const DIFFUSE: &str = r#"
-seed = 3
-[input]
-mesh = "builtin:torus"
-exemplar = "builtin:noise"
-[input.mesh_options]
-resolution = [48, 16]
-
 [[stage]]
 kind = "diffuse_orientation"
 keys = [{ POS_A, up = [0.0, 1.0, 0.0] }, { POS_B, up = [1.0, 0.0, 0.3] }]
@@ -111,13 +123,6 @@ sweep_anchor = { POS_S }
 "#;
 
 const TANGENT: &str = r#"
-seed = 3
-[input]
-mesh = "builtin:torus"
-exemplar = "builtin:noise"
-[input.mesh_options]
-resolution = [48, 16]
-
 [[stage]]
 kind = "tangent_field"
 mode = "constraints"
@@ -131,15 +136,17 @@ const A: [f32; 3] = [0.93, 0.41, 0.57];
 const B: [f32; 3] = [0.22, 0.08, 0.31];
 const S: [f32; 3] = [0.61, 0.87, 0.45];
 
-fn with_positions(template: &str, bbox: bool) -> String {
+/// The torus config with `stage`, its positions written as `at_bbox`
+/// (`bbox`) or as the equivalent world `at`.
+fn with_positions(stage: &str, bbox: bool) -> String {
     let pos = |f: [f32; 3]| {
         if bbox {
             format!("at_bbox = {}", bbox_array(f))
         } else {
-            format!("at = {}", world_point(template, f))
+            format!("at = {}", world_point(f))
         }
     };
-    template
+    format!("{TORUS}{stage}")
         .replace("POS_A", &pos(A))
         .replace("POS_B", &pos(B))
         .replace("POS_S", &pos(S))
@@ -156,7 +163,12 @@ fn at_bbox_is_the_same_point_as_at_and_follows_the_mesh() {
     let moved = world_with(&by_bbox, scale_and_move).expect("runs");
     // The singularity's pull is measured in bounding-box diagonals, so the
     // whole field is the same on the scaled mesh.
-    assert_same_frames(&frames(&a), &frames(&moved), 2e-3, "orientation: scaled and moved");
+    assert_same_frames(
+        &frames(&a),
+        &frames(&moved),
+        1e-2,
+        "orientation: scaled and moved",
+    );
     assert_eq!(metric(&a, 0, "fallback_components"), 0);
 
     // diffuse_orientation: keys and the sweep anchor.
@@ -169,9 +181,18 @@ fn at_bbox_is_the_same_point_as_at_and_follows_the_mesh() {
     assert_same_frames(&frames(&a), &frames(&b), 1e-6, "diffuse: at_bbox vs at");
     let moved = world_with(&by_bbox, scale_and_move).expect("runs");
     for key in ["key_vertices", "sweep_anchor"] {
-        assert_eq!(metric(&a, 0, key), metric(&moved, 0, key), "{key} on the moved mesh");
+        assert_eq!(
+            metric(&a, 0, key),
+            metric(&moved, 0, key),
+            "{key} on the moved mesh"
+        );
     }
-    assert_same_frames(&frames(&a), &frames(&moved), 2e-3, "diffuse: scaled and moved");
+    assert_same_frames(
+        &frames(&a),
+        &frames(&moved),
+        1e-2,
+        "diffuse: scaled and moved",
+    );
     let sweep = |w: &World| {
         let e = w.resource::<ActiveMesh>().0;
         w.get::<SweepField>(e).expect("sweep").0.clone()
@@ -182,7 +203,10 @@ fn at_bbox_is_the_same_point_as_at_and_follows_the_mesh() {
         .zip(&s1)
         .map(|(x, y)| (x * 100.0 - y).abs())
         .fold(0.0f32, f32::max);
-    assert!(worst < 0.05, "the sweep scales with the mesh: off by {worst}");
+    assert!(
+        worst < 0.05,
+        "the sweep scales with the mesh: off by {worst}"
+    );
 
     // tangent_field constraints.
     let by_bbox = with_positions(TANGENT, true);
@@ -202,7 +226,7 @@ fn at_bbox_is_the_same_point_as_at_and_follows_the_mesh() {
         .zip(&f1)
         .map(|(x, y)| (x.normalize() - y.normalize()).length())
         .fold(0.0f32, f32::max);
-    assert!(worst < 2e-3, "tangent field directions differ by {worst}");
+    assert!(worst < 1e-2, "tangent field directions differ by {worst}");
 }
 
 /// Two icospheres of radius 1, centred at the origin and at (4, 0, 0).
@@ -224,8 +248,9 @@ fn two_spheres(mesh: &mut PolyMesh) {
 }
 
 /// Every vertex's `t` is a unit vector in its tangent plane, and on the
-/// component without a key most edges join nearly parallel directions (a
-/// smooth field; a sphere's field must turn somewhere, so not all).
+/// component without a key most edges join directions less than 45° apart
+/// (a smooth field; a sphere's field must turn somewhere, so not all; the
+/// keyed sphere of this mesh has 95% such edges).
 fn assert_tangent_and_smooth(w: &World, what: &str) {
     let e = w.resource::<ActiveMesh>().0;
     let mesh = &w.get::<Geometry>(e).expect("mesh").0;
@@ -246,7 +271,7 @@ fn assert_tangent_and_smooth(w: &World, what: &str) {
     for &[a, b] in &topo.edges {
         if of[a as usize] == 1 {
             total += 1;
-            if frames[a as usize].t.dot(frames[b as usize].t) > 0.9 {
+            if frames[a as usize].t.dot(frames[b as usize].t) > 0.7 {
                 smooth += 1;
             }
         }

@@ -30,7 +30,8 @@ pub fn check(at: Option<[f32; 3]>, at_bbox: Option<[f32; 3]>) -> Result<(), Stri
         return Err(format!("`at` = {p:?} must be finite"));
     }
     if let Some(p) = at_bbox
-        && p.iter().any(|c| !(c.is_finite() && (0.0..=1.0).contains(c)))
+        && p.iter()
+            .any(|c| !(c.is_finite() && (0.0..=1.0).contains(c)))
     {
         return Err(format!(
             "`at_bbox` = {p:?} must have every coordinate in [0, 1] (0 = bounding-box minimum, 1 = maximum)"
@@ -91,7 +92,10 @@ mod tests {
     #[test]
     fn bad_positions_name_the_key() {
         let both = check(Some([0.0; 3]), Some([0.0; 3])).unwrap_err();
-        assert!(both.contains("`at`") && both.contains("`at_bbox`"), "{both}");
+        assert!(
+            both.contains("`at`") && both.contains("`at_bbox`"),
+            "{both}"
+        );
         let out = check(None, Some([2.0, 0.0, 0.0])).unwrap_err();
         assert!(out.contains("`at_bbox`") && out.contains("[0, 1]"), "{out}");
         let nan = check(None, Some([f32::NAN, 0.0, 0.0])).unwrap_err();

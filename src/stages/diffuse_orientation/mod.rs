@@ -127,9 +127,7 @@ fn check_point(
     position::check(at, at_bbox)?;
     match (vertex.is_some(), at.is_some() || at_bbox.is_some()) {
         (true, false) | (false, true) => Ok(()),
-        (true, true) => Err(
-            "give `vertex` or a position (`at` or `at_bbox`), not both".into(),
-        ),
+        (true, true) => Err("give `vertex` or a position (`at` or `at_bbox`), not both".into()),
         (false, false) => {
             Err("give `vertex = N`, `at = [x, y, z]` or `at_bbox = [u, v, w]`".into())
         }
@@ -173,7 +171,9 @@ impl StageSettings for DiffuseOrientationSettings {
         ParamDoc {
             name: "sweep_anchor",
             unit: "",
-            range: ParamRange::Any("{ vertex = N } or { at = [x, y, z] } or { at_bbox = [u, v, w] }"),
+            range: ParamRange::Any(
+                "{ vertex = N } or { at = [x, y, z] } or { at_bbox = [u, v, w] }",
+            ),
             doc: "where the sweep is 0 (default: the first key); a position is in world coordinates (`at`) or fractions 0..1 of the coarsest level's bounding box (`at_bbox`); every other component sweeps from its first key (or automatic key), its values continuing after the previous component's",
         },
         ParamDoc {

@@ -175,7 +175,8 @@ impl StageSettings for OrientationSettings {
         }
         for (i, a) in self.anchors.iter().enumerate() {
             let what = format!("anchor {}", i + 1);
-            check_position(a.at, a.at_bbox).map_err(|m| ("anchors".to_string(), format!("{what}: {m}")))?;
+            check_position(a.at, a.at_bbox)
+                .map_err(|m| ("anchors".to_string(), format!("{what}: {m}")))?;
             if Vec3::from(a.up).length_squared() < 1e-12 {
                 return Err((
                     "anchors".into(),

@@ -342,7 +342,12 @@ pub fn face_field(
         .iter()
         .fold((f32::INFINITY, 0.0f32), |(a, b), &l| (a.min(l), b.max(l)));
     metrics.insert(
-        if per_pixel { "world_units_per_pixel" } else { "patch_size_world" }.into(),
+        if per_pixel {
+            "world_units_per_pixel"
+        } else {
+            "patch_size_world"
+        }
+        .into(),
         to_json(&scale),
     );
     metrics.insert("scale_mean".into(), mean.into());
@@ -404,19 +409,14 @@ impl Stage for TangentField {
                 }
             };
             let frames = frames.map(|f| f.0.as_slice());
-            let (field, stage_metrics) = match face_field(
-                mesh,
-                &tri,
-                &settings,
-                frames,
-                texture_scale.texels_per_unit,
-            ) {
-                Ok(x) => x,
-                Err(message) => {
-                    failure.0 = Some(fail(message));
-                    return;
-                }
-            };
+            let (field, stage_metrics) =
+                match face_field(mesh, &tri, &settings, frames, texture_scale.texels_per_unit) {
+                    Ok(x) => x,
+                    Err(message) => {
+                        failure.0 = Some(fail(message));
+                        return;
+                    }
+                };
             for (k, v) in stage_metrics {
                 metrics.record(ctx.index, &k, v);
             }
