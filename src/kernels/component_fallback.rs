@@ -111,8 +111,7 @@ pub fn unseeded_components(components: Components, seeded: &[u32]) -> Vec<u32> {
 ///
 /// Preconditions: `positions`, `normals` and `components.of_vertex` have
 /// one entry per vertex; component ids are below `components.count`.
-/// Linear in the vertex count, plus one pass over a component whose
-/// direction needs its principal axis.
+/// Linear in the vertex count, however many components there are.
 pub fn fallback_keys(
     positions: &[Vec3],
     normals: &[Vec3],
@@ -152,21 +151,39 @@ pub fn fallback_keys(
             nearest[c] = Some((d, v as u32));
         }
     }
+    // Vertices per component (counting sort), built only if a component
+    // needs its principal axis, so that many components cost one pass.
+    let mut members: Option<(Vec<u32>, Vec<u32>)> = None;
+    let mut members_of = |c: u32| -> Vec<Vec3> {
+        let (start, order) = members.get_or_insert_with(|| {
+            let mut start = vec![0u32; components.count + 1];
+            for &k in of {
+                start[k as usize + 1] += 1;
+            }
+            for k in 0..components.count {
+                start[k + 1] += start[k];
+            }
+            let mut next = start.clone();
+            let mut order = vec![0u32; of.len()];
+            for (v, &k) in of.iter().enumerate() {
+                order[next[k as usize] as usize] = v as u32;
+                next[k as usize] += 1;
+            }
+            (start, order)
+        });
+        let range = start[c as usize] as usize..start[c as usize + 1] as usize;
+        order[range]
+            .iter()
+            .map(|&v| positions[v as usize])
+            .collect()
+    };
     missing
         .into_iter()
         .filter_map(|c| {
             let (_, vertex) = nearest[c as usize]?;
             let n = normals[vertex as usize];
             let direction = tangent(fallback_up, n)
-                .or_else(|| {
-                    let points: Vec<Vec3> = positions
-                        .iter()
-                        .zip(of)
-                        .filter(|&(_, &k)| k == c)
-                        .map(|(&p, _)| p)
-                        .collect();
-                    principal_axis(&points).and_then(|a| tangent(a, n))
-                })
+                .or_else(|| principal_axis(&members_of(c)).and_then(|a| tangent(a, n)))
                 .unwrap_or_else(|| {
                     n.try_normalize()
                         .map_or(Vec3::X, |n| n.any_orthonormal_vector())
@@ -177,6 +194,28 @@ pub fn fallback_keys(
                 direction,
             })
         })
+        .collect()
+}
+
+/// Spreads each key's direction over its whole component: one vector per
+/// vertex, the direction of the key on its component, zero on components
+/// without one. A component with a single key and nothing else acting on
+/// it has that key's direction everywhere (before projection), so this is
+/// what blending the key with itself would give, in one pass instead of a
+/// search from the key.
+///
+/// Preconditions: `components.of_vertex` has one entry per vertex.
+pub fn spread_over_components(components: Components, keys: &[FallbackKey]) -> Vec<Vec3> {
+    let mut by_component = vec![Vec3::ZERO; components.count];
+    for k in keys {
+        if let Some(slot) = by_component.get_mut(k.component as usize) {
+            *slot = k.direction;
+        }
+    }
+    components
+        .of_vertex
+        .iter()
+        .map(|&c| by_component.get(c as usize).copied().unwrap_or(Vec3::ZERO))
         .collect()
 }
 
@@ -268,6 +307,38 @@ mod tests {
         let keys = fallback_keys(&positions, &normals, comps, &[1], Vec3::Z);
         assert!((keys[0].direction - Vec3::X).length() < 1e-5, "{keys:?}");
         assert!(fallback_keys(&positions, &normals, comps, &[2, 5], Vec3::Y).is_empty());
+    }
+
+    #[test]
+    fn many_components_with_degenerate_up_take_their_own_axes() {
+        // 1000 two-point components, alternately along x and y, `up` along
+        // every normal: each needs its principal axis (one pass in all).
+        let mut positions = Vec::new();
+        let mut of = Vec::new();
+        for c in 0..1000u32 {
+            let base = Vec3::new(0.0, 0.0, c as f32 * 10.0);
+            let axis = if c % 2 == 0 { Vec3::X } else { Vec3::Y };
+            positions.extend([base, base + axis]);
+            of.extend([c, c]);
+        }
+        let normals = vec![Vec3::Z; positions.len()];
+        let comps = Components {
+            count: 1000,
+            of_vertex: &of,
+        };
+        let keys = fallback_keys(&positions, &normals, comps, &[], Vec3::Z);
+        assert_eq!(keys.len(), 1000);
+        for k in &keys {
+            let want = if k.component % 2 == 0 {
+                Vec3::X
+            } else {
+                Vec3::Y
+            };
+            assert!((k.direction - want).length() < 1e-5, "{k:?}");
+        }
+        let spread = spread_over_components(comps, &keys[..2]);
+        assert_eq!(&spread[..4], &[Vec3::X, Vec3::X, Vec3::Y, Vec3::Y]);
+        assert!(spread[4..].iter().all(|v| *v == Vec3::ZERO));
     }
 
     #[test]

@@ -15,7 +15,7 @@
 //! component.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::component_fallback::{Components, fallback_keys};
+use crate::kernels::component_fallback::{Components, fallback_keys, spread_over_components};
 use crate::kernels::frames::{TangentFrame, frames_from_global_direction, frames_with_angles};
 use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::orientation_field::{Anchor, Singularity, up_field};
@@ -275,8 +275,12 @@ pub fn orientation_frames(
                 });
             }
             // The anchors blend by edge-path distance: a component none of
-            // them is on gets one automatic anchor. (Without anchors the
-            // field is the singularities', which reach every component.)
+            // them is on gets one automatic anchor, spread over the
+            // component directly (one anchor alone gives its own vector
+            // everywhere; no search per component, however many there
+            // are). Without anchors the field is the singularities', which
+            // reach every component.
+            let mut unreached = None;
             if !anchors.is_empty() {
                 let anchored: Vec<u32> = anchors
                     .iter()
@@ -294,16 +298,22 @@ pub fn orientation_frames(
                     up,
                 );
                 fallback_components = automatic.len();
-                anchors.extend(automatic.iter().map(|k| Anchor {
-                    at: mesh.positions[k.vertex as usize],
-                    up: k.direction,
-                }));
+                if !automatic.is_empty() {
+                    unreached = Some(spread_over_components(
+                        Components {
+                            count,
+                            of_vertex: &of_vertex,
+                        },
+                        &automatic,
+                    ));
+                }
             }
             up_field(
                 &mesh.positions,
                 &normals,
                 &topo,
                 &anchors,
+                unreached.as_deref(),
                 &singularities,
                 up,
             )
