@@ -81,10 +81,7 @@ impl StageSettings for BakeSettings {
         if (1..256).contains(&self.size) {
             return Err((
                 "size".into(),
-                format!(
-                    "{} is too small; allowed: 0 (from the texture scale) or 256..=8192",
-                    self.size
-                ),
+                format!("{} is too small; allowed: 0 (from the texture scale) or 256..=8192", self.size),
             ));
         }
         Ok(())
@@ -103,9 +100,7 @@ pub fn auto_atlas_size(texels_per_unit: f64, area: f64) -> u32 {
     if !side.is_finite() {
         return 8192;
     }
-    (side.clamp(256.0, 8192.0).ceil() as u32)
-        .next_power_of_two()
-        .min(8192)
+    (side.clamp(256.0, 8192.0).ceil() as u32).next_power_of_two().min(8192)
 }
 
 /// What the bake reads of a mesh entity.
