@@ -4,6 +4,7 @@ pub mod atlas;
 pub mod bake_triangles;
 pub mod channels;
 pub mod coherent;
+pub mod component_fallback;
 pub mod diffuse_orientation;
 pub mod flatten;
 pub mod frames;

@@ -23,7 +23,8 @@ pub struct Singularity {
     pub at: Vec3,
     /// +1 for a source (up points away), −1 for a sink (up points toward it).
     pub sign: f32,
-    /// Relative strength.
+    /// Relative strength: at `strength` bounding-box diagonals from it, its
+    /// pull has the length of one anchor's vector.
     pub strength: f32,
 }
 
@@ -33,23 +34,35 @@ pub struct Singularity {
 /// Anchors blend by inverse squared edge-path distance (Dijkstra from each
 /// anchor's nearest vertex), so each anchor dominates near itself and the
 /// field varies smoothly between them. Singularities add
-/// `sign · strength · (x − p) / |x − p|²` (a 2-D point-charge field, decaying
-/// with distance). Each vertex's sum is projected onto its tangent plane;
-/// where it vanishes, `fallback_up` is used.
+/// `sign · strength · D · (x − p) / |x − p|²` (a 2-D point-charge field,
+/// decaying with distance; `D` the bounding-box diagonal of `positions`, so
+/// the balance of anchors and singularities does not depend on the mesh's
+/// units). Each vertex's sum is projected onto its tangent plane; where it
+/// vanishes, `fallback_up` is used.
+///
+/// An anchor reaches only the connected component it is on. A vertex no
+/// anchor reaches takes `unreached[v]` in place of the blend (when given;
+/// e.g. the direction of an automatic key spread over its component,
+/// `component_fallback::spread_over_components`, which is what one anchor
+/// alone on that component would give without a search per component).
+///
+/// Preconditions: `topo` was built for the mesh; `normals` and `unreached`
+/// (if given) have one entry per vertex.
 pub fn up_field(
     positions: &[Vec3],
     normals: &[Vec3],
     topo: &Topology,
     anchors: &[Anchor],
+    unreached: Option<&[Vec3]>,
     singularities: &[Singularity],
     fallback_up: Vec3,
 ) -> Vec<TangentFrame> {
     let n = positions.len();
     let mut field = vec![Vec3::ZERO; n];
+    let scale = bbox_diagonal(positions).max(1e-12);
+    let mut total = vec![0.0f32; n];
     if !anchors.is_empty() {
         let mut weighted = vec![Vec3::ZERO; n];
-        let mut total = vec![0.0f32; n];
-        let scale = bbox_diagonal(positions).max(1e-12);
         for a in anchors {
             let Some(src) = nearest_vertex(positions, a.at) else {
                 continue;
@@ -70,11 +83,18 @@ pub fn up_field(
             }
         }
     }
+    if let Some(unreached) = unreached {
+        for ((f, &t), &u) in field.iter_mut().zip(&total).zip(unreached) {
+            if t == 0.0 {
+                *f += u;
+            }
+        }
+    }
     for s in singularities {
         for (v, f) in field.iter_mut().enumerate() {
             let r = positions[v] - s.at;
             let d2 = r.length_squared().max(1e-12);
-            *f += r * (s.sign * s.strength / d2);
+            *f += r * (s.sign * s.strength * scale / d2);
         }
     }
     field
@@ -135,7 +155,7 @@ mod tests {
                 up: Vec3::Y,
             },
         ];
-        let f = up_field(&m.positions, &normals, &t, &anchors, &[], Vec3::Y);
+        let f = up_field(&m.positions, &normals, &t, &anchors, None, &[], Vec3::Y);
         assert!((f[0].t - Vec3::X).length() < 1e-2, "{:?}", f[0].t);
         assert!((f[63].t - Vec3::Y).length() < 1e-2, "{:?}", f[63].t);
         // Halfway, a blend of the two.
@@ -154,7 +174,7 @@ mod tests {
             sign: 1.0,
             strength: 1.0,
         }];
-        let f = up_field(&m.positions, &normals, &t, &[], &src, Vec3::Y);
+        let f = up_field(&m.positions, &normals, &t, &[], None, &src, Vec3::Y);
         let v = 4 * 9 + 8; // (8, 4): to the right of the centre
         assert!(f[v].t.x > 0.99, "{:?}", f[v].t);
         let sink = [Singularity {
@@ -162,7 +182,7 @@ mod tests {
             sign: -1.0,
             strength: 1.0,
         }];
-        let f = up_field(&m.positions, &normals, &t, &[], &sink, Vec3::Y);
+        let f = up_field(&m.positions, &normals, &t, &[], None, &sink, Vec3::Y);
         assert!(f[v].t.x < -0.99, "{:?}", f[v].t);
     }
 }

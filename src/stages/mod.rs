@@ -15,6 +15,7 @@ pub mod jump_surface;
 pub mod lapped_paste;
 pub mod map_back;
 pub mod orientation;
+pub mod position;
 pub mod relax_orientation;
 pub mod result_metrics;
 pub mod retile;

@@ -8,16 +8,28 @@
 //! field (a scalar growing along the field from an anchor, Turk 2001) is
 //! made the same way and orders the vertices of the first synthesis pass.
 //!
+//! A connected component that no key is on gets one automatic key
+//! (`kernels::component_fallback::fallback_keys`: its vertex nearest its
+//! centroid, `fallback_up` projected there) and is diffused from it like
+//! any other; its sweep starts at its first key and continues after the
+//! values of the components before it. Metric `fallback_components`.
+//! Key positions are vertex ids, world points (`at`) or fractions of the
+//! coarsest level's bounding box (`at_bbox`, `stages::position`).
+//!
 //! Writes `Frames` (t = the diffused up direction, s = t × n) and
 //! `SweepField` on every level (or on the active mesh without a hierarchy).
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::component_fallback::{
+    Components, chain_components, fallback_keys, one_per_component,
+};
 use crate::kernels::diffuse_orientation::diffuse_orientation;
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::sweep::{relax_sweep, sweep_field};
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::position;
 use crate::stages::subdivide_sqrt2::carry_attribute;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
@@ -27,7 +39,9 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 
 /// A point on the mesh: a vertex id of the coarsest level (which √2 keeps
-/// in every level) or the vertex nearest to a position.
+/// in every level) or the vertex nearest to a position, in world
+/// coordinates or as fractions of the coarsest level's bounding box
+/// (`stages::position`). Exactly one of the three.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct VertexSpec {
@@ -37,10 +51,15 @@ pub struct VertexSpec {
     /// World position; the nearest vertex of the coarsest level is used.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub at: Option<[f32; 3]>,
+    /// Position as fractions `[0, 1]` of the coarsest level's bounding box
+    /// (0 = minimum, 1 = maximum); the nearest vertex is used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at_bbox: Option<[f32; 3]>,
 }
 
-/// A key orientation: `{ vertex = 12, up = [0, 1, 0] }` or
-/// `{ at = [x, y, z], up = [0, 1, 0] }`.
+/// A key orientation: `{ vertex = 12, up = [0, 1, 0] }`,
+/// `{ at = [x, y, z], up = [0, 1, 0] }` or
+/// `{ at_bbox = [u, v, w], up = [0, 1, 0] }`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct KeySpec {
@@ -50,6 +69,10 @@ pub struct KeySpec {
     /// World position; the nearest vertex of the coarsest level is used.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub at: Option<[f32; 3]>,
+    /// Position as fractions `[0, 1]` of the coarsest level's bounding box;
+    /// the nearest vertex is used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at_bbox: Option<[f32; 3]>,
     /// The texture's up direction there (projected onto the tangent plane).
     pub up: [f32; 3],
 }
@@ -64,11 +87,13 @@ pub struct DiffuseOrientationSettings {
     pub smoothing_passes: u32,
     /// Passes on each finer level after carrying the directions down.
     pub refine_passes: u32,
-    /// Direction for vertices no key reaches (other components).
+    /// Direction of the automatic key placed on each connected component
+    /// no key is on (see [`fallback_keys`]).
     pub fallback_up: [f32; 3],
     /// Whether to compute the sweep field too.
     pub sweep: bool,
-    /// Where the sweep is 0; the first key when not given.
+    /// Where the sweep is 0; the first key when not given. Every other
+    /// component starts its sweep at its first key (or automatic key).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sweep_anchor: Option<VertexSpec>,
     /// Relaxation passes of the sweep on the coarsest level.
@@ -81,6 +106,7 @@ impl Default for DiffuseOrientationSettings {
             keys: vec![KeySpec {
                 vertex: Some(0),
                 at: None,
+                at_bbox: None,
                 up: [0.0, 1.0, 0.0],
             }],
             smoothing_passes: 20,
@@ -93,11 +119,18 @@ impl Default for DiffuseOrientationSettings {
     }
 }
 
-fn check_point(vertex: Option<u32>, at: Option<[f32; 3]>) -> Result<(), String> {
-    match (vertex, at) {
-        (Some(_), None) | (None, Some(_)) => Ok(()),
-        (Some(_), Some(_)) => Err("give either `vertex` or `at`, not both".into()),
-        (None, None) => Err("give `vertex = N` or `at = [x, y, z]`".into()),
+fn check_point(
+    vertex: Option<u32>,
+    at: Option<[f32; 3]>,
+    at_bbox: Option<[f32; 3]>,
+) -> Result<(), String> {
+    position::check(at, at_bbox)?;
+    match (vertex.is_some(), at.is_some() || at_bbox.is_some()) {
+        (true, false) | (false, true) => Ok(()),
+        (true, true) => Err("give `vertex` or a position (`at` or `at_bbox`), not both".into()),
+        (false, false) => {
+            Err("give `vertex = N`, `at = [x, y, z]` or `at_bbox = [u, v, w]`".into())
+        }
     }
 }
 
@@ -107,9 +140,9 @@ impl StageSettings for DiffuseOrientationSettings {
             name: "keys",
             unit: "",
             range: ParamRange::Any(
-                "list of { vertex = N, up = [x, y, z] } or { at = [x, y, z], up = [x, y, z] }",
+                "list of { vertex = N | at = [x, y, z] | at_bbox = [u, v, w], up = [x, y, z] }",
             ),
-            doc: "texture up direction at key vertices (ids of the coarsest level = input mesh ids, or the vertex nearest a position)",
+            doc: "texture up direction at key vertices: ids of the coarsest level (= input mesh ids), or the vertex nearest a position given in world coordinates (`at`) or as fractions 0..1 of the coarsest level's bounding box (`at_bbox`, 0 = min, 1 = max)",
         },
         ParamDoc {
             name: "smoothing_passes",
@@ -127,7 +160,7 @@ impl StageSettings for DiffuseOrientationSettings {
             name: "fallback_up",
             unit: "world axes",
             range: ParamRange::Float(-1e6, 1e6),
-            doc: "up direction of components no key reaches",
+            doc: "each connected component no key is on gets one automatic key, at its vertex nearest its centroid, with this direction projected onto the tangent plane (the component's principal axis where it is along the normal), and is diffused from it; counted in the metric `fallback_components`",
         },
         ParamDoc {
             name: "sweep",
@@ -138,8 +171,10 @@ impl StageSettings for DiffuseOrientationSettings {
         ParamDoc {
             name: "sweep_anchor",
             unit: "",
-            range: ParamRange::Any("{ vertex = N } or { at = [x, y, z] }"),
-            doc: "where the sweep is 0 (default: the first key)",
+            range: ParamRange::Any(
+                "{ vertex = N } or { at = [x, y, z] } or { at_bbox = [u, v, w] }",
+            ),
+            doc: "where the sweep is 0 (default: the first key); a position is in world coordinates (`at`) or fractions 0..1 of the coarsest level's bounding box (`at_bbox`); every other component sweeps from its first key (or automatic key), its values continuing after the previous component's",
         },
         ParamDoc {
             name: "sweep_iterations",
@@ -153,21 +188,33 @@ impl StageSettings for DiffuseOrientationSettings {
         if self.keys.is_empty() {
             return Err(("keys".into(), "give at least one key orientation".into()));
         }
-        for k in &self.keys {
-            check_point(k.vertex, k.at).map_err(|m| ("keys".to_string(), m))?;
+        for (i, k) in self.keys.iter().enumerate() {
+            check_point(k.vertex, k.at, k.at_bbox)
+                .map_err(|m| ("keys".to_string(), format!("key {}: {m}", i + 1)))?;
             if Vec3::from(k.up).length_squared() < 1e-12 {
-                return Err(("keys".into(), "a key has a zero `up` vector".into()));
+                return Err((
+                    "keys".into(),
+                    format!("key {}: `up` is the zero vector", i + 1),
+                ));
             }
         }
         if let Some(a) = &self.sweep_anchor {
-            check_point(a.vertex, a.at).map_err(|m| ("sweep_anchor".to_string(), m))?;
+            check_point(a.vertex, a.at, a.at_bbox).map_err(|m| ("sweep_anchor".to_string(), m))?;
         }
         Ok(())
     }
 }
 
-fn resolve(positions: &[Vec3], vertex: Option<u32>, at: Option<[f32; 3]>) -> Result<u32, String> {
-    match (vertex, at) {
+/// The coarsest-level vertex a spec names: its `vertex`, or the vertex
+/// nearest its `at` / `at_bbox` (`bbox` is the coarsest level's).
+fn resolve(
+    positions: &[Vec3],
+    bbox: Option<(Vec3, Vec3)>,
+    vertex: Option<u32>,
+    at: Option<[f32; 3]>,
+    at_bbox: Option<[f32; 3]>,
+) -> Result<u32, String> {
+    match (vertex, position::resolve(at, at_bbox, bbox)?) {
         (Some(v), _) if (v as usize) < positions.len() => Ok(v),
         (Some(v), _) => Err(format!(
             "key vertex {v} does not exist: the coarsest level has {} vertices (ids 0..={})",
@@ -175,9 +222,9 @@ fn resolve(positions: &[Vec3], vertex: Option<u32>, at: Option<[f32; 3]>) -> Res
             positions.len().saturating_sub(1)
         )),
         (None, Some(p)) => {
-            nearest_vertex(positions, p.into()).ok_or_else(|| "the mesh has no vertices".into())
+            nearest_vertex(positions, p).ok_or_else(|| "the mesh has no vertices".into())
         }
-        (None, None) => Err("a key needs `vertex` or `at`".into()),
+        (None, None) => Err("a key needs `vertex`, `at` or `at_bbox`".into()),
     }
 }
 
@@ -219,21 +266,53 @@ impl Stage for DiffuseOrientation {
                 return;
             };
             let positions = &coarsest.0.positions;
+            let bbox = coarsest.0.bounding_box();
             let mut keys = Vec::with_capacity(settings.keys.len());
-            for k in &settings.keys {
-                match resolve(positions, k.vertex, k.at) {
+            for (i, k) in settings.keys.iter().enumerate() {
+                match resolve(positions, bbox, k.vertex, k.at, k.at_bbox) {
                     Ok(v) => keys.push((v, Vec3::from(k.up))),
-                    Err(m) => return fail(&mut failure, m),
+                    Err(m) => return fail(&mut failure, format!("keys: key {}: {m}", i + 1)),
                 }
             }
             let anchor = match &settings.sweep_anchor {
-                Some(a) => match resolve(positions, a.vertex, a.at) {
+                Some(a) => match resolve(positions, bbox, a.vertex, a.at, a.at_bbox) {
                     Ok(v) => v,
                     Err(m) => return fail(&mut failure, format!("sweep_anchor: {m}")),
                 },
                 None => keys[0].0,
             };
             let fallback = Vec3::from(settings.fallback_up);
+            // Every connected component no key is on gets one automatic
+            // key, so the field is diffused there too; the keys hold on
+            // every level (√2 keeps the coarsest level's vertex ids).
+            let coarsest_topo = Topology::build(&coarsest.0);
+            let coarsest_normals = coarsest.0.vertex_normals();
+            let (count, of_vertex) = coarsest_topo.components();
+            let user_keys: Vec<u32> = keys.iter().map(|k| k.0).collect();
+            let automatic = fallback_keys(
+                positions,
+                &coarsest_normals,
+                Components {
+                    count,
+                    of_vertex: &of_vertex,
+                },
+                &user_keys,
+                fallback,
+            );
+            keys.extend(automatic.iter().map(|k| (k.vertex, k.direction)));
+            // One sweep start per component: the anchor, else the
+            // component's first key (user keys before automatic ones).
+            let preferred: Vec<u32> = std::iter::once(anchor)
+                .chain(keys.iter().map(|k| k.0))
+                .collect();
+            let sweep_starts = one_per_component(
+                Components {
+                    count,
+                    of_vertex: &of_vertex,
+                },
+                &preferred,
+            );
+            let mut coarsest_cache = Some((coarsest_topo, coarsest_normals));
             let mut directions: Vec<Vec3> = Vec::new();
             let mut sweep: Vec<f32> = Vec::new();
             for (i, &e) in levels.iter().enumerate() {
@@ -243,8 +322,15 @@ impl Stage for DiffuseOrientation {
                 let mesh = &geometry.0;
                 let _span =
                     tracing::info_span!("diffuse_level", vertices = mesh.vertex_count()).entered();
-                let topo = Topology::build(mesh);
-                let normals = mesh.vertex_normals();
+                let (topo, normals) = match coarsest_cache.take() {
+                    Some(cached) if i == 0 => cached,
+                    _ => (Topology::build(mesh), mesh.vertex_normals()),
+                };
+                let (count, of_vertex) = topo.components();
+                let components = Components {
+                    count,
+                    of_vertex: &of_vertex,
+                };
                 let carried = match (i, parents) {
                     (0, _) => None,
                     (_, Some(p)) if p.0.len() == mesh.vertex_count() => Some((
@@ -274,10 +360,12 @@ impl Stage for DiffuseOrientation {
                 if i == 0 {
                     metrics.record(ctx.index, "fill_passes", result.fill_passes);
                     metrics.record(ctx.index, "fallback_vertices", result.fallback_vertices);
+                    metrics.record(ctx.index, "key_vertices", user_keys.clone());
+                    metrics.record(ctx.index, "fallback_components", automatic.len());
                     metrics.record(
                         ctx.index,
-                        "key_vertices",
-                        keys.iter().map(|k| k.0).collect::<Vec<_>>(),
+                        "fallback_keys",
+                        automatic.iter().map(|k| k.vertex).collect::<Vec<_>>(),
                     );
                     metrics.record(ctx.index, "sweep_anchor", anchor);
                 }
@@ -288,12 +376,16 @@ impl Stage for DiffuseOrientation {
                             &mesh.positions,
                             &topo,
                             &directions,
-                            &[anchor],
+                            &sweep_starts,
                             settings.sweep_iterations,
                         ),
                         Some((_, mut s)) => {
                             let mut fixed = vec![false; s.len()];
-                            fixed[anchor as usize] = true;
+                            for &a in &sweep_starts {
+                                if let Some(f) = fixed.get_mut(a as usize) {
+                                    *f = true;
+                                }
+                            }
                             relax_sweep(
                                 &mesh.positions,
                                 &topo,
@@ -305,6 +397,10 @@ impl Stage for DiffuseOrientation {
                             s
                         }
                     };
+                    // The anchor's component first, the others continuing
+                    // after it (a no-op on a connected mesh).
+                    let first = of_vertex.get(anchor as usize).copied();
+                    chain_components(&mut sweep, components, first);
                 } else {
                     sweep = vec![0.0; mesh.vertex_count()];
                 }

@@ -4,12 +4,24 @@
 //! per vertex (isotropic textures), or a field interpolated from anchor
 //! vectors plus sources and sinks (Zelinka & Garland 2004 §6.1); all with a
 //! global rotation angle.
+//!
+//! Anchor and singularity positions are world points (`at`) or fractions of
+//! the active mesh's bounding box (`at_bbox`, [`crate::stages::position`]).
+//! In field mode, a connected component that no anchor is on gets one
+//! automatic anchor (`kernels::component_fallback::fallback_keys`: at its
+//! vertex nearest its centroid, `up` projected there), since the anchors
+//! blend by edge-path distance and never reach it; metric
+//! `fallback_components`. Singularities act through space and reach every
+//! component.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::component_fallback::{Components, fallback_keys, spread_over_components};
 use crate::kernels::frames::{TangentFrame, frames_from_global_direction, frames_with_angles};
+use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::orientation_field::{Anchor, Singularity, up_field};
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::position;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -30,12 +42,19 @@ pub enum OrientationMode {
     Field,
 }
 
-/// An anchor in the config: `{ at = [x, y, z], up = [x, y, z] }`.
+/// An anchor in the config: `{ at = [x, y, z], up = [x, y, z] }` or
+/// `{ at_bbox = [u, v, w], up = [x, y, z] }` (exactly one of `at` and
+/// `at_bbox`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AnchorSpec {
     /// World position; the nearest vertex takes the anchor.
-    pub at: [f32; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<[f32; 3]>,
+    /// Position as fractions `[0, 1]` of the active mesh's bounding box
+    /// (0 = minimum, 1 = maximum); the nearest vertex takes the anchor.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at_bbox: Option<[f32; 3]>,
     /// Texture up direction there.
     pub up: [f32; 3],
 }
@@ -50,15 +69,21 @@ pub enum SingularityKind {
     Sink,
 }
 
-/// A singularity in the config: `{ at = [x, y, z], kind = "source", strength = 1.0 }`.
+/// A singularity in the config: `{ at = [x, y, z], kind = "source", strength = 1.0 }`
+/// (or `at_bbox = [u, v, w]` instead of `at`).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SingularitySpec {
     /// World position.
-    pub at: [f32; 3],
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at: Option<[f32; 3]>,
+    /// Position as fractions `[0, 1]` of the active mesh's bounding box.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at_bbox: Option<[f32; 3]>,
     /// Source or sink.
     pub kind: SingularityKind,
-    /// Relative strength (default 1).
+    /// Relative strength (default 1): at a distance of `strength` bounding-box
+    /// diagonals its pull equals one anchor's.
     #[serde(default = "one")]
     pub strength: f32,
 }
@@ -73,8 +98,9 @@ fn one() -> f32 {
 pub struct OrientationSettings {
     /// Global, random or field.
     pub mode: OrientationMode,
-    /// The texture's up direction in world space (global mode, and the
-    /// fallback where a field vanishes).
+    /// The texture's up direction in world space (global mode, the
+    /// automatic anchor of a component without one, and the fallback
+    /// where a field vanishes).
     pub up: [f32; 3],
     /// Extra rotation of every frame about its normal, degrees.
     pub angle: f32,
@@ -108,7 +134,7 @@ impl StageSettings for OrientationSettings {
             name: "up",
             unit: "world axes",
             range: ParamRange::Float(-1e6, 1e6),
-            doc: "texture up direction in world space (non-zero); where it is parallel to the normal a perpendicular is used",
+            doc: "texture up direction in world space (non-zero); where it is parallel to the normal a perpendicular is used; field mode: the direction of the automatic anchor each connected component without an anchor gets (at its vertex nearest its centroid; metric `fallback_components`)",
         },
         ParamDoc {
             name: "angle",
@@ -119,16 +145,18 @@ impl StageSettings for OrientationSettings {
         ParamDoc {
             name: "anchors",
             unit: "",
-            range: ParamRange::Any("list of { at = [x, y, z], up = [x, y, z] }"),
-            doc: "field mode: up vectors at points, blended by inverse squared edge-path distance",
+            range: ParamRange::Any(
+                "list of { at = [x, y, z] | at_bbox = [u, v, w], up = [x, y, z] }",
+            ),
+            doc: "field mode: up vectors at points (world coordinates `at`, or `at_bbox` = fractions 0..1 of the mesh's bounding box, 0 = min, 1 = max; the nearest vertex takes it), blended by inverse squared edge-path distance; a component no anchor is on gets an automatic one",
         },
         ParamDoc {
             name: "singularities",
             unit: "",
             range: ParamRange::Any(
-                "list of { at = [x, y, z], kind = \"source\" | \"sink\", strength = 1.0 }",
+                "list of { at = [x, y, z] | at_bbox = [u, v, w], kind = \"source\" | \"sink\", strength = 1.0 }",
             ),
-            doc: "field mode: points the up field flows out of (source) or into (sink)",
+            doc: "field mode: points (world `at` or bounding-box fractions `at_bbox`) the up field flows out of (source) or into (sink); the pull falls off as 1 / distance and equals one anchor's at `strength` bounding-box diagonals",
         },
     ];
 
@@ -145,26 +173,75 @@ impl StageSettings for OrientationSettings {
                 "field mode needs at least one entry in `anchors` or `singularities`".into(),
             ));
         }
-        if let Some(a) = self
-            .anchors
-            .iter()
-            .find(|a| Vec3::from(a.up).length_squared() < 1e-12)
-        {
-            return Err((
-                "anchors".into(),
-                format!("anchor at {:?} has a zero `up` vector", a.at),
-            ));
+        for (i, a) in self.anchors.iter().enumerate() {
+            let what = format!("anchor {}", i + 1);
+            check_position(a.at, a.at_bbox)
+                .map_err(|m| ("anchors".to_string(), format!("{what}: {m}")))?;
+            if Vec3::from(a.up).length_squared() < 1e-12 {
+                return Err((
+                    "anchors".into(),
+                    format!(
+                        "{what} ({}) has a zero `up` vector",
+                        position::describe(a.at, a.at_bbox)
+                    ),
+                ));
+            }
+        }
+        for (i, s) in self.singularities.iter().enumerate() {
+            let what = format!("singularity {}", i + 1);
+            check_position(s.at, s.at_bbox)
+                .map_err(|m| ("singularities".to_string(), format!("{what}: {m}")))?;
+            if !s.strength.is_finite() {
+                return Err((
+                    "singularities".into(),
+                    format!("{what}: `strength` = {} must be finite", s.strength),
+                ));
+            }
         }
         Ok(())
     }
 }
 
+/// Exactly one of `at` and `at_bbox`, each valid ([`position::check`]).
+fn check_position(at: Option<[f32; 3]>, at_bbox: Option<[f32; 3]>) -> Result<(), String> {
+    position::check(at, at_bbox)?;
+    if at.is_none() && at_bbox.is_none() {
+        return Err("give `at = [x, y, z]` or `at_bbox = [u, v, w]`".into());
+    }
+    Ok(())
+}
+
+/// The world point of a spec's `at` / `at_bbox` on a mesh with bounding
+/// box `bbox`.
+fn point(
+    at: Option<[f32; 3]>,
+    at_bbox: Option<[f32; 3]>,
+    bbox: Option<(Vec3, Vec3)>,
+) -> Result<Vec3, String> {
+    position::resolve(at, at_bbox, bbox)?
+        .ok_or_else(|| "give `at = [x, y, z]` or `at_bbox = [u, v, w]`".into())
+}
+
+/// The frames of [`orientation_frames`] and what it did.
+#[derive(Clone, Debug)]
+pub struct OrientationResult {
+    /// One frame per vertex.
+    pub frames: Vec<TangentFrame>,
+    /// Field mode: connected components that got an automatic anchor.
+    pub fallback_components: usize,
+}
+
 /// Computes the frames of `settings` for a mesh.
+///
+/// # Errors
+/// A message naming the anchor or singularity whose position cannot be
+/// resolved (`at_bbox` on a mesh without vertices).
 pub fn orientation_frames(
     mesh: &crate::mesh::PolyMesh,
     settings: &OrientationSettings,
     seed: u64,
-) -> Vec<TangentFrame> {
+) -> Result<OrientationResult, String> {
+    let mut fallback_components = 0;
     let normals = mesh.vertex_normals();
     let up = Vec3::from(settings.up);
     let mut frames = match settings.mode {
@@ -175,32 +252,68 @@ pub fn orientation_frames(
         }),
         OrientationMode::Field => {
             let topo = Topology::build(mesh);
-            let anchors: Vec<Anchor> = settings
-                .anchors
-                .iter()
-                .map(|a| Anchor {
-                    at: a.at.into(),
+            let bbox = mesh.bounding_box();
+            let mut anchors = Vec::with_capacity(settings.anchors.len());
+            for (i, a) in settings.anchors.iter().enumerate() {
+                anchors.push(Anchor {
+                    at: point(a.at, a.at_bbox, bbox)
+                        .map_err(|m| format!("anchors: anchor {}: {m}", i + 1))?,
                     up: a.up.into(),
-                })
-                .collect();
-            let singularities: Vec<Singularity> = settings
-                .singularities
-                .iter()
-                .map(|s| Singularity {
-                    at: s.at.into(),
+                });
+            }
+            let mut singularities = Vec::with_capacity(settings.singularities.len());
+            for (i, s) in settings.singularities.iter().enumerate() {
+                singularities.push(Singularity {
+                    at: point(s.at, s.at_bbox, bbox)
+                        .map_err(|m| format!("singularities: singularity {}: {m}", i + 1))?,
                     sign: if s.kind == SingularityKind::Source {
                         1.0
                     } else {
                         -1.0
                     },
                     strength: s.strength,
-                })
-                .collect();
+                });
+            }
+            // The anchors blend by edge-path distance: a component none of
+            // them is on gets one automatic anchor, spread over the
+            // component directly (one anchor alone gives its own vector
+            // everywhere; no search per component, however many there
+            // are). Without anchors the field is the singularities', which
+            // reach every component.
+            let mut unreached = None;
+            if !anchors.is_empty() {
+                let anchored: Vec<u32> = anchors
+                    .iter()
+                    .filter_map(|a| nearest_vertex(&mesh.positions, a.at))
+                    .collect();
+                let (count, of_vertex) = topo.components();
+                let automatic = fallback_keys(
+                    &mesh.positions,
+                    &normals,
+                    Components {
+                        count,
+                        of_vertex: &of_vertex,
+                    },
+                    &anchored,
+                    up,
+                );
+                fallback_components = automatic.len();
+                if !automatic.is_empty() {
+                    unreached = Some(spread_over_components(
+                        Components {
+                            count,
+                            of_vertex: &of_vertex,
+                        },
+                        &automatic,
+                    ));
+                }
+            }
             up_field(
                 &mesh.positions,
                 &normals,
                 &topo,
                 &anchors,
+                unreached.as_deref(),
                 &singularities,
                 up,
             )
@@ -210,7 +323,10 @@ pub fn orientation_frames(
     if rotation != 0.0 {
         frames.iter_mut().for_each(|f| *f = f.rotated(rotation));
     }
-    frames
+    Ok(OrientationResult {
+        frames,
+        fallback_components,
+    })
 }
 
 /// The `orientation` stage.
@@ -234,12 +350,31 @@ impl Stage for Orientation {
         (move |mut commands: Commands,
                active: Res<ActiveMesh>,
                seed: Res<RunSeed>,
+               mut metrics: ResMut<Metrics>,
+               mut failure: ResMut<StageFailure>,
                meshes: Query<&Geometry>| {
             let Ok(geometry) = meshes.get(active.0) else {
                 return;
             };
-            let frames = orientation_frames(&geometry.0, &settings, seed.derive(ctx.index, 0));
-            commands.entity(active.0).insert(Frames(frames));
+            match orientation_frames(&geometry.0, &settings, seed.derive(ctx.index, 0)) {
+                Ok(result) => {
+                    if settings.mode == OrientationMode::Field {
+                        metrics.record(
+                            ctx.index,
+                            "fallback_components",
+                            result.fallback_components,
+                        );
+                    }
+                    commands.entity(active.0).insert(Frames(result.frames));
+                }
+                Err(message) => {
+                    failure.0 = Some(PipelineError::Stage {
+                        index: ctx.index + 1,
+                        kind: Self::KIND.into(),
+                        message,
+                    });
+                }
+            }
         })
         .into_configs()
     }

@@ -8,16 +8,25 @@
 //! frames. With `isotropic = true` only the scale is used and each paste
 //! propagates its own orientation.
 //!
+//! Constraint positions are face ids, world points (`at`) or fractions of
+//! the mesh's bounding box (`at_bbox`, [`crate::stages::position`]). The
+//! Gaussians spread over edges and never reach a connected component
+//! without a constraint; that component keeps the global field, `up`
+//! projected onto its faces (metric `fallback_components`), which is
+//! already smooth, so it needs no automatic constraint.
+//!
 //! Lapped textures work on triangles: a polygon mesh is fan-triangulated
 //! into a new active mesh level first.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
+use crate::kernels::component_fallback::{Components, unseeded_components};
 use crate::kernels::lapped::TriMesh;
 use crate::kernels::lapped::tangent_field::{
     FieldConstraint, field_from_vertex_frames, global_up_field, nearest_face, rbf_field,
 };
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stages::position;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -67,16 +76,20 @@ pub enum LengthUnit {
 
 /// A constraint in the config:
 /// `{ at = [x, y, z], up = [x, y, z], scale = 1.0, radius = 0.2, weight = 1.0 }`
-/// (or `face = N` instead of `at`).
+/// (or `face = N` or `at_bbox = [u, v, w]` instead of `at`; exactly one).
 #[derive(Clone, Debug, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ConstraintSpec {
     /// The face it sits on, or...
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub face: Option<u32>,
-    /// ...a point whose nearest face (by centroid) takes it.
+    /// ...a point whose nearest face (by centroid) takes it, or...
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub at: Option<[f32; 3]>,
+    /// ...a point as fractions `[0, 1]` of the mesh's bounding box (0 =
+    /// minimum, 1 = maximum), whose nearest face takes it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub at_bbox: Option<[f32; 3]>,
     /// Texture up direction there (world space, projected onto the face).
     pub up: [f32; 3],
     /// Texture scale there, relative to `patch_size` (> 0).
@@ -164,9 +177,9 @@ impl StageSettings for TangentFieldSettings {
             name: "constraints",
             unit: "",
             range: ParamRange::Any(
-                "list of { at = [x, y, z] | face = N, up = [x, y, z], scale = 1.0, radius = R, weight = 1.0 }",
+                "list of { face = N | at = [x, y, z] | at_bbox = [u, v, w], up = [x, y, z], scale = 1.0, radius = R, weight = 1.0 }",
             ),
-            doc: "constraints mode: direction, relative scale, Gaussian radius (in units) and weight at a face or the face nearest a point",
+            doc: "constraints mode: direction, relative scale, Gaussian radius (in units) and weight at a face, or at the face nearest a point given in world coordinates (`at`) or as fractions 0..1 of the mesh's bounding box (`at_bbox`, 0 = min, 1 = max); a connected component without a constraint keeps the global field",
         },
         ParamDoc {
             name: "background_weight",
@@ -194,10 +207,13 @@ impl StageSettings for TangentFieldSettings {
         }
         for (i, c) in self.constraints.iter().enumerate() {
             let what = format!("constraint {}", i + 1);
-            if c.face.is_some() == c.at.is_some() {
+            position::check(c.at, c.at_bbox)
+                .map_err(|m| ("constraints".to_string(), format!("{what}: {m}")))?;
+            let given = [c.face.is_some(), c.at.is_some(), c.at_bbox.is_some()];
+            if given.iter().filter(|&&g| g).count() != 1 {
                 return Err((
                     "constraints".into(),
-                    format!("{what}: give exactly one of `face` and `at`"),
+                    format!("{what}: give exactly one of `face`, `at` and `at_bbox`"),
                 ));
             }
             if Vec3::from(c.up).length_squared() < 1e-12 {
@@ -260,21 +276,45 @@ pub fn face_field(
             field_from_vertex_frames(tri, frames, scale, up)
         }
         FieldMode::Constraints => {
-            let constraints: Vec<FieldConstraint> = settings
-                .constraints
-                .iter()
-                .map(|c| FieldConstraint {
-                    face: c
-                        .face
-                        .unwrap_or_else(|| nearest_face(tri, Vec3::from(c.at.unwrap_or_default()))),
+            let bbox = mesh.bounding_box();
+            let mut constraints = Vec::with_capacity(settings.constraints.len());
+            for (i, c) in settings.constraints.iter().enumerate() {
+                let at = position::resolve(c.at, c.at_bbox, bbox)
+                    .map_err(|m| format!("constraints: constraint {}: {m}", i + 1))?;
+                let face = match (c.face, at) {
+                    (Some(f), _) => f,
+                    (None, Some(p)) => nearest_face(tri, p),
+                    (None, None) => {
+                        return Err(format!(
+                            "constraints: constraint {}: give `face`, `at` or `at_bbox`",
+                            i + 1
+                        ));
+                    }
+                };
+                constraints.push(FieldConstraint {
+                    face,
                     direction: Vec3::from(c.up),
                     scale: c.scale,
                     radius: c.radius * unit,
                     weight: c.weight,
-                })
-                .collect();
+                });
+            }
             let background = global_up_field(tri, up, 1.0);
             let topo = Topology::build(mesh);
+            // Components without a constraint keep the background field.
+            let (count, of_vertex) = topo.components();
+            let constrained: Vec<u32> = constraints
+                .iter()
+                .filter_map(|c| tri.tris.get(c.face as usize).map(|t| t[0]))
+                .collect();
+            let unconstrained = unseeded_components(
+                Components {
+                    count,
+                    of_vertex: &of_vertex,
+                },
+                &constrained,
+            );
+            metrics.insert("fallback_components".into(), unconstrained.len().into());
             let (t, report) = rbf_field(
                 tri,
                 &topo,
