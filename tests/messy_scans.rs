@@ -34,12 +34,11 @@ fn run_config(name: &str, mesh: Option<&Path>) -> Result<World, String> {
 
 fn quality(w: &World) -> [f64; 3] {
     let r = &w.resource::<Metrics>().result;
-    let q = r.get("quality").unwrap_or(&serde_json::Value::Null);
-    let n = |v: &serde_json::Value| v.as_f64().unwrap_or(f64::NAN);
+    let n = |v: Option<&serde_json::Value>| v.and_then(|v| v.as_f64()).unwrap_or(f64::NAN);
     [
-        n(&q["coherence"]["mean"]),
-        n(&q["completeness"]),
-        n(&q["sharpness"]),
+        n(r.get("coherence").and_then(|c| c.get("mean"))),
+        n(r.get("completeness")),
+        n(r.get("sharpness")),
     ]
 }
 
