@@ -25,7 +25,8 @@ fn run_config(name: &str, mesh: Option<&Path>) -> Result<World, String> {
         input.remove("mesh_options");
     }
     let text = toml::to_string(&table).unwrap();
-    let p = Pipeline::from_source(ConfigSource::from_text(name, &text)).map_err(|e| e.to_string())?;
+    let p =
+        Pipeline::from_source(ConfigSource::from_text(name, &text)).map_err(|e| e.to_string())?;
     let input = load_input(&p.input, &dir, name).map_err(|e| e.to_string())?;
     let mut w = World::new();
     run_in_world(&p, &mut w, input).map_err(|e| e.to_string())?;
@@ -83,6 +84,10 @@ fn every_method_runs_on_a_messy_20k_scan() {
     let dir = tempfile::tempdir().unwrap();
     let (scan, report) = common::messy::write_messy_scan(dir.path(), 20_000, 3);
     assert!(report.small_components >= 100, "{report:?}");
+    // To look at it: SURFSYNTH_KEEP_MESSY=FOLDER keeps a copy of the scan.
+    if let Ok(keep) = std::env::var("SURFSYNTH_KEEP_MESSY") {
+        let _ = std::fs::copy(&scan, Path::new(&keep).join("messy_20k.off"));
+    }
     let mut lines = Vec::new();
     let mut failures = Vec::new();
     for config in [

@@ -68,7 +68,13 @@ pub fn messy_scan(vertices: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<Vec<u32>>, 
     let nu = ((main as f32 * 2.7).sqrt() as usize).max(12);
     let nv = (main / nu).max(6);
     let bumps: Vec<(f32, f32, f32)> = (0..24)
-        .map(|_| (rng.range(0.0, TAU), rng.range(0.0, TAU), rng.range(-1.5, 1.5)))
+        .map(|_| {
+            (
+                rng.range(0.0, TAU),
+                rng.range(0.0, TAU),
+                rng.range(-1.5, 1.5),
+            )
+        })
         .collect();
     for i in 0..nu {
         for j in 0..nv {
@@ -143,7 +149,8 @@ pub fn messy_scan(vertices: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<Vec<u32>>, 
         p.push(q);
         (p.len() - 1) as u32
     };
-    let near = |q: [f32; 3], d: [f32; 3], s: f32| [q[0] + d[0] * s, q[1] + d[1] * s, q[2] + d[2] * s];
+    let near =
+        |q: [f32; 3], d: [f32; 3], s: f32| [q[0] + d[0] * s, q[1] + d[1] * s, q[2] + d[2] * s];
     let main_faces_count = f.len();
     // Non-manifold fins: a third and a fourth triangle on existing edges.
     for _ in 0..20 {

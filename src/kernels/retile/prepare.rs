@@ -3,7 +3,9 @@
 //!
 //! Steps, in order: fan-triangulate every polygon (the same triangles, in the
 //! same order, as [`PolyMesh::triangulated`]); drop triangles with a repeated
-//! vertex; reject non-manifold edges (more than two triangles); orient every
+//! vertex; cut non-manifold edges (more than two triangles: the two that
+//! best continue each other stay joined, the others are detached along that
+//! edge, and the vertices of the cut get one copy per fan); orient every
 //! component consistently (keeping the orientation most of its triangles
 //! already have) or reject it as non-orientable; split non-manifold vertices
 //! (several fans of triangles meeting at one vertex) into one vertex per fan;
@@ -26,6 +28,10 @@ pub struct InputReport {
     /// Extra vertices made by splitting non-manifold vertices (one per
     /// additional fan).
     pub split_vertices: usize,
+    /// Non-manifold edges (three or more triangles) cut apart.
+    pub cut_edges: usize,
+    /// Extra vertices made where those cuts separated fans.
+    pub cut_vertices: usize,
     /// Input vertices in no face (not part of any surface; left out).
     pub isolated_vertices: usize,
     /// Connected components of the surface.
@@ -97,10 +103,13 @@ pub(crate) fn prepare(input: &PolyMesh) -> Result<Prepared, RetileError> {
     tris.iter().flatten().for_each(|&v| used[v as usize] = true);
     report.isolated_vertices = used.iter().filter(|&&u| !u).count();
 
+    let mut positions = input.positions.clone();
+    (report.cut_edges, report.cut_vertices) = cut_nonmanifold_edges(&mut tris, &mut positions);
+
     let tri_flipped = orient(&mut tris, &tri_source)?;
     report.reoriented_triangles = tri_flipped.iter().filter(|&&f| f).count();
 
-    let mut mesh = TriMesh::from_triangles(input.positions.clone(), &tris).map_err(|(a, b)| {
+    let mut mesh = TriMesh::from_triangles(positions, &tris).map_err(|(a, b)| {
         // `orient` leaves no directed edge twice; keep a message anyway.
         RetileError::NonManifoldEdge {
             a,
@@ -118,6 +127,119 @@ pub(crate) fn prepare(input: &PolyMesh) -> Result<Prepared, RetileError> {
         tri_flipped,
         report,
     })
+}
+
+/// Undirected edge key.
+fn edge_key(a: u32, b: u32) -> u64 {
+    ((a.min(b) as u64) << 32) | a.max(b) as u64
+}
+
+/// Union-find root with path halving.
+fn root(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        parent[x as usize] = parent[parent[x as usize] as usize];
+        x = parent[x as usize];
+    }
+    x
+}
+
+/// Cuts every edge that three or more triangles share, as a scan's fins
+/// and flaps need: the triangles on the edge are paired greedily, each with
+/// the next one running along it in the opposite direction (a consistently
+/// oriented pair; else the next one), and only pairs stay joined there (a
+/// side past the eighth stays alone). Then every
+/// vertex gets one copy per fan of its triangles still joined through
+/// edges (corners joined by union-find across the kept edges), so each
+/// detached triangle's corners on the cut become their own vertices and
+/// the mesh is edge-manifold. Linear in the triangles (one sort). Returns
+/// (edges cut, vertices added); nothing changes on an edge-manifold mesh.
+fn cut_nonmanifold_edges(tris: &mut [[u32; 3]], positions: &mut Vec<Vec3>) -> (usize, usize) {
+    // Sides keyed by their undirected edge: (key, triangle, corner of a).
+    let mut sides: Vec<(u64, u32, u8)> = Vec::with_capacity(tris.len() * 3);
+    for (t, tri) in tris.iter().enumerate() {
+        for i in 0..3 {
+            sides.push((edge_key(tri[i], tri[(i + 1) % 3]), t as u32, i as u8));
+        }
+    }
+    sides.sort_unstable();
+    let mut cut = 0;
+    let mut parent: Vec<u32> = (0..tris.len() as u32 * 3).collect();
+    let mut i = 0;
+    while i < sides.len() {
+        let mut j = i + 1;
+        while j < sides.len() && sides[j].0 == sides[i].0 {
+            j += 1;
+        }
+        let group = &sides[i..j];
+        if group.len() > 2 {
+            cut += 1;
+        }
+        // Pair the sides greedily: each unpaired side with the next one
+        // running the other way along the edge (else the next one).
+        let forward = |s: &(u64, u32, u8)| {
+            let tri = tris[s.1 as usize];
+            tri[s.2 as usize] < tri[(s.2 as usize + 1) % 3]
+        };
+        let mut paired = [false; 8];
+        let mut pairs: Vec<((u64, u32, u8), (u64, u32, u8))> = Vec::new();
+        let n = group.len().min(paired.len());
+        for a in 0..n {
+            if paired[a] {
+                continue;
+            }
+            let free = (a + 1..n).filter(|&b| !paired[b]);
+            let partner = free
+                .clone()
+                .find(|&b| forward(&group[b]) != forward(&group[a]))
+                .or_else(|| free.clone().next());
+            if let Some(b) = partner {
+                paired[a] = true;
+                paired[b] = true;
+                pairs.push((group[a], group[b]));
+            }
+        }
+        for (s, t) in pairs {
+            // Join the corners of s and t at each end of the edge.
+            let (ts, cs) = (s.1 as usize, s.2 as usize);
+            let (tt, _) = (t.1 as usize, t.2 as usize);
+            for v in [tris[ts][cs], tris[ts][(cs + 1) % 3]] {
+                let corner_s = 3 * ts + (0..3).find(|&k| tris[ts][k] == v).unwrap_or(0);
+                let corner_t = 3 * tt + (0..3).find(|&k| tris[tt][k] == v).unwrap_or(0);
+                let (a, b) = (
+                    root(&mut parent, corner_s as u32),
+                    root(&mut parent, corner_t as u32),
+                );
+                if a != b {
+                    parent[a.max(b) as usize] = a.min(b);
+                }
+            }
+        }
+        i = j;
+    }
+    if cut == 0 {
+        return (0, 0);
+    }
+    // One vertex per fan: the first fan met keeps the vertex, each further
+    // one gets a copy.
+    let mut fan_vertex: Vec<u32> = vec![u32::MAX; parent.len()];
+    let mut vertex_taken = vec![false; positions.len()];
+    let mut added = 0;
+    for c in 0..parent.len() {
+        let r = root(&mut parent, c as u32) as usize;
+        let v = tris[c / 3][c % 3];
+        if fan_vertex[r] == u32::MAX {
+            fan_vertex[r] = if vertex_taken[v as usize] {
+                positions.push(positions[v as usize]);
+                added += 1;
+                (positions.len() - 1) as u32
+            } else {
+                vertex_taken[v as usize] = true;
+                v
+            };
+        }
+        tris[c / 3][c % 3] = fan_vertex[r];
+    }
+    (cut, added)
 }
 
 /// Checks edge manifoldness and orients each component consistently.
@@ -381,14 +503,33 @@ mod tests {
     }
 
     #[test]
-    fn non_manifold_edge_is_named() {
+    fn non_manifold_edge_is_cut_keeping_the_oriented_pair() {
         let pos = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, Vec3::NEG_Y];
+        // Three triangles on edge 0-1: [0,1,2] and [1,0,3] run along it in
+        // opposite directions and stay joined; [0,1,4] is cut off.
         let mesh = PolyMesh::from_triangles(pos, &[[0, 1, 2], [1, 0, 3], [0, 1, 4]]);
-        match prepare(&mesh) {
-            Err(RetileError::NonManifoldEdge { a, b, faces, .. }) => {
-                assert_eq!((a, b, faces), (0, 1, 3));
-            }
-            other => panic!("expected a non-manifold edge error, got {other:?}"),
-        }
+        let p = prepare(&mesh).unwrap();
+        p.mesh.check().unwrap();
+        assert_eq!(p.report.cut_edges, 1);
+        assert_eq!(p.report.cut_vertices, 2);
+        assert_eq!(p.report.components, 2);
+        assert_eq!(p.report.reoriented_triangles, 0);
+    }
+
+    #[test]
+    fn a_fan_of_four_triangles_on_one_edge_becomes_two_manifold_pieces() {
+        let pos = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::Z,
+            Vec3::NEG_Y,
+            Vec3::NEG_Z,
+        ];
+        let mesh = PolyMesh::from_triangles(pos, &[[0, 1, 2], [1, 0, 3], [0, 1, 4], [1, 0, 5]]);
+        let p = prepare(&mesh).unwrap();
+        p.mesh.check().unwrap();
+        assert_eq!(p.report.cut_edges, 1);
+        assert_eq!(p.report.components, 2);
     }
 }

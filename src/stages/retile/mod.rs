@@ -174,6 +174,27 @@ impl Stage for Retile {
                     return;
                 }
             };
+            // What preparing a messy input changed, for the user.
+            let r = &pyramid.input;
+            metrics.record(ctx.index, "input_components", r.components);
+            metrics.record(ctx.index, "input_boundary_loops", r.boundary_loops);
+            metrics.record(ctx.index, "input_cut_nonmanifold_edges", r.cut_edges);
+            metrics.record(
+                ctx.index,
+                "input_split_vertices",
+                r.split_vertices + r.cut_vertices,
+            );
+            metrics.record(
+                ctx.index,
+                "input_dropped_degenerate_triangles",
+                r.dropped_degenerate_triangles,
+            );
+            if r.cut_edges > 0 {
+                tracing::info!(
+                    "retile: cut {} non-manifold edge(s) of the input into manifold pieces",
+                    r.cut_edges
+                );
+            }
             // The input is no longer a pyramid level: the retiled levels are.
             commands.entity(source_entity).remove::<MeshLevel>();
             let mut counts = Vec::new();
