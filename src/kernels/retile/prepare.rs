@@ -129,6 +129,9 @@ pub(crate) fn prepare(input: &PolyMesh) -> Result<Prepared, RetileError> {
     })
 }
 
+/// A triangle's side along an edge: (edge key, triangle, corner).
+type Side = (u64, u32, u8);
+
 /// Undirected edge key.
 fn edge_key(a: u32, b: u32) -> u64 {
     ((a.min(b) as u64) << 32) | a.max(b) as u64
@@ -181,7 +184,7 @@ fn cut_nonmanifold_edges(tris: &mut [[u32; 3]], positions: &mut Vec<Vec3>) -> (u
             tri[s.2 as usize] < tri[(s.2 as usize + 1) % 3]
         };
         let mut paired = [false; 8];
-        let mut pairs: Vec<((u64, u32, u8), (u64, u32, u8))> = Vec::new();
+        let mut pairs: Vec<(Side, Side)> = Vec::new();
         let n = group.len().min(paired.len());
         for a in 0..n {
             if paired[a] {
