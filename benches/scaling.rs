@@ -1,0 +1,105 @@
+//! Scaling of every method on messy scans (issue 15): each method's shipped
+//! config runs, as its own process, on the messy-scan generator of the
+//! tests (`tests/common/messy.rs`: holes, fins, 100+ small components,
+//! slivers, duplicate vertices) at 10 k and 100 k vertices (add 1 M with
+//! `SURFSYNTH_SCALING_1M=1`), and prints seconds per vertex and peak
+//! resident bytes per vertex from each run's `metrics.json`, with the
+//! slowest stage.
+//!
+//!     cargo bench --bench scaling
+//!
+//! Not a criterion bench: one run per size is the measurement (each takes
+//! seconds to minutes), and peak memory needs a process of its own.
+
+#[path = "../tests/common/messy.rs"]
+mod messy;
+
+use std::path::Path;
+use std::process::Command;
+
+const CONFIGS: [(&str, &str); 6] = [
+    ("jump_surface", "02_jump_bunny_planks.toml"),
+    ("wei_levoy", "17_wl_bunny.toml"),
+    ("coherent", "19_coherent_bunny_brick.toml"),
+    ("bangay_morkel", "23_bm_bunny_brick_graphcut.toml"),
+    ("lapped", "31_lapped_bunny_planks.toml"),
+    ("jump + bake", "40_bake_bunny.toml"),
+];
+
+fn main() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let bin = root.join("target/release/surfsynth");
+    let built = Command::new(env!("CARGO"))
+        .args(["build", "--release", "--bin", "surfsynth"])
+        .current_dir(root)
+        .status()
+        .expect("cargo runs");
+    assert!(built.success(), "the binary builds");
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let mut sizes = vec![10_000usize, 100_000];
+    if std::env::var("SURFSYNTH_SCALING_1M").is_ok() {
+        sizes.push(1_000_000);
+    }
+    println!(
+        "| method | vertices | seconds | µs / vertex | peak MB | bytes / vertex | slowest stage |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for &n in &sizes {
+        let (mesh, report) = messy::write_messy_scan(dir.path(), n, 1);
+        for (method, config) in CONFIGS {
+            let out = dir.path().join(format!("out_{n}_{method}"));
+            let run = Command::new(&bin)
+                .arg("run")
+                .arg(root.join("configs").join(config))
+                .arg("--set")
+                .arg(format!("input.mesh={}", mesh.display()))
+                .arg("--out")
+                .arg(&out)
+                .arg("-q")
+                .output()
+                .expect("the binary runs");
+            if !run.status.success() {
+                println!(
+                    "| {method} | {} | failed: {} | | | | |",
+                    report.vertices,
+                    String::from_utf8_lossy(&run.stderr)
+                        .lines()
+                        .last()
+                        .unwrap_or("")
+                );
+                continue;
+            }
+            let m: serde_json::Value = serde_json::from_str(
+                &std::fs::read_to_string(out.join("metrics.json")).expect("metrics.json"),
+            )
+            .expect("json");
+            let secs = m["total_seconds"].as_f64().unwrap_or(f64::NAN);
+            let peak = m["peak_rss_bytes"].as_f64().unwrap_or(f64::NAN);
+            let slowest = m["stages"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .max_by(|a, b| {
+                    let s = |x: &serde_json::Value| x["seconds"].as_f64().unwrap_or(0.0);
+                    s(a).total_cmp(&s(b))
+                })
+                .map(|s| {
+                    format!(
+                        "{} {:.1} s",
+                        s["kind"].as_str().unwrap_or("?"),
+                        s["seconds"].as_f64().unwrap_or(0.0)
+                    )
+                })
+                .unwrap_or_default();
+            let v = report.vertices as f64;
+            println!(
+                "| {method} | {} | {secs:.2} | {:.1} | {:.0} | {:.0} | {slowest} |",
+                report.vertices,
+                secs / v * 1e6,
+                peak / 1e6,
+                peak / v
+            );
+            let _ = std::fs::remove_dir_all(&out);
+        }
+    }
+}
