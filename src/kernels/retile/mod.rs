@@ -61,7 +61,7 @@ mod trimesh;
 pub use prepare::InputReport;
 pub use project::{
     MapBackError, MappedBack, ResultAttributes, SurfacePoint, SurfaceProjector,
-    closest_point_on_triangle, map_back,
+    closest_point_on_triangle, map_back, map_back_with_progress,
 };
 
 use crate::mesh::PolyMesh;
