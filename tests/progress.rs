@@ -54,6 +54,24 @@ kind = "export"
 formats = ["ply"]
 "#;
 
+/// Jump maps on the surface, baked into an atlas.
+const JUMP_BAKE: &str = r#"
+[[stage]]
+kind = "orientation"
+up = [0.0, 0.0, 1.0]
+[[stage]]
+kind = "jump_map"
+cache = false
+[[stage]]
+kind = "jump_surface"
+[[stage]]
+kind = "bake"
+size = 256
+[[stage]]
+kind = "export"
+formats = ["ply", "glb"]
+"#;
+
 /// Runs `surfsynth run` on `HEADER + stages` with stderr piped (not a
 /// terminal), `RUST_LOG=info` and the given progress interval; returns the
 /// stderr and the bytes of the exported PLY.
@@ -165,6 +183,20 @@ fn graph_match_logs_levels_and_passes() {
         "{logged}"
     );
     let (quiet, quiet_ply) = run(dir.path(), GRAPH_MATCH, "0", &["--quiet"]);
+    assert!(progress_lines(&quiet).is_empty(), "{quiet}");
+    assert!(ply == quiet_ply, "progress changes the result");
+}
+
+#[test]
+fn jump_map_bake_and_export_log_their_phases() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (logged, ply) = run(dir.path(), JUMP_BAKE, "0", &[]);
+    assert_logged(&logged, "jump_map", "nearest neighbours");
+    assert_logged(&logged, "jump_map", "filtering");
+    assert_logged(&logged, "bake", "atlas");
+    assert_logged(&logged, "bake", "texels");
+    assert_logged(&logged, "export", "ply");
+    let (quiet, quiet_ply) = run(dir.path(), JUMP_BAKE, "0", &["-q"]);
     assert!(progress_lines(&quiet).is_empty(), "{quiet}");
     assert!(ply == quiet_ply, "progress changes the result");
 }
