@@ -230,30 +230,32 @@ impl Progress {
 
     /// Sets the number of steps (the position is kept) and restarts the ETA.
     pub fn set_length(&self, len: u64) {
-        match &self.0 {
-            None => {}
-            Some(Sink::Bar(b, _)) => {
-                b.set_length(len);
-                b.reset_eta();
-            }
-            Some(Sink::Log(s)) => {
-                s.len.store(len, Ordering::Relaxed);
-                s.restart_phase();
-            }
-        }
+        self.restart(
+            |b| b.set_length(len),
+            |s| s.len.store(len, Ordering::Relaxed),
+        );
     }
 
     /// Moves to step `pos` (e.g. 0 at the start of a phase counted on its
     /// own) and restarts the ETA.
     pub fn set_position(&self, pos: u64) {
+        self.restart(
+            |b| b.set_position(pos),
+            |s| s.pos.store(pos, Ordering::Relaxed),
+        );
+    }
+
+    /// Applies a change to the bar or the logged counters, then restarts
+    /// the ETA from here.
+    fn restart(&self, bar: impl FnOnce(&indicatif::ProgressBar), log: impl FnOnce(&LogState)) {
         match &self.0 {
             None => {}
             Some(Sink::Bar(b, _)) => {
-                b.set_position(pos);
+                bar(b);
                 b.reset_eta();
             }
             Some(Sink::Log(s)) => {
-                s.pos.store(pos, Ordering::Relaxed);
+                log(s);
                 s.restart_phase();
             }
         }
