@@ -313,7 +313,7 @@ pub fn synthesize_controlled_with_progress(
     let mut done = 0u64;
     for (x, y) in settings.order.iter(w, h) {
         done += 1;
-        if done % (1 << 14) == 0 {
+        if done.is_multiple_of(1 << 14) {
             progress.inc(1 << 14);
         }
         let mut cands = [((0u32, 0u32), (0i32, 0i32)); 4];

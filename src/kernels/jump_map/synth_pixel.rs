@@ -318,7 +318,7 @@ fn run<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
     let mut done = 0u64;
     for (x, y) in order {
         done += 1;
-        if done % PROGRESS_PIXELS == 0 {
+        if done.is_multiple_of(PROGRESS_PIXELS) {
             progress.inc(PROGRESS_PIXELS);
         }
         let pi = (y as usize + 1) * pw + x as usize + 1;
