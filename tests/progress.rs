@@ -200,3 +200,47 @@ fn jump_map_bake_and_export_log_their_phases() {
     assert!(progress_lines(&quiet).is_empty(), "{quiet}");
     assert!(ply == quiet_ply, "progress changes the result");
 }
+
+#[test]
+fn displace_logs_its_steps() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    // The run needs a height map in `[input]`, so its config is written
+    // whole rather than after HEADER.
+    let config = r#"
+seed = 5
+[input]
+mesh = "builtin:torus"
+exemplar = "builtin:bricks"
+height_map = "derive:luminance"
+[input.mesh_options]
+resolution = [24, 12]
+[input.exemplar_options]
+size = 32
+[[stage]]
+kind = "orientation"
+up = [0.0, 0.0, 1.0]
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "displace"
+smoothing = 2
+[[stage]]
+kind = "export"
+formats = ["ply"]
+"#;
+    let path = dir.path().join("displace.toml");
+    std::fs::write(&path, config).expect("write config");
+    let output = Command::new(env!("CARGO_BIN_EXE_surfsynth"))
+        .arg("run")
+        .arg(&path)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .env("RUST_LOG", "info")
+        .env("SURFSYNTH_PROGRESS_INTERVAL_MS", "0")
+        .output()
+        .expect("run surfsynth");
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(output.status.success(), "{stderr}");
+    assert_logged(&stderr, "displace", "smoothing");
+    assert_logged(&stderr, "displace", "displacing");
+}
