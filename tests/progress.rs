@@ -72,21 +72,35 @@ kind = "export"
 formats = ["ply", "glb"]
 "#;
 
-/// Runs `surfsynth run` on `HEADER + stages` with stderr piped (not a
-/// terminal), `RUST_LOG=info` and the given progress interval; returns the
-/// stderr and the bytes of the exported PLY.
+/// Runs `surfsynth run` on `HEADER + stages`; see [`run_config`].
 fn run(dir: &Path, stages: &str, interval_ms: &str, extra: &[&str]) -> (String, Vec<u8>) {
-    let config = dir.join("config.toml");
-    std::fs::write(&config, format!("{HEADER}{stages}")).expect("write config");
-    let out = dir.join(format!("out-{interval_ms}-{}", extra.len()));
-    let output = Command::new(env!("CARGO_BIN_EXE_surfsynth"))
+    run_config(dir, &format!("{HEADER}{stages}"), Some(interval_ms), extra)
+}
+
+/// Runs `surfsynth run` on `config` with stderr piped (not a terminal),
+/// `RUST_LOG=info` and the given progress interval (the default for
+/// `None`); returns the stderr and the bytes of the exported PLY.
+fn run_config(
+    dir: &Path,
+    config: &str,
+    interval_ms: Option<&str>,
+    extra: &[&str],
+) -> (String, Vec<u8>) {
+    let path = dir.join("config.toml");
+    std::fs::write(&path, config).expect("write config");
+    let out = dir.join(format!("out-{interval_ms:?}-{}", extra.len()));
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_surfsynth"));
+    match interval_ms {
+        Some(ms) => cmd.env("SURFSYNTH_PROGRESS_INTERVAL_MS", ms),
+        None => cmd.env_remove("SURFSYNTH_PROGRESS_INTERVAL_MS"),
+    };
+    let output = cmd
         .arg("run")
-        .arg(&config)
+        .arg(&path)
         .arg("--out")
         .arg(&out)
         .args(extra)
         .env("RUST_LOG", "info")
-        .env("SURFSYNTH_PROGRESS_INTERVAL_MS", interval_ms)
         .env(
             "SURFSYNTH_CACHE",
             Path::new(env!("CARGO_TARGET_TMPDIR")).join("surfsynth-cache"),
@@ -148,20 +162,8 @@ fn default_interval_keeps_a_short_run_silent() {
     // No interval override: a line at most every 10 s, and this run takes
     // a second or two.
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let config = dir.path().join("config.toml");
-    std::fs::write(&config, format!("{HEADER}{GRAPH_MATCH}")).expect("write config");
     let started = std::time::Instant::now();
-    let output = Command::new(env!("CARGO_BIN_EXE_surfsynth"))
-        .arg("run")
-        .arg(&config)
-        .arg("--out")
-        .arg(dir.path().join("out"))
-        .env("RUST_LOG", "info")
-        .env_remove("SURFSYNTH_PROGRESS_INTERVAL_MS")
-        .output()
-        .expect("run surfsynth");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
+    let (stderr, _) = run_config(dir.path(), &format!("{HEADER}{GRAPH_MATCH}"), None, &[]);
     if started.elapsed().as_secs() < 9 {
         assert!(
             progress_lines(&stderr).is_empty(),
@@ -228,19 +230,7 @@ smoothing = 2
 kind = "export"
 formats = ["ply"]
 "#;
-    let path = dir.path().join("displace.toml");
-    std::fs::write(&path, config).expect("write config");
-    let output = Command::new(env!("CARGO_BIN_EXE_surfsynth"))
-        .arg("run")
-        .arg(&path)
-        .arg("--out")
-        .arg(dir.path().join("out"))
-        .env("RUST_LOG", "info")
-        .env("SURFSYNTH_PROGRESS_INTERVAL_MS", "0")
-        .output()
-        .expect("run surfsynth");
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(output.status.success(), "{stderr}");
+    let (stderr, _) = run_config(dir.path(), config, Some("0"), &[]);
     assert_logged(&stderr, "displace", "smoothing");
     assert_logged(&stderr, "displace", "displacing");
 }
