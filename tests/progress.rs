@@ -72,6 +72,21 @@ kind = "export"
 formats = ["ply", "glb"]
 "#;
 
+/// Height-map displacement with smoothing (needs `height_map` in `[input]`).
+const DISPLACE: &str = r#"
+[[stage]]
+kind = "orientation"
+up = [0.0, 0.0, 1.0]
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "displace"
+smoothing = 2
+[[stage]]
+kind = "export"
+formats = ["ply"]
+"#;
+
 /// Runs `surfsynth run` on `HEADER + stages`; see [`run_config`].
 fn run(dir: &Path, stages: &str, interval_ms: &str, extra: &[&str]) -> (String, Vec<u8>) {
     run_config(dir, &format!("{HEADER}{stages}"), Some(interval_ms), extra)
@@ -206,31 +221,13 @@ fn jump_map_bake_and_export_log_their_phases() {
 #[test]
 fn displace_logs_its_steps() {
     let dir = tempfile::tempdir().expect("a temporary folder");
-    // The run needs a height map in `[input]`, so its config is written
-    // whole rather than after HEADER.
-    let config = r#"
-seed = 5
-[input]
-mesh = "builtin:torus"
-exemplar = "builtin:bricks"
-height_map = "derive:luminance"
-[input.mesh_options]
-resolution = [24, 12]
-[input.exemplar_options]
-size = 32
-[[stage]]
-kind = "orientation"
-up = [0.0, 0.0, 1.0]
-[[stage]]
-kind = "init_colours"
-[[stage]]
-kind = "displace"
-smoothing = 2
-[[stage]]
-kind = "export"
-formats = ["ply"]
-"#;
-    let (stderr, _) = run_config(dir.path(), config, Some("0"), &[]);
+    // The run needs a height map in `[input]`.
+    let header = HEADER.replace(
+        "exemplar_wrap",
+        "height_map = \"derive:luminance\"\nexemplar_wrap",
+    );
+    let config = format!("{header}{DISPLACE}");
+    let (stderr, _) = run_config(dir.path(), &config, Some("0"), &[]);
     assert_logged(&stderr, "displace", "smoothing");
     assert_logged(&stderr, "displace", "displacing");
 }
