@@ -259,6 +259,23 @@ pub fn smooth_vertex_heights(
     moved: &[bool],
     passes: u32,
 ) {
+    smooth_vertex_heights_with_progress(
+        topo,
+        heights,
+        moved,
+        passes,
+        &crate::progress::Progress::hidden(),
+    );
+}
+
+/// [`smooth_vertex_heights`], advancing `progress` by one step per pass.
+pub fn smooth_vertex_heights_with_progress(
+    topo: &crate::mesh::Topology,
+    heights: &mut Vec<f32>,
+    moved: &[bool],
+    passes: u32,
+    progress: &crate::progress::Progress,
+) {
     use rayon::prelude::*;
     for _ in 0..passes {
         let h: &[f32] = heights;
@@ -283,6 +300,7 @@ pub fn smooth_vertex_heights(
             })
             .collect();
         *heights = next;
+        progress.inc(1);
     }
 }
 

@@ -32,6 +32,7 @@ use super::flatten::{TriangleAdjacency, template_spacing};
 use super::frames::TangentFrame;
 use super::wl_match::parents::{SurfacePoint, TriangleBvh};
 use crate::mesh::Topology;
+use crate::progress::Progress;
 
 /// How `s` directions are chosen.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -89,14 +90,32 @@ pub struct RelaxResult {
 /// Preconditions: `levels[l]` arrays all have that level's vertex count;
 /// normals are unit length; `settings.symmetry >= 1`.
 pub fn relax_orientation(levels: &[OrientationLevel], settings: &RelaxSettings) -> RelaxResult {
+    relax_orientation_with_progress(levels, settings, &Progress::hidden())
+}
+
+/// [`relax_orientation`], reporting to `progress`: one step per vertex for
+/// its initial frame and per relaxation iteration, each level a part
+/// (`"level 1/3"`, coarsest first).
+pub fn relax_orientation_with_progress(
+    levels: &[OrientationLevel],
+    settings: &RelaxSettings,
+    progress: &Progress,
+) -> RelaxResult {
     let n = settings.symmetry.max(1);
     let count = levels.len();
+    let rounds = 1 + if settings.mode == OrientationMode::Relax {
+        u64::from(settings.iterations)
+    } else {
+        0
+    };
+    progress.set_length(levels.iter().map(|l| l.normals.len() as u64 * rounds).sum());
     let mut result = RelaxResult {
         frames: vec![Vec::new(); count],
         energy: vec![Vec::new(); count],
     };
     for l in (0..count).rev() {
         let _span = tracing::info_span!("relax_level", level = l).entered();
+        progress.set_part(&format!("level {}/{count}", count - l));
         let level = &levels[l];
         let coarser = (l + 1 < count).then(|| {
             let c = &levels[l + 1];
@@ -137,6 +156,8 @@ pub fn relax_orientation(levels: &[OrientationLevel], settings: &RelaxSettings) 
             n,
         };
         let mut energy = vec![state.total_energy()];
+        let nv = state.frames.len() as u64;
+        progress.inc(nv);
         if settings.mode == OrientationMode::Relax {
             let classes = colour_classes(level.topology);
             let mut dirty = vec![true; state.frames.len()];
@@ -148,6 +169,7 @@ pub fn relax_orientation(levels: &[OrientationLevel], settings: &RelaxSettings) 
                     *energy.last().unwrap_or(&0.0)
                 };
                 energy.push(e);
+                progress.inc(nv);
             }
         }
         result.frames[l] = state.frames;

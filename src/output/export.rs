@@ -2,19 +2,27 @@
 
 use super::{OutputError, write_atomic, write_png};
 use crate::mesh::PolyMesh;
+use crate::progress::Progress;
 use crate::stages::world::{ExportJob, PasteExport};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-/// Writes the job's files into `dir`; returns their paths.
+/// Writes the job's files into `dir`; returns their paths. Progress (the
+/// stage `export`) counts images and formats, the one being written the
+/// part: a PLY or OBJ of a million vertices takes seconds.
 pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputError> {
     let mut files = Vec::new();
+    let items = job.images.len() + job.formats.len() + usize::from(job.original.is_some());
+    let progress = Progress::new(items as u64, "export");
     for (name, image) in &job.images {
+        progress.set_part(name);
         let path = dir.join(name);
         super::write_png(&path, image)?;
         files.push(path);
+        progress.inc(1);
     }
     for format in &job.formats {
+        progress.set_part(format);
         match format.as_str() {
             "ply" => {
                 let path = dir.join(format!("{}.ply", job.stem));
@@ -92,9 +100,11 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
             }
             _ => {}
         }
+        progress.inc(1);
     }
     // The result mapped back onto the original input mesh (`map_back`).
     if let Some((mesh, colours, previews)) = &job.original {
+        progress.set_part("original");
         if job.formats.iter().any(|f| f == "ply") {
             let path = dir.join(format!("{}_original.ply", job.stem));
             let colours = (colours.values.as_slice(), colours.channels);
@@ -106,7 +116,9 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
             "original_preview",
             previews,
         )?);
+        progress.inc(1);
     }
+    progress.finish();
     Ok(files)
 }
 

@@ -27,6 +27,7 @@ use super::raster::barycentric;
 use crate::image::{Image, pixel_rgb, sample::Wrap};
 use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
 use crate::kernels::retile::SurfaceProjector;
+use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -204,6 +205,29 @@ pub fn bake_channels_with_patches(
     maps: &[ChannelMap],
     patches: &[PatchPlacement],
 ) -> (Image, Vec<Image>) {
+    bake_channels_with_progress(
+        target,
+        source,
+        textures,
+        wrap,
+        maps,
+        patches,
+        &Progress::hidden(),
+    )
+}
+
+/// [`bake_channels_with_patches`], reporting to `progress` as the part
+/// `"texels"`: one step per atlas row baked.
+pub fn bake_channels_with_progress(
+    target: &BakeTarget,
+    source: &dyn ContributionSource,
+    textures: &[&Image],
+    wrap: Wrap,
+    maps: &[ChannelMap],
+    patches: &[PatchPlacement],
+    progress: &Progress,
+) -> (Image, Vec<Image>) {
+    progress.start_part("texels", u64::from(target.size));
     let _span =
         tracing::info_span!("bake_channels", size = target.size, maps = maps.len()).entered();
     let s = target.size as usize;
@@ -309,6 +333,7 @@ pub fn bake_channels_with_patches(
                 }
             }
         }
+        progress.inc(1);
     });
     drop(rows);
     let filled: Vec<bool> = target.texel_face.iter().map(|&f| f != u32::MAX).collect();

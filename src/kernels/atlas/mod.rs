@@ -31,8 +31,9 @@ pub mod segment;
 
 pub use pack::{pack_charts, skyline_pack};
 pub use raster::{dilate, rasterise_faces};
-pub use segment::segment_charts;
+pub use segment::{segment_charts, segment_charts_with_progress};
 
+use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 
 /// Settings of an atlas.
@@ -124,6 +125,20 @@ pub fn build_uv_atlas(
     tris: &[[u32; 3]],
     settings: &AtlasSettings,
 ) -> Result<UvAtlas, AtlasError> {
+    build_uv_atlas_with_progress(positions, tris, settings, &Progress::hidden())
+}
+
+/// [`build_uv_atlas`], reporting to `progress` as the part `"atlas"`: one
+/// step per face, taken when its chart is flattened.
+///
+/// # Errors
+/// As [`build_uv_atlas`].
+pub fn build_uv_atlas_with_progress(
+    positions: &[Vec3],
+    tris: &[[u32; 3]],
+    settings: &AtlasSettings,
+    progress: &Progress,
+) -> Result<UvAtlas, AtlasError> {
     let _span = tracing::info_span!("build_uv_atlas", faces = tris.len()).entered();
     if tris.is_empty() {
         return Err(AtlasError::NoFaces);
@@ -137,7 +152,8 @@ pub fn build_uv_atlas(
             });
         }
     }
-    let charts = segment_charts(positions, tris, settings);
+    progress.start_part("atlas", tris.len() as u64);
+    let charts = segment_charts_with_progress(positions, tris, settings, progress);
     let (corner_uvs, texels_per_unit) = pack_charts(&charts, settings.size, settings.padding_px)
         .ok_or(AtlasError::DoesNotFit {
             charts: charts.count,

@@ -5,6 +5,7 @@
 use super::lscm::{flatten_chart, project_chart};
 use super::raster::flat_and_disjoint;
 use super::{AtlasSettings, Charts};
+use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 use std::collections::VecDeque;
 
@@ -48,6 +49,17 @@ pub fn manifold_neighbours(tris: &[[u32; 3]]) -> Vec<[u32; 3]> {
 /// first (least bent to their neighbours), so charts spread widest before
 /// the normal cone stops them.
 pub fn segment_charts(positions: &[Vec3], tris: &[[u32; 3]], settings: &AtlasSettings) -> Charts {
+    segment_charts_with_progress(positions, tris, settings, &Progress::hidden())
+}
+
+/// [`segment_charts`], advancing `progress` by the faces of each chart once
+/// it is flattened.
+pub fn segment_charts_with_progress(
+    positions: &[Vec3],
+    tris: &[[u32; 3]],
+    settings: &AtlasSettings,
+    progress: &Progress,
+) -> Charts {
     let _span = tracing::debug_span!("segment_charts", faces = tris.len()).entered();
     let fc = tris.len();
     let normals: Vec<Vec3> = tris
@@ -110,6 +122,7 @@ pub fn segment_charts(positions: &[Vec3], tris: &[[u32; 3]], settings: &AtlasSet
             }
         }
         // Flatten, splitting until every part is valid.
+        let grown = faces.len() as u64;
         let mut stack = vec![faces];
         let mut first = true;
         while let Some(part) = stack.pop() {
@@ -146,6 +159,7 @@ pub fn segment_charts(positions: &[Vec3], tris: &[[u32; 3]], settings: &AtlasSet
             }
         }
         count += 1;
+        progress.inc(grown);
     }
     Charts {
         count: count as usize,

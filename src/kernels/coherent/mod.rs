@@ -512,6 +512,14 @@ pub fn coherent_synthesis(
     } else {
         levels
     };
+    // One step per vertex and correction pass (one pass for none).
+    let passes = u64::from(settings.passes.max(1));
+    progress.set_length(
+        levels
+            .iter()
+            .map(|lv| lv.mesh.vertex_count() as u64 * passes)
+            .sum(),
+    );
     let geometry: Vec<LevelGeometry> = levels
         .iter()
         .map(|lv| {
@@ -545,6 +553,7 @@ pub fn coherent_synthesis(
     let mut out: Vec<CoherentLevel> = vec![CoherentLevel::default(); levels.len()];
     for l in (0..levels.len()).rev() {
         let _span = tracing::info_span!("coherent_level", level = l).entered();
+        progress.set_part(&format!("level {}/{}", levels.len() - l, levels.len()));
         let started = Instant::now();
         let lv = &levels[l];
         let positions = &lv.mesh.positions;
@@ -656,11 +665,14 @@ pub fn coherent_synthesis(
                     coords[v as usize] = c;
                     picks[how as usize] += 1;
                 }
+                progress.inc(batch.len() as u64);
             }
             report.energy.push(energy(&coords, &nbs, &app, &domain));
             let total = nv.max(1) as f32;
             report.picks = picks.map(|p| p as f32 / total);
-            progress.inc(1);
+        }
+        if settings.passes == 0 {
+            progress.inc(nv as u64);
         }
         report.seconds = started.elapsed().as_secs_f64();
         out[l] = CoherentLevel { coords, report };

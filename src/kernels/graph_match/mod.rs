@@ -42,6 +42,7 @@ use crate::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
 use crate::kernels::mix;
 use crate::kernels::sqrt2::Parents;
 use crate::mesh::Topology;
+use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -301,6 +302,32 @@ pub fn match_pass(
     seed: u64,
     state: &mut SynthesisState,
 ) -> PassStats {
+    match_pass_with_progress(
+        level,
+        images,
+        settings,
+        order,
+        rule,
+        seed,
+        state,
+        &Progress::hidden(),
+    )
+}
+
+/// [`match_pass`], advancing `progress` by one step per vertex of `order`
+/// as its region is planned (at most a planning chunk ahead of the
+/// colouring).
+#[allow(clippy::too_many_arguments)]
+pub fn match_pass_with_progress(
+    level: &LevelMesh,
+    images: &MatchImages,
+    settings: &GraphMatchSettings,
+    order: &[u32],
+    rule: BatchRule,
+    seed: u64,
+    state: &mut SynthesisState,
+    progress: &Progress,
+) -> PassStats {
     let _span = tracing::debug_span!("match_pass", vertices = order.len()).entered();
     let n = level.positions.len();
     let mut stats = PassStats::default();
@@ -325,6 +352,7 @@ pub fn match_pass(
                 })
                 .collect();
             stats.covered_by_cuts += (chunk.len() - planned.len()) as u64;
+            progress.inc(chunk.len() as u64);
             pending.extend(planned);
         }
         if pending.is_empty() {

@@ -4,7 +4,7 @@
 
 use rayon::prelude::*;
 
-use super::ann::all_knn;
+use super::ann::all_knn_with_progress;
 use super::map::JumpMapParts;
 use super::neighbourhoods::{neighbourhood_vectors, source_region, vector_len, wrap_for};
 use super::normalise::normalise_weights;
@@ -12,6 +12,7 @@ use super::pca;
 use super::poisson::PoissonDisc;
 use super::{Boundary, Jump, JumpMap, JumpMapError, JumpMapSettings, TexelCoord};
 use crate::image::{Image, pyramid::gaussian_pyramid};
+use crate::progress::Progress;
 
 /// Facts about one analysis run, for reports and tuning.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -102,6 +103,20 @@ pub fn analyse_with_stats(
     exemplar: &Image,
     settings: &JumpMapSettings,
 ) -> Result<(JumpMap, AnalysisStats), JumpMapError> {
+    analyse_with_progress(exemplar, settings, &Progress::hidden())
+}
+
+/// [`analyse_with_stats`], reporting to `progress`: two steps per source
+/// pixel (its nearest neighbours, then their filtering), the neighbourhood
+/// vectors and the PCA fit as parts without steps.
+///
+/// # Errors
+/// As [`analyse_with_stats`].
+pub fn analyse_with_progress(
+    exemplar: &Image,
+    settings: &JumpMapSettings,
+    progress: &Progress,
+) -> Result<(JumpMap, AnalysisStats), JumpMapError> {
     let _span =
         tracing::info_span!("jump_map_analysis", w = exemplar.width, h = exemplar.height).entered();
     settings.validate()?;
@@ -115,12 +130,16 @@ pub fn analyse_with_stats(
         Boundary::Inset => region.eroded(1),
     };
     let dim = vector_len(widths, exemplar.channels);
+    let pixels = region.width() as u64 * region.height() as u64;
+    progress.set_length(2 * pixels);
+    progress.set_part("neighbourhoods");
 
     let vectors = {
         let _s = tracing::info_span!("neighbourhoods").entered();
         let pyramid = gaussian_pyramid(exemplar, widths.len(), wrap_for(boundary));
         neighbourhood_vectors(&pyramid, widths, region, wrap_for(boundary))
     };
+    progress.set_part("pca");
     let (pca, projected) = {
         let _s = tracing::info_span!("pca").entered();
         let pca = pca::fit(
@@ -151,10 +170,20 @@ pub fn analyse_with_stats(
     let coord = |i: usize| TexelCoord::new(region.x0 + i as u32 % rw, region.y0 + i as u32 / rw);
     let per_pixel: Vec<PixelJumps> = {
         let _s = tracing::info_span!("nearest_neighbours").entered();
-        let nbrs = all_knn(&projected, pca.components, m, eps, settings.ann_search);
+        progress.set_part("nearest neighbours");
+        let nbrs = all_knn_with_progress(
+            &projected,
+            pca.components,
+            m,
+            eps,
+            settings.ann_search,
+            progress,
+        );
         let m = m.min(region.width() as usize * region.height() as usize);
+        progress.set_part("filtering");
         nbrs.par_chunks(m)
             .enumerate()
+            .inspect(|_| progress.inc(1))
             .map_init(
                 || (Vec::<(TexelCoord, f32)>::new(), Vec::<usize>::new()),
                 |(cands, acc), (i, nbrs)| {

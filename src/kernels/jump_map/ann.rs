@@ -36,6 +36,8 @@ use faer::{Accum, MatMut, MatRef, Par};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+use crate::progress::Progress;
+
 /// Number of leading PCA coordinates indexed by the kd-tree.
 pub const TREE_DIMS: usize = 8;
 /// Fewest points for which [`AnnSearch::Auto`] picks the kd-tree.
@@ -73,6 +75,19 @@ pub fn all_knn(
     eps: f32,
     search: AnnSearch,
 ) -> Vec<Neighbour> {
+    all_knn_with_progress(points, dim, m, eps, search, &Progress::hidden())
+}
+
+/// [`all_knn`], advancing `progress` by one step per point whose
+/// neighbours are found (a query block at a time).
+pub fn all_knn_with_progress(
+    points: &[f32],
+    dim: usize,
+    m: usize,
+    eps: f32,
+    search: AnnSearch,
+    progress: &Progress,
+) -> Vec<Neighbour> {
     let n = points.len() / dim;
     let m = m.min(n);
     let mut out = vec![
@@ -100,9 +115,10 @@ pub fn all_knn(
                     index.knn(b * QUERY_BLOCK + i, m, eps, &mut list);
                     row.copy_from_slice(&list);
                 }
+                progress.inc((o.len() / m) as u64);
             });
     } else {
-        exhaustive(points, dim, m, &mut out);
+        exhaustive(points, dim, m, &mut out, progress);
     }
     out
 }
@@ -115,7 +131,7 @@ pub fn all_knn(
 /// vectorised compare against the current m-th best. Tiles are visited
 /// starting with the query block's own (image neighbours are similar, so the
 /// threshold drops fast).
-fn exhaustive(points: &[f32], dim: usize, m: usize, out: &mut [Neighbour]) {
+fn exhaustive(points: &[f32], dim: usize, m: usize, out: &mut [Neighbour], progress: &Progress) {
     let n = points.len() / dim;
     let da = dim + 1;
     let mut aug_p = vec![0.0f32; n * da];
@@ -185,6 +201,7 @@ fn exhaustive(points: &[f32], dim: usize, m: usize, out: &mut [Neighbour]) {
                 list.sort_by(|a, b| a.dist2.total_cmp(&b.dist2).then(a.index.cmp(&b.index)));
                 row.copy_from_slice(list);
             }
+            progress.inc(qn as u64);
         });
 }
 

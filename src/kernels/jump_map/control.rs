@@ -33,6 +33,7 @@ use super::neighbourhoods::wrap_for;
 use super::synth_pixel::{base_range, boundary_ramp, validate_common};
 use super::{Boundary, FloatJump, JumpMap, JumpMapError, PixelOrder};
 use crate::image::{Image, pyramid::gaussian_pyramid};
+use crate::progress::Progress;
 
 /// Largest scale a field may hold (exemplar pixels per output pixel).
 pub const MAX_SCALE: f32 = 1024.0;
@@ -253,6 +254,21 @@ pub fn synthesize_controlled(
     field: &ControlField,
     settings: &ControlledSynthesisSettings,
 ) -> Result<ControlledOutput, JumpMapError> {
+    synthesize_controlled_with_progress(exemplar, map, field, settings, &Progress::hidden())
+}
+
+/// [`synthesize_controlled`], advancing `progress` (its length set to the
+/// pixel count) every 16,384 pixels.
+///
+/// # Errors
+/// As [`synthesize_controlled`].
+pub fn synthesize_controlled_with_progress(
+    exemplar: &Image,
+    map: &JumpMap,
+    field: &ControlField,
+    settings: &ControlledSynthesisSettings,
+    progress: &Progress,
+) -> Result<ControlledOutput, JumpMapError> {
     validate_common(
         field.width,
         field.height,
@@ -293,7 +309,13 @@ pub fn synthesize_controlled(
     let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
     let mut jumps: Vec<FloatJump> = Vec::new();
     let mut valid: Vec<([f32; 2], f32)> = Vec::new();
+    progress.set_length(u64::from(w) * u64::from(h));
+    let mut done = 0u64;
     for (x, y) in settings.order.iter(w, h) {
+        done += 1;
+        if done.is_multiple_of(1 << 14) {
+            progress.inc(1 << 14);
+        }
         let mut cands = [((0u32, 0u32), (0i32, 0i32)); 4];
         let mut n = 0;
         for (dx, dy) in [(-1i32, 0i32), (1, 0), (0, -1), (0, 1)] {

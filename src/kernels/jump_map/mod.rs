@@ -49,11 +49,18 @@ pub use analysis::analyse;
 pub use ann::AnnSearch;
 pub use control::{
     ControlField, ControlledOutput, ControlledSynthesisSettings, synthesize_controlled,
+    synthesize_controlled_with_progress,
 };
 pub use error::JumpMapError;
 pub use map::{FloatJump, Jump, JumpMap, TexelCoord, TexelRect};
 pub use order::{PixelOrder, PixelOrderIter};
 pub use settings::{Boundary, JumpMapSettings};
 pub use sources::{SourceMap, SynthesisOutput};
-pub use synth_patch::{PatchSynthesisSettings, synthesize_patches};
-pub use synth_pixel::{PixelSynthesisSettings, synthesize_pixels, synthesize_sources};
+pub use synth_patch::{
+    PatchSynthesisSettings, synthesize_patch_sources_with_progress, synthesize_patches,
+    synthesize_patches_with_progress,
+};
+pub use synth_pixel::{
+    PixelSynthesisSettings, synthesize_pixels, synthesize_pixels_with_progress, synthesize_sources,
+    synthesize_sources_with_progress,
+};

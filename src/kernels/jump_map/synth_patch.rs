@@ -25,6 +25,7 @@ use super::order::HilbertIter;
 use super::synth_pixel::validate_common;
 use super::{Boundary, JumpMap, JumpMapError, SourceMap, SynthesisOutput, TexelCoord};
 use crate::image::Image;
+use crate::progress::Progress;
 
 /// Parameters of patch-based synthesis (§7.1).
 #[derive(Clone, Debug, PartialEq)]
@@ -98,6 +99,19 @@ pub fn synthesize_patch_sources(
     map: &JumpMap,
     settings: &PatchSynthesisSettings,
 ) -> Result<SourceMap, JumpMapError> {
+    synthesize_patch_sources_with_progress(map, settings, &Progress::hidden())
+}
+
+/// [`synthesize_patch_sources`], advancing `progress` by one step per patch
+/// (its length set to the patch count).
+///
+/// # Errors
+/// As [`synthesize_patch_sources`].
+pub fn synthesize_patch_sources_with_progress(
+    map: &JumpMap,
+    settings: &PatchSynthesisSettings,
+    progress: &Progress,
+) -> Result<SourceMap, JumpMapError> {
     settings.validate()?;
     let _span = tracing::info_span!(
         "jump_map_synthesize_patches",
@@ -125,7 +139,9 @@ pub fn synthesize_patch_sources(
     let mut table: Vec<((i64, i64), f64)> = Vec::new();
     let mut border: Vec<(u32, u32)> = Vec::new();
     let (gw, gh) = (w.div_ceil(p), h.div_ceil(p));
+    progress.set_length(u64::from(gw) * u64::from(gh));
     for (gx, gy) in HilbertIter::new(gw, gh) {
+        progress.inc(1);
         let (x0, y0) = (gx * p, gy * p);
         let (x1, y1) = ((x0 + p).min(w), (y0 + p).min(h));
         let (cx, cy) = ((x0 + p / 2) as i64, (y0 + p / 2) as i64);
@@ -210,6 +226,20 @@ pub fn synthesize_patches(
     map: &JumpMap,
     settings: &PatchSynthesisSettings,
 ) -> Result<SynthesisOutput, JumpMapError> {
+    synthesize_patches_with_progress(exemplar, map, settings, &Progress::hidden())
+}
+
+/// [`synthesize_patches`], reporting to `progress` as
+/// [`synthesize_patch_sources_with_progress`] does.
+///
+/// # Errors
+/// As [`synthesize_patches`].
+pub fn synthesize_patches_with_progress(
+    exemplar: &Image,
+    map: &JumpMap,
+    settings: &PatchSynthesisSettings,
+    progress: &Progress,
+) -> Result<SynthesisOutput, JumpMapError> {
     if exemplar.width != map.width() || exemplar.height != map.height() {
         return Err(JumpMapError::ExemplarMismatch {
             map_width: map.width(),
@@ -218,7 +248,7 @@ pub fn synthesize_patches(
             height: exemplar.height,
         });
     }
-    let sources = synthesize_patch_sources(map, settings)?;
+    let sources = synthesize_patch_sources_with_progress(map, settings, progress)?;
     let image = sources.gather(exemplar)?;
     Ok(SynthesisOutput { image, sources })
 }

@@ -34,6 +34,7 @@ use super::{
     Boundary, JumpMap, JumpMapError, PixelOrder, SourceMap, SynthesisOutput, TexelCoord, TexelRect,
 };
 use crate::image::Image;
+use crate::progress::Progress;
 
 /// Marks an output pixel not yet synthesized (and the padding border).
 const NONE: u32 = u32::MAX;
@@ -299,6 +300,9 @@ impl Ctx<'_> {
     }
 }
 
+/// Pixels between two progress reports of the synthesis loop.
+const PROGRESS_PIXELS: u64 = 1 << 16;
+
 /// The synthesis loop over `order`; `grid` is the output padded by one pixel
 /// on every side (padding stays `NONE`), row stride `pw`.
 #[inline(never)]
@@ -308,9 +312,15 @@ fn run<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
     pw: usize,
     ctx: &Ctx,
     rng: &mut Pcg64Mcg,
+    progress: &Progress,
 ) {
     let k = ctx.table.k;
+    let mut done = 0u64;
     for (x, y) in order {
+        done += 1;
+        if done.is_multiple_of(PROGRESS_PIXELS) {
+            progress.inc(PROGRESS_PIXELS);
+        }
         let pi = (y as usize + 1) * pw + x as usize + 1;
         // Already-synthesized neighbours and the direction from each to here.
         let mut cand = [0u32; 4];
@@ -360,7 +370,21 @@ pub fn synthesize_sources(
     map: &JumpMap,
     settings: &PixelSynthesisSettings,
 ) -> Result<SourceMap, JumpMapError> {
+    synthesize_sources_with_progress(map, settings, &Progress::hidden())
+}
+
+/// [`synthesize_sources`], advancing `progress` (its length set to the
+/// pixel count) every 65,536 pixels.
+///
+/// # Errors
+/// As [`synthesize_sources`].
+pub fn synthesize_sources_with_progress(
+    map: &JumpMap,
+    settings: &PixelSynthesisSettings,
+    progress: &Progress,
+) -> Result<SourceMap, JumpMapError> {
     settings.validate()?;
+    progress.set_length(u64::from(settings.width) * u64::from(settings.height));
     let _span = tracing::info_span!(
         "jump_map_synthesize_pixels",
         w = settings.width,
@@ -386,14 +410,24 @@ pub fn synthesize_sources(
     let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
     let toroidal = map.boundary() == Boundary::Toroidal;
     match (settings.order, toroidal) {
-        (PixelOrder::Hilbert, true) => {
-            run::<true, _>(HilbertIter::new(w, h), &mut grid, pw, &ctx, &mut rng)
-        }
-        (PixelOrder::Hilbert, false) => {
-            run::<false, _>(HilbertIter::new(w, h), &mut grid, pw, &ctx, &mut rng)
-        }
-        (o, true) => run::<true, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng),
-        (o, false) => run::<false, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng),
+        (PixelOrder::Hilbert, true) => run::<true, _>(
+            HilbertIter::new(w, h),
+            &mut grid,
+            pw,
+            &ctx,
+            &mut rng,
+            progress,
+        ),
+        (PixelOrder::Hilbert, false) => run::<false, _>(
+            HilbertIter::new(w, h),
+            &mut grid,
+            pw,
+            &ctx,
+            &mut rng,
+            progress,
+        ),
+        (o, true) => run::<true, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng, progress),
+        (o, false) => run::<false, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng, progress),
     }
     let mut texels = Vec::with_capacity(w as usize * h as usize);
     for row in grid.chunks_exact(pw).skip(1).take(h as usize) {
@@ -423,6 +457,20 @@ pub fn synthesize_pixels(
     map: &JumpMap,
     settings: &PixelSynthesisSettings,
 ) -> Result<SynthesisOutput, JumpMapError> {
+    synthesize_pixels_with_progress(exemplar, map, settings, &Progress::hidden())
+}
+
+/// [`synthesize_pixels`], reporting to `progress` as
+/// [`synthesize_sources_with_progress`] does.
+///
+/// # Errors
+/// As [`synthesize_pixels`].
+pub fn synthesize_pixels_with_progress(
+    exemplar: &Image,
+    map: &JumpMap,
+    settings: &PixelSynthesisSettings,
+    progress: &Progress,
+) -> Result<SynthesisOutput, JumpMapError> {
     if exemplar.width != map.width() || exemplar.height != map.height() {
         return Err(JumpMapError::ExemplarMismatch {
             map_width: map.width(),
@@ -431,7 +479,7 @@ pub fn synthesize_pixels(
             height: exemplar.height,
         });
     }
-    let sources = synthesize_sources(map, settings)?;
+    let sources = synthesize_sources_with_progress(map, settings, progress)?;
     let image = sources.gather(exemplar)?;
     Ok(SynthesisOutput { image, sources })
 }

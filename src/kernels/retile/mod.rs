@@ -61,10 +61,11 @@ mod trimesh;
 pub use prepare::InputReport;
 pub use project::{
     MapBackError, MappedBack, ResultAttributes, SurfacePoint, SurfaceProjector,
-    closest_point_on_triangle, map_back,
+    closest_point_on_triangle, map_back, map_back_with_progress,
 };
 
 use crate::mesh::PolyMesh;
+use crate::progress::Progress;
 use glam::Vec3;
 use remesh::{LevelPlan, remesh_level, snap_to_surface};
 
@@ -302,6 +303,19 @@ pub enum RetileError {
 /// logged); the pyramid ends early, with fewer levels than asked, at a level
 /// that would not shrink below half the finer one.
 pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyramid, RetileError> {
+    retile_with_progress(input, settings, &Progress::hidden())
+}
+
+/// [`retile`], reporting to `progress`: its length is set to the vertex
+/// iterations of all levels, and each level is a part (`"level 2/4"`).
+///
+/// # Errors
+/// As [`retile`].
+pub fn retile_with_progress(
+    input: &PolyMesh,
+    settings: &RetileSettings,
+    progress: &Progress,
+) -> Result<RetiledPyramid, RetileError> {
     settings.validate()?;
     let prep = prepare::prepare(input)?;
     let proj = SurfaceProjector::from_trimesh(&prep.mesh);
@@ -314,6 +328,11 @@ pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyra
         });
     }
     let v0 = settings.level0_vertices(area)?;
+    progress.set_length(
+        (0..settings.levels)
+            .map(|l| level_target(v0, l).max(1) as u64 * (u64::from(settings.iterations) + 1))
+            .sum(),
+    );
 
     let mut mesh = prep.mesh.clone();
     remesh::attach_to_input(&mut mesh, &proj);
@@ -322,13 +341,14 @@ pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyra
     for level in 0..settings.levels {
         let target = level_target(v0, level);
         let _span = tracing::debug_span!("retile_level", level, target).entered();
+        progress.set_part(&format!("level {}/{}", level + 1, settings.levels));
         let plan = LevelPlan {
             target_vertices: target,
             edge_length: len,
             iterations: settings.iterations,
             seed: splitmix(settings.seed ^ splitmix(level as u64 + 1)),
         };
-        len = remesh_level(&mut mesh, &proj, &plan);
+        len = remesh_level(&mut mesh, &proj, &plan, progress);
         mesh.compact();
         snap_to_surface(&mut mesh, &proj);
         let max_change = (repair::MAX_COUNT_CHANGE * target as f64) as usize;

@@ -12,6 +12,7 @@
 use super::trimesh::{NONE, TriMesh, next};
 use crate::kernels::frames::TangentFrame;
 use crate::mesh::PolyMesh;
+use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 
 /// Most primitives in a BVH leaf.
@@ -509,6 +510,21 @@ pub fn map_back(
     positions: &[Vec3],
     normals: &[Vec3],
 ) -> Result<MappedBack, MapBackError> {
+    map_back_with_progress(result, attributes, positions, normals, &Progress::hidden())
+}
+
+/// [`map_back`], advancing `progress` (its length set to the target vertex
+/// count) by one step per target vertex projected.
+///
+/// # Errors
+/// As [`map_back`].
+pub fn map_back_with_progress(
+    result: &PolyMesh,
+    attributes: &ResultAttributes,
+    positions: &[Vec3],
+    normals: &[Vec3],
+    progress: &Progress,
+) -> Result<MappedBack, MapBackError> {
     use rayon::prelude::*;
     let nv = result.vertex_count();
     let ch = attributes.channels;
@@ -535,6 +551,7 @@ pub fn map_back(
         return Err(MapBackError::NoFaces);
     }
     let n = positions.len();
+    progress.set_length(n as u64);
     let mut out = MappedBack {
         colours: vec![0.0; n * ch],
         texels: attributes.texels.map(|_| vec![Vec2::ZERO; n]),
@@ -554,11 +571,15 @@ pub fn map_back(
     let hits: Vec<Option<SurfacePoint>> = positions
         .par_iter()
         .enumerate()
-        .map(|(v, &p)| match normals.get(v).copied() {
-            Some(normal) if normal.length_squared() > 0.0 => {
-                projector.project_facing(p, normal, NONE)
-            }
-            _ => projector.project(p),
+        .map(|(v, &p)| {
+            let hit = match normals.get(v).copied() {
+                Some(normal) if normal.length_squared() > 0.0 => {
+                    projector.project_facing(p, normal, NONE)
+                }
+                _ => projector.project(p),
+            };
+            progress.inc(1);
+            hit
         })
         .collect();
     for (v, hit) in hits.iter().enumerate() {

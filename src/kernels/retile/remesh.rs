@@ -34,6 +34,7 @@
 
 use super::project::{SurfacePoint, SurfaceProjector};
 use super::trimesh::{NONE, TriMesh, next, prev};
+use crate::progress::Progress;
 use glam::Vec3;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -88,7 +89,14 @@ impl Scratch {
 }
 
 /// Remeshes `mesh` in place onto `proj`; returns the final target edge length.
-pub(crate) fn remesh_level(mesh: &mut TriMesh, proj: &SurfaceProjector, plan: &LevelPlan) -> f32 {
+/// `progress` advances by the target vertex count per iteration and once
+/// more for the final count matching and smoothing.
+pub(crate) fn remesh_level(
+    mesh: &mut TriMesh,
+    proj: &SurfaceProjector,
+    plan: &LevelPlan,
+    progress: &Progress,
+) -> f32 {
     let mut rng = Pcg64Mcg::seed_from_u64(plan.seed);
     let mut scratch = Scratch::default();
     let mut len = plan.edge_length;
@@ -108,6 +116,7 @@ pub(crate) fn remesh_level(mesh: &mut TriMesh, proj: &SurfaceProjector, plan: &L
         relax(mesh, proj, SMOOTHING_STEPS);
         let ratio = (mesh.live_vertices as f32 / target as f32).sqrt();
         len *= ratio.clamp(0.5, 2.0);
+        progress.inc(target as u64);
     }
     match_vertex_count(mesh, proj, target, len, &mut rng, &mut scratch);
     mesh.compact();
@@ -117,6 +126,7 @@ pub(crate) fn remesh_level(mesh: &mut TriMesh, proj: &SurfaceProjector, plan: &L
     }
     equalize_valences(mesh, proj);
     relax(mesh, proj, SMOOTHING_STEPS);
+    progress.inc(target as u64);
     len
 }
 
@@ -692,7 +702,7 @@ mod tests {
             iterations: 8,
             seed: 1,
         };
-        remesh_level(&mut mesh, &proj, &plan);
+        remesh_level(&mut mesh, &proj, &plan, &Progress::hidden());
         mesh.check().unwrap();
         mesh.compact();
         mesh.check().unwrap();

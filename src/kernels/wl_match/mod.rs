@@ -56,6 +56,7 @@ use super::flatten::{
 use super::frames::TangentFrame;
 use crate::image::{Image, pyramid::gaussian_pyramid, sample::Wrap};
 use crate::mesh::PolyMesh;
+use crate::progress::Progress;
 
 /// A neighbourhood `{size×size, levels}` (Wei & Levoy Table 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -278,8 +279,30 @@ pub fn wei_levoy_synthesis(
     settings: &WlSettings,
     initial: Option<InitialColours>,
 ) -> Result<Vec<LevelResult>, WlError> {
+    wei_levoy_synthesis_with_progress(levels, exemplar, settings, initial, &Progress::hidden())
+}
+
+/// [`wei_levoy_synthesis`], reporting to `progress`: two steps per vertex
+/// and level (pass 1, then pass 2 batch by batch), each level a part
+/// (`"level 1/3"`, coarsest first).
+///
+/// # Errors
+/// As [`wei_levoy_synthesis`].
+pub fn wei_levoy_synthesis_with_progress(
+    levels: &[SynthesisLevel],
+    exemplar: &Image,
+    settings: &WlSettings,
+    initial: Option<InitialColours>,
+    progress: &Progress,
+) -> Result<Vec<LevelResult>, WlError> {
     validate(levels, exemplar, settings)?;
     let count = levels.len();
+    progress.set_length(
+        levels
+            .iter()
+            .map(|l| 2 * l.mesh.vertex_count() as u64)
+            .sum(),
+    );
     let ch = exemplar.channels as usize;
     let pyramid = gaussian_pyramid(exemplar, count, settings.wrap);
     let geometry: Vec<LevelGeometry> = levels
@@ -302,6 +325,7 @@ pub fn wei_levoy_synthesis(
     let mut results: Vec<LevelResult> = vec![LevelResult::default(); count];
     for l in (0..count).rev() {
         let _span = tracing::info_span!("wl_level", level = l).entered();
+        progress.set_part(&format!("level {}/{count}", count - l));
         let level = &levels[l];
         let geo = &geometry[l];
         let nv = level.mesh.vertex_count();
@@ -354,7 +378,10 @@ pub fn wei_levoy_synthesis(
             matches
                 .par_chunks_mut(PASS1_CHUNK)
                 .zip(coarse.par_chunks(PASS1_CHUNK * coarse_dim))
-                .for_each(|(out, q)| search.search(q, out));
+                .for_each(|(out, q)| {
+                    search.search(q, out);
+                    progress.inc(out.len() as u64);
+                });
             report.search_seconds += started.elapsed().as_secs_f64();
             report.exhaustive_values += (nv * search.len() * coarse_dim) as u64;
             report.dims[0] = coarse_dim;
@@ -362,6 +389,8 @@ pub fn wei_levoy_synthesis(
             for (v, m) in matches.iter().enumerate() {
                 assign(img, *m, &mut colours[v * ch..(v + 1) * ch], &mut texels[v]);
             }
+        } else {
+            progress.inc(nv as u64);
         }
 
         // Pass 2: the whole neighbourhood, in random order.
@@ -477,6 +506,7 @@ pub fn wei_levoy_synthesis(
                     })
                     .collect();
                 search_seconds += t0.elapsed().as_secs_f64();
+                progress.inc(batch.len() as u64);
                 for (v, m) in found {
                     let v = v as usize;
                     all[v] = m;

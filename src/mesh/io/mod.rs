@@ -148,11 +148,18 @@ pub fn load_mesh(path: &Path, options: &LoadOptions) -> Result<(PolyMesh, LoadRe
         return Ok((mesh, report));
     }
     let format = MeshFormat::from_path(path)?;
+    // Three coarse steps (read, parse, repair): a file of a million
+    // vertices takes a second or two, too long for silence on a terminal.
+    let progress = crate::progress::Progress::new(3, "load_mesh");
+    progress.set_part("reading");
     let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
         path: path.to_path_buf(),
         source,
     })?;
-    load_mesh_from_bytes(&bytes, format, path, options)
+    progress.inc(1);
+    let loaded = load_mesh_from_bytes_with_progress(&bytes, format, path, options, &progress);
+    progress.finish();
+    loaded
 }
 
 /// Parses, validates and repairs a mesh held in memory. `path` is only used in
@@ -163,8 +170,29 @@ pub fn load_mesh_from_bytes(
     path: &Path,
     options: &LoadOptions,
 ) -> Result<(PolyMesh, LoadReport), MeshError> {
+    load_mesh_from_bytes_with_progress(
+        bytes,
+        format,
+        path,
+        options,
+        &crate::progress::Progress::hidden(),
+    )
+}
+
+/// [`load_mesh_from_bytes`], advancing `progress` by one step after parsing
+/// and one after the repairs.
+fn load_mesh_from_bytes_with_progress(
+    bytes: &[u8],
+    format: MeshFormat,
+    path: &Path,
+    options: &LoadOptions,
+    progress: &crate::progress::Progress,
+) -> Result<(PolyMesh, LoadReport), MeshError> {
     options.validate()?;
+    progress.set_part("parsing");
     let mut mesh = parse_mesh(bytes, format, path)?;
+    progress.inc(1);
+    progress.set_part("repairs");
     let file_faces = mesh.face_count();
     if file_faces == 0 {
         return Err(MeshError::NoFaces {
@@ -173,6 +201,7 @@ pub fn load_mesh_from_bytes(
         });
     }
     let report = repair_mesh(&mut mesh, options);
+    progress.inc(1);
     if mesh.face_count() == 0 {
         return Err(MeshError::NoFaces {
             path: path.to_path_buf(),

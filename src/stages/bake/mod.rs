@@ -18,12 +18,15 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
 use crate::image::Image;
 use crate::kernels::atlas::bake::{
     AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
-    LappedSource, PatchPlacement, VertexColourSource, bake_channels, bake_channels_with_patches,
+    LappedSource, PatchPlacement, VertexColourSource, bake_channels_with_progress,
 };
-use crate::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
+use crate::kernels::atlas::{
+    AtlasSettings, build_uv_atlas_with_progress, distortion, rasterise_faces,
+};
 use crate::kernels::retile::SurfaceProjector;
 use crate::mesh::PolyMesh;
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::lapped_paste::components::*;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
@@ -245,8 +248,9 @@ fn bake_world(
         normal_cone_deg: settings.normal_cone as f32,
         padding_px: settings.padding,
     };
-    let atlas =
-        build_uv_atlas(&mesh.positions, &tris, &atlas_settings).map_err(|e| e.to_string())?;
+    let progress = Progress::new(0, Bake::KIND);
+    let atlas = build_uv_atlas_with_progress(&mesh.positions, &tris, &atlas_settings, &progress)
+        .map_err(|e| e.to_string())?;
     let texel_face = rasterise_faces(&atlas.corner_uvs, settings.size);
     let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
     let target = BakeTarget {
@@ -324,13 +328,14 @@ fn bake_world(
         if !maps.is_empty() && placements.is_empty() {
             maps_note = "lapped patches record no exemplar origin: maps are flat/neutral";
         }
-        bake_channels_with_patches(
+        bake_channels_with_progress(
             &target,
             &src as &dyn ContributionSource,
             &textures,
             exemplar.wrap,
             &maps,
             &placements,
+            &progress,
         )
     } else if blend.is_some() || uvs.is_some() {
         if !on_source {
@@ -351,12 +356,14 @@ fn bake_world(
             _ => return Err("the result's UVs do not match the mesh's corners".into()),
         };
         let src = BlendUvSource::new(&mesh.positions, &tris, &frames, &layers);
-        bake_channels(
+        bake_channels_with_progress(
             &target,
             &src as &dyn ContributionSource,
             &textures,
             exemplar.wrap,
             &maps,
+            &[],
+            &progress,
         )
     } else if let Some(c) = colours {
         if c.channels == 0 || c.values.len() != c.channels * result.0.vertex_count() {
@@ -391,16 +398,19 @@ fn bake_world(
         if !maps.is_empty() && source_uv.is_none() {
             maps_note = "the result records no source texels: maps are flat/neutral";
         }
-        bake_channels(
+        bake_channels_with_progress(
             &target,
             &src as &dyn ContributionSource,
             &textures,
             exemplar.wrap,
             &maps,
+            &[],
+            &progress,
         )
     } else {
         return Err("the result has nothing to bake: no vertex colours, per-corner UVs or lapped pastes; put `bake` after a synthesis stage".into());
     };
+    progress.finish();
     let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
     let record = vec![
         ("bake_method", to_json(&method)),

@@ -225,11 +225,8 @@ impl Stage for Coherent {
                 seed: seed.derive(ctx.index, 0),
                 wrap: exemplar.wrap,
             };
-            let synthesised = if settings.start == Start::Sources { 1 } else { inputs.len() };
-            let progress = Progress::new(
-                (synthesised as u64 * settings.passes as u64).max(1),
-                Self::KIND,
-            );
+            // The kernel sets the length: vertices times passes.
+            let progress = Progress::new(0, Self::KIND);
             let start = match settings.start {
                 Start::Random => None,
                 Start::Sources => {

@@ -19,9 +19,10 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::channels::{
     displace_along_normals, heights_at_corner_uvs, heights_at_texels, mean_height,
-    smooth_vertex_heights,
+    smooth_vertex_heights_with_progress,
 };
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -175,6 +176,15 @@ impl Stage for Displace {
                 HeightCoordinates::CornerUvs => true,
                 HeightCoordinates::SourceTexels => false,
             };
+            // Coarse steps: sampling, the one-rings and each smoothing pass,
+            // normals, displacing (seconds at a million vertices).
+            let smoothing_steps = if settings.smoothing > 0 {
+                1 + u64::from(settings.smoothing)
+            } else {
+                0
+            };
+            let progress = Progress::new(3 + smoothing_steps, Self::KIND);
+            progress.set_part("heights");
             let (mut heights, moved) = if use_uvs {
                 let Some(uvs) = uvs else {
                     return fail_with(
@@ -190,12 +200,24 @@ impl Stage for Displace {
                 };
                 (heights_at_texels(height, channels.wrap, &texels.0), vec![true; nv])
             };
+            progress.inc(1);
             if settings.smoothing > 0 {
+                progress.set_part("smoothing");
                 let topo = crate::mesh::Topology::build(mesh);
-                smooth_vertex_heights(&topo, &mut heights, &moved, settings.smoothing);
+                progress.inc(1);
+                smooth_vertex_heights_with_progress(
+                    &topo,
+                    &mut heights,
+                    &moved,
+                    settings.smoothing,
+                    &progress,
+                );
             }
+            progress.set_part("normals");
             let mean = mean_height(height);
             let normals = mesh.vertex_normals();
+            progress.inc(1);
+            progress.set_part("displacing");
             let amplitude = match settings.amplitude_unit {
                 AmplitudeUnit::World => settings.amplitude as f32,
                 AmplitudeUnit::Texels => settings.amplitude as f32 * spacing.0,
@@ -211,6 +233,8 @@ impl Stage for Displace {
                 .fold(0.0f32, f32::max);
             let mut displaced = mesh.clone();
             displaced.positions = positions;
+            progress.inc(1);
+            progress.finish();
             metrics.record(ctx.index, "vertices", nv);
             metrics.record(ctx.index, "vertices_moved", moved.iter().filter(|&&m| m).count());
             metrics.record(

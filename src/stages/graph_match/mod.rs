@@ -30,11 +30,12 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::graph_match::{
     BatchRule, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats, SynthesisState,
-    match_pass, mean_edge_lengths,
+    match_pass_with_progress, mean_edge_lengths,
 };
 use crate::kernels::sweep::{sweep_field, sweep_order};
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -346,6 +347,16 @@ impl Stage for GraphMatch {
             metrics.record(idx, "k_max", k_max);
             metrics.record(idx, "image_levels", images.levels());
             let ch = img.channels as usize;
+            // One step per vertex and pass over all levels.
+            let steps: u64 = levels
+                .iter()
+                .enumerate()
+                .filter_map(|(li, &e)| {
+                    let nv = meshes.get(e).ok()?.0.0.vertex_count() as u64;
+                    Some(nv * u64::from(settings.passes_for(li)))
+                })
+                .sum();
+            let progress = Progress::new(steps, Self::KIND);
             let mut state: Option<SynthesisState> = None;
             let mut per_level = Vec::new();
             let mut total = PassStats::default();
@@ -394,6 +405,12 @@ impl Stage for GraphMatch {
                 let passes = settings.passes_for(li);
                 let mut level_stats = PassStats::default();
                 for pass in 0..passes {
+                    progress.set_part(&format!(
+                        "level {}/{} pass {}/{passes}",
+                        li + 1,
+                        levels.len(),
+                        pass + 1
+                    ));
                     let (order, rule) = if li == 0 && pass == 0 && settings.coarse_order == CoarseOrder::Sweep {
                         let values = match sweep {
                             Some(s) if s.0.len() == nv => s.0.clone(),
@@ -408,7 +425,7 @@ impl Stage for GraphMatch {
                         o.shuffle(&mut seed.rng(idx, ((li as u64) << 16) | pass as u64));
                         (o, BatchRule::Relaxed)
                     };
-                    let s = match_pass(
+                    let s = match_pass_with_progress(
                         &level,
                         &images,
                         &kernel,
@@ -416,6 +433,7 @@ impl Stage for GraphMatch {
                         rule,
                         seed.derive(idx, (1 << 40) | ((li as u64) << 16) | pass as u64),
                         &mut st,
+                        &progress,
                     );
                     level_stats += s;
                 }
@@ -445,6 +463,7 @@ impl Stage for GraphMatch {
                 ));
                 state = Some(st);
             }
+            progress.finish();
             metrics.record(idx, "levels", per_level);
             metrics.record(idx, "total", total);
             metrics.record(idx, "cut_vertices_per_cut", per_cut(&total));

@@ -9,10 +9,12 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::jump_map::{
     ControlField, ControlledSynthesisSettings, PatchSynthesisSettings, PixelOrder,
-    PixelSynthesisSettings, synthesize_controlled, synthesize_patches, synthesize_pixels,
+    PixelSynthesisSettings, synthesize_controlled_with_progress, synthesize_patches_with_progress,
+    synthesize_pixels_with_progress,
 };
 use crate::kernels::metrics::{EnergySettings, image_texture_energy};
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -214,8 +216,10 @@ impl Stage for JumpImage {
             let ex = &exemplar.image;
             let s = seed.derive(ctx.index, 0);
             let started = std::time::Instant::now();
+            // The kernels set the length: pixels, or patches.
+            let progress = Progress::new(0, Self::KIND);
             let result = match settings.method.as_str() {
-                "patch" => synthesize_patches(
+                "patch" => synthesize_patches_with_progress(
                     ex,
                     map,
                     &PatchSynthesisSettings {
@@ -224,6 +228,7 @@ impl Stage for JumpImage {
                         patch_fraction: settings.patch_side,
                         seed: s,
                     },
+                    &progress,
                 )
                 .map(|o| {
                     let src: Vec<[f32; 2]> = o
@@ -244,7 +249,7 @@ impl Stage for JumpImage {
                         }
                         _ => ControlField::perspective(w, h, a, b),
                     };
-                    synthesize_controlled(
+                    synthesize_controlled_with_progress(
                         ex,
                         map,
                         &field,
@@ -254,10 +259,11 @@ impl Stage for JumpImage {
                             boundary_fraction: settings.boundary_fraction,
                             seed: s,
                         },
+                        &progress,
                     )
                     .map(|o| (o.image, o.sources))
                 }
-                _ => synthesize_pixels(
+                _ => synthesize_pixels_with_progress(
                     ex,
                     map,
                     &PixelSynthesisSettings {
@@ -268,6 +274,7 @@ impl Stage for JumpImage {
                         boundary_fraction: settings.boundary_fraction,
                         seed: s,
                     },
+                    &progress,
                 )
                 .map(|o| {
                     let src: Vec<[f32; 2]> = o
@@ -279,6 +286,7 @@ impl Stage for JumpImage {
                     (o.image, src)
                 }),
             };
+            progress.finish();
             let (image, sources) = match result {
                 Ok(r) => r,
                 Err(e) => {

@@ -5,8 +5,11 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::sample::Wrap;
-use crate::kernels::jump_map::{Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_stats};
+use crate::kernels::jump_map::{
+    Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress,
+};
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -191,7 +194,10 @@ pub fn load_or_analyse(
             Err(e) => tracing::warn!("jump-map cache entry rejected ({e}); rebuilding"),
         }
     }
-    let (map, stats) = analyse_with_stats(exemplar, settings).map_err(|e| e.to_string())?;
+    let progress = Progress::new(0, JumpMapStage::KIND);
+    let analysed = analyse_with_progress(exemplar, settings, &progress);
+    progress.finish();
+    let (map, stats) = analysed.map_err(|e| e.to_string())?;
     if let Some(dir) = &dir {
         crate::cache::write(dir, "jumpmap", &key, &map.to_bytes());
     }

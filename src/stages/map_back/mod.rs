@@ -11,8 +11,9 @@
 //! `original_preview_*.png` (format `preview`).
 
 use crate::config::params::{ParamDoc, StageSettings};
-use crate::kernels::retile::{ResultAttributes, map_back};
+use crate::kernels::retile::{ResultAttributes, map_back_with_progress};
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -104,7 +105,16 @@ impl Stage for MapBack {
                 frames: frames.map(|f| f.0.as_slice()),
             };
             let normals = original.0.vertex_normals();
-            let mapped = match map_back(&result.0, &attributes, &original.0.positions, &normals) {
+            let progress = Progress::new(0, Self::KIND);
+            let mapped = map_back_with_progress(
+                &result.0,
+                &attributes,
+                &original.0.positions,
+                &normals,
+                &progress,
+            );
+            progress.finish();
+            let mapped = match mapped {
                 Ok(m) => m,
                 Err(e) => {
                     fail(&mut failure, ctx.index, Self::KIND, e.to_string());

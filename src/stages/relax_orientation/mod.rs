@@ -6,10 +6,11 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::flatten::TriangleAdjacency;
 use crate::kernels::relax_orientation::{
-    OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
+    OrientationLevel, OrientationMode, RelaxSettings, relax_orientation_with_progress,
 };
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -156,7 +157,8 @@ impl Stage for RelaxOrientation {
                     up: Vec3::from(settings.up),
                 },
             };
-            let result = relax_orientation(
+            let progress = Progress::new(0, Self::KIND);
+            let result = relax_orientation_with_progress(
                 &views,
                 &RelaxSettings {
                     mode,
@@ -164,7 +166,9 @@ impl Stage for RelaxOrientation {
                     iterations: settings.iterations,
                     seed: seed.derive(ctx.index, 0),
                 },
+                &progress,
             );
+            progress.finish();
             metrics.record(ctx.index, "levels", entities.len());
             metrics.record(ctx.index, "energy_degrees2_per_level", &result.energy);
             if let Some(e) = result.energy.first() {

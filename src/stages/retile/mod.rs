@@ -5,9 +5,10 @@
 //! onto the input; the finest level becomes the active mesh.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::retile::{RetileSettings, RetileTarget, retile};
+use crate::kernels::retile::{RetileSettings, RetileTarget, retile_with_progress};
 use crate::mesh::{PolyMesh, Topology};
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -167,7 +168,10 @@ impl Stage for Retile {
                 iterations: settings.iterations,
                 seed: seed.derive(ctx.index, 0),
             };
-            let pyramid = match retile(&source.0, &rs) {
+            let progress = Progress::new(0, Self::KIND);
+            let pyramid = retile_with_progress(&source.0, &rs, &progress);
+            progress.finish();
+            let pyramid = match pyramid {
                 Ok(p) => p,
                 Err(e) => {
                     fail(&mut failure, ctx.index, Self::KIND, e.to_string());

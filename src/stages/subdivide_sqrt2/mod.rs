@@ -19,6 +19,7 @@ use crate::kernels::sqrt2::{
     adaptive_sqrt2, sqrt2_subdivide_with,
 };
 use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -358,21 +359,35 @@ impl Stage for SubdivideSqrt2 {
                 }
                 _ => 0,
             };
+            // Counted in vertices of the finest level: a step costs about
+            // what it adds (V' = V + F, about 2V).
+            let start_vertices = coarse.vertex_count();
+            let expected = if target > 0 {
+                target
+            } else {
+                start_vertices.saturating_mul(1 << max_steps.min(30))
+            }
+            .min(MAX_HIERARCHY_VERTICES)
+            .max(start_vertices);
+            let progress = Progress::new((expected - start_vertices) as u64, Self::KIND);
             let mut levels: Vec<(crate::mesh::PolyMesh, Option<Parents>, Attributes)> =
                 vec![(coarse, None, attrs)];
-            for _ in 0..max_steps {
+            for step in 0..max_steps {
                 let (current, _, current_attrs) = levels.last().expect("one level at least");
                 let (nv, nf) = (current.vertex_count(), current.face_count());
                 if (target > 0 && nv >= target) || nf == 0 || nv + nf > MAX_HIERARCHY_VERTICES {
                     break;
                 }
+                progress.set_part(&format!("step {}", step + 1));
                 let mut sub = sqrt2_subdivide_with(current, &step_settings);
                 if let Some(projector) = &projector {
                     onto_surface(projector, &mut sub.mesh);
                 }
                 let next_attrs = current_attrs.carried(&sub.parents, &sub.mesh);
+                progress.inc(sub.mesh.vertex_count().saturating_sub(nv) as u64);
                 levels.push((sub.mesh, Some(sub.parents), next_attrs));
             }
+            progress.finish();
             // The finest level is the one closest to the target in ratio: the
             // step past it may overshoot by up to 2x (V' = V + F).
             if target > 0 && levels.len() >= 2 {

@@ -13,10 +13,12 @@ use crate::kernels::flatten::TriangleAdjacency;
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::relax_orientation::{OrientationLevel, transfer_frames};
 use crate::kernels::wl_match::{
-    InitialColours, NeighbourhoodSpec, SearchKind, SynthesisLevel, WlSettings, wei_levoy_synthesis,
+    InitialColours, NeighbourhoodSpec, SearchKind, SynthesisLevel, WlSettings,
+    wei_levoy_synthesis_with_progress,
 };
 use crate::mesh::{PolyMesh, Topology};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -264,13 +266,16 @@ impl Stage for Match {
                 .map(|(m, f)| SynthesisLevel { mesh: m, frames: f })
                 .collect();
             let kernel = settings.kernel_settings(seed.derive(ctx.index, 0), exemplar.wrap);
-            let result = wei_levoy_synthesis(
+            let progress = Progress::new(0, Self::KIND);
+            let result = wei_levoy_synthesis_with_progress(
                 &inputs,
                 &exemplar.image,
                 &kernel,
                 init.as_ref()
                     .map(|(values, texels)| InitialColours { values, texels }),
+                &progress,
             );
+            progress.finish();
             let results = match result {
                 Ok(r) => r,
                 Err(e) => {

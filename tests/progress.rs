@@ -1,0 +1,233 @@
+//! Issue 15, progress: off a terminal every long stage logs
+//! `<stage> <part>: <pos>/<len> (<pct>%), <eta> left` at most every
+//! `SURFSYNTH_PROGRESS_INTERVAL_MS` (10 s by default), nothing with `-q`,
+//! and progress never changes a result.
+
+use std::path::Path;
+use std::process::Command;
+
+const HEADER: &str = r#"
+seed = 5
+[input]
+mesh = "builtin:torus"
+exemplar = "builtin:bricks"
+exemplar_wrap = "clamp"
+texture_scale = 0.6
+[input.mesh_options]
+resolution = [24, 12]
+[input.exemplar_options]
+size = 32
+"#;
+
+/// Wei & Levoy on a retiled pyramid, then back onto the input mesh.
+const WEI_LEVOY: &str = r#"
+[[stage]]
+kind = "retile"
+levels = 2
+[[stage]]
+kind = "orientation"
+up = [0.0, 0.0, 1.0]
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "match"
+passes = 1
+[[stage]]
+kind = "map_back"
+[[stage]]
+kind = "export"
+formats = ["ply"]
+"#;
+
+/// Bangay & Morkel on a √2 hierarchy.
+const GRAPH_MATCH: &str = r#"
+[[stage]]
+kind = "subdivide_sqrt2"
+[[stage]]
+kind = "diffuse_orientation"
+[[stage]]
+kind = "graph_match"
+region = 5.0
+passes = [1]
+[[stage]]
+kind = "export"
+formats = ["ply"]
+"#;
+
+/// Jump maps on the surface, baked into an atlas.
+const JUMP_BAKE: &str = r#"
+[[stage]]
+kind = "orientation"
+up = [0.0, 0.0, 1.0]
+[[stage]]
+kind = "jump_map"
+cache = false
+[[stage]]
+kind = "jump_surface"
+[[stage]]
+kind = "bake"
+size = 256
+[[stage]]
+kind = "export"
+formats = ["ply", "glb"]
+"#;
+
+/// Height-map displacement with smoothing (needs `height_map` in `[input]`).
+const DISPLACE: &str = r#"
+[[stage]]
+kind = "orientation"
+up = [0.0, 0.0, 1.0]
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "displace"
+smoothing = 2
+[[stage]]
+kind = "export"
+formats = ["ply"]
+"#;
+
+/// Runs `surfsynth run` on `HEADER + stages`; see [`run_config`].
+fn run(dir: &Path, stages: &str, interval_ms: &str, extra: &[&str]) -> (String, Vec<u8>) {
+    run_config(dir, &format!("{HEADER}{stages}"), Some(interval_ms), extra)
+}
+
+/// Runs `surfsynth run` on `config` with stderr piped (not a terminal),
+/// `RUST_LOG=info` and the given progress interval (the default for
+/// `None`); returns the stderr and the bytes of the exported PLY.
+fn run_config(
+    dir: &Path,
+    config: &str,
+    interval_ms: Option<&str>,
+    extra: &[&str],
+) -> (String, Vec<u8>) {
+    let path = dir.join("config.toml");
+    std::fs::write(&path, config).expect("write config");
+    let out = dir.join(format!("out-{interval_ms:?}-{}", extra.len()));
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_surfsynth"));
+    match interval_ms {
+        Some(ms) => cmd.env("SURFSYNTH_PROGRESS_INTERVAL_MS", ms),
+        None => cmd.env_remove("SURFSYNTH_PROGRESS_INTERVAL_MS"),
+    };
+    let output = cmd
+        .arg("run")
+        .arg(&path)
+        .arg("--out")
+        .arg(&out)
+        .args(extra)
+        .env("RUST_LOG", "info")
+        .env(
+            "SURFSYNTH_CACHE",
+            Path::new(env!("CARGO_TARGET_TMPDIR")).join("surfsynth-cache"),
+        )
+        .output()
+        .expect("run surfsynth");
+    let stderr = String::from_utf8_lossy(&output.stderr).into_owned();
+    assert!(output.status.success(), "the run fails: {stderr}");
+    let ply = std::fs::read_dir(&out)
+        .expect("the output folder")
+        .flatten()
+        .map(|e| e.path())
+        .find(|p| p.extension().is_some_and(|e| e == "ply"))
+        .unwrap_or_else(|| panic!("no PLY in {}", out.display()));
+    (stderr, std::fs::read(ply).expect("read the PLY"))
+}
+
+/// The progress lines of `stderr` (`... (NN%), ... left`).
+fn progress_lines(stderr: &str) -> Vec<&str> {
+    stderr
+        .lines()
+        .filter(|l| l.contains("%), ") && l.contains(" left"))
+        .collect()
+}
+
+/// Checks that some progress line names `stage` with a part and a percent.
+fn assert_logged(stderr: &str, stage: &str, part: &str) {
+    let lines = progress_lines(stderr);
+    let label = if part.is_empty() {
+        format!("{stage}: ")
+    } else {
+        format!("{stage} {part}")
+    };
+    assert!(
+        lines.iter().any(|l| l.contains(&label) && l.contains('%')),
+        "no progress line of {stage} ({part}) in:\n{}",
+        lines.join("\n")
+    );
+}
+
+#[test]
+fn long_stages_log_progress_off_a_terminal_and_not_with_quiet() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (logged, ply) = run(dir.path(), WEI_LEVOY, "0", &[]);
+    assert_logged(&logged, "retile", "level 1/2");
+    assert_logged(&logged, "retile", "level 2/2");
+    assert_logged(&logged, "match", "level 1/2");
+    assert_logged(&logged, "map_back", "");
+    let (quiet, quiet_ply) = run(dir.path(), WEI_LEVOY, "0", &["-q"]);
+    assert!(
+        progress_lines(&quiet).is_empty(),
+        "-q shows no progress: {quiet}"
+    );
+    assert!(ply == quiet_ply, "progress changes the result");
+}
+
+#[test]
+fn default_interval_keeps_a_short_run_silent() {
+    // No interval override: a line at most every 10 s, and this run takes
+    // a second or two.
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let started = std::time::Instant::now();
+    let (stderr, _) = run_config(dir.path(), &format!("{HEADER}{GRAPH_MATCH}"), None, &[]);
+    if started.elapsed().as_secs() < 9 {
+        assert!(
+            progress_lines(&stderr).is_empty(),
+            "a run shorter than the interval logs no progress: {stderr}"
+        );
+    }
+}
+
+#[test]
+fn graph_match_logs_levels_and_passes() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (logged, ply) = run(dir.path(), GRAPH_MATCH, "0", &[]);
+    assert_logged(&logged, "subdivide_sqrt2", "step 1");
+    assert_logged(&logged, "graph_match", "level 1/");
+    assert!(
+        progress_lines(&logged)
+            .iter()
+            .any(|l| l.contains("graph_match level") && l.contains(" pass 1/1:")),
+        "{logged}"
+    );
+    let (quiet, quiet_ply) = run(dir.path(), GRAPH_MATCH, "0", &["--quiet"]);
+    assert!(progress_lines(&quiet).is_empty(), "{quiet}");
+    assert!(ply == quiet_ply, "progress changes the result");
+}
+
+#[test]
+fn jump_map_bake_and_export_log_their_phases() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (logged, ply) = run(dir.path(), JUMP_BAKE, "0", &[]);
+    assert_logged(&logged, "jump_map", "nearest neighbours");
+    assert_logged(&logged, "jump_map", "filtering");
+    assert_logged(&logged, "bake", "atlas");
+    assert_logged(&logged, "bake", "texels");
+    assert_logged(&logged, "export", "ply");
+    let (quiet, quiet_ply) = run(dir.path(), JUMP_BAKE, "0", &["-q"]);
+    assert!(progress_lines(&quiet).is_empty(), "{quiet}");
+    assert!(ply == quiet_ply, "progress changes the result");
+}
+
+#[test]
+fn displace_logs_its_steps() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    // The run needs a height map in `[input]`.
+    let header = HEADER.replace(
+        "exemplar_wrap",
+        "height_map = \"derive:luminance\"\nexemplar_wrap",
+    );
+    let config = format!("{header}{DISPLACE}");
+    let (stderr, _) = run_config(dir.path(), &config, Some("0"), &[]);
+    assert_logged(&stderr, "displace", "smoothing");
+    assert_logged(&stderr, "displace", "displacing");
+}
