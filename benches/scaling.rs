@@ -2,7 +2,8 @@
 //! config runs, as its own process, on the messy-scan generator of the
 //! tests (`tests/common/messy.rs`: holes, fins, 100+ small components,
 //! slivers, duplicate vertices) at 10 k and 100 k vertices (add 1 M with
-//! `SURFSYNTH_SCALING_1M=1`), and prints seconds per vertex and peak
+//! `SURFSYNTH_SCALING_1M=1`; `SURFSYNTH_SCALING_SIZES=1000000` and
+//! `SURFSYNTH_SCALING_METHODS=jump_surface,wei_levoy` choose), and prints seconds per vertex and peak
 //! resident bytes per vertex from each run's `metrics.json`, with the
 //! slowest stage.
 //!
@@ -40,6 +41,17 @@ fn main() {
     if std::env::var("SURFSYNTH_SCALING_1M").is_ok() {
         sizes.push(1_000_000);
     }
+    // SURFSYNTH_SCALING_SIZES=1000000 and SURFSYNTH_SCALING_METHODS=
+    // jump_surface,lapped pick what to run.
+    if let Ok(list) = std::env::var("SURFSYNTH_SCALING_SIZES") {
+        sizes = list
+            .split(',')
+            .filter_map(|s| s.trim().parse().ok())
+            .collect();
+    }
+    let methods: Option<Vec<String>> = std::env::var("SURFSYNTH_SCALING_METHODS")
+        .ok()
+        .map(|l| l.split(',').map(|s| s.trim().to_string()).collect());
     println!(
         "| method | vertices | seconds | µs / vertex | peak MB | bytes / vertex | slowest stage |"
     );
@@ -47,6 +59,12 @@ fn main() {
     for &n in &sizes {
         let (mesh, report) = messy::write_messy_scan(dir.path(), n, 1);
         for (method, config) in CONFIGS {
+            if methods
+                .as_ref()
+                .is_some_and(|m| !m.iter().any(|x| x == method))
+            {
+                continue;
+            }
             let out = dir.path().join(format!("out_{n}_{method}"));
             let run = Command::new(&bin)
                 .arg("run")
