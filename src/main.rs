@@ -173,7 +173,10 @@ fn run(
         g.finish()
             .map_err(|e| PipelineError::Internal(format!("trace file: {e}")))?;
     }
-    println!("{}", surfsynth::pipeline::format_report(&report));
+    say(format_args!(
+        "{}\n",
+        surfsynth::pipeline::format_report(&report)
+    ));
     Ok(())
 }
 
@@ -185,7 +188,7 @@ fn stages(kind: Option<&str>) -> Result<(), PipelineError> {
             message: format!("no stage {:?}; allowed: {allowed}", kind.unwrap_or("")),
         })
     })?;
-    print!("{text}");
+    say(format_args!("{text}"));
     Ok(())
 }
 
@@ -201,8 +204,11 @@ fn mesh_info(file: &str, merge_duplicates: bool) -> Result<(), PipelineError> {
         let (mesh, report) = surfsynth::mesh::load_mesh(std::path::Path::new(file), &options)?;
         (mesh, report.summary())
     };
-    println!("{file}\nrepairs: {report}");
-    println!("{}", surfsynth::mesh::MeshInfo::compute(&mesh));
+    say(format_args!("{file}\nrepairs: {report}\n"));
+    say(format_args!(
+        "{}\n",
+        surfsynth::mesh::MeshInfo::compute(&mesh)
+    ));
     Ok(())
 }
 
@@ -221,7 +227,7 @@ fn sweep_inner(args: SweepArgs) -> Result<(), surfsynth::sweep::SweepError> {
     let _guard = surfsynth::telemetry::init(None, true);
     if let Some(dir) = args.summarise {
         for f in surfsynth::sweep::summarise(&dir)? {
-            println!("{}", f.display());
+            say(format_args!("{}\n", f.display()));
         }
         return Ok(());
     }
@@ -251,7 +257,25 @@ fn sweep_inner(args: SweepArgs) -> Result<(), surfsynth::sweep::SweepError> {
     };
     let report = surfsynth::sweep::run_sweep(&opts);
     if let Ok(r) = &report {
-        print!("{}", surfsynth::sweep::format_report(&opts, r));
+        say(format_args!(
+            "{}",
+            surfsynth::sweep::format_report(&opts, r)
+        ));
     }
     report.map(|_| ())
+}
+
+/// Writes `text` to standard output. A reader that closed the pipe early
+/// (`surfsynth stages | head`) ends the program quietly with success, as
+/// command-line tools do, instead of the panic `print!` raises.
+fn say(text: std::fmt::Arguments) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    if let Err(e) = out.write_fmt(text).and_then(|()| out.flush()) {
+        if e.kind() == std::io::ErrorKind::BrokenPipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: writing to standard output: {e}");
+        std::process::exit(1);
+    }
 }

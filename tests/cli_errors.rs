@@ -147,3 +147,23 @@ fn missing_stage_input_says_what_to_add() {
         ],
     );
 }
+
+/// A reader that closes the pipe early (`surfsynth stages | head`) ends the
+/// program quietly with success, not with a panic.
+#[test]
+fn a_closed_output_pipe_is_not_a_panic() {
+    for args in [&["stages"][..], &["mesh-info", "builtin:torus"][..]] {
+        let mut child = common::bin()
+            .args(args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .expect("the binary starts");
+        // Close the read end before the program writes.
+        drop(child.stdout.take());
+        let out = child.wait_with_output().expect("it ends");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        assert_eq!(out.status.code(), Some(0), "{args:?}: {stderr}");
+    }
+}
