@@ -58,6 +58,10 @@ fn main() {
     println!("|---|---|---|---|---|---|---|");
     for &n in &sizes {
         let (mesh, report) = messy::write_messy_scan(dir.path(), n, 1);
+        // SURFSYNTH_SCALING_KEEP=FOLDER keeps the scans, to look or profile.
+        if let Ok(keep) = std::env::var("SURFSYNTH_SCALING_KEEP") {
+            let _ = std::fs::copy(&mesh, Path::new(&keep).join(mesh.file_name().unwrap()));
+        }
         for (method, config) in CONFIGS {
             if methods
                 .as_ref()
