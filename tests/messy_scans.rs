@@ -130,3 +130,33 @@ fn every_method_runs_on_a_messy_20k_scan() {
     eprintln!("{report:?}\n{}", lines.join("\n"));
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// Issue 15: a retile target that the scan's pieces cannot go below is
+/// refused before any remeshing, naming the pieces and what to ask for;
+/// coarser levels below that floor are not attempted.
+#[test]
+fn retile_refuses_up_front_a_target_below_one_triangle_per_piece() {
+    let dir = tempfile::tempdir().unwrap();
+    let (scan, report) = common::messy::write_messy_scan(dir.path(), 5_000, 4);
+    let pieces = report.small_components + report.isolated_triangles;
+    let config = format!(
+        "seed = 1\n[input]\nmesh = {scan:?}\nexemplar = \"builtin:noise\"\n[[stage]]\nkind = \"retile\"\nvertices = {}\nlevels = 1\n",
+        pieces // fewer than 3 per piece
+    );
+    common::expect_refused(&config, &[], &["connected pieces", "retile.vertices"]);
+
+    // Enough for level 0, not for level 2: the pyramid stops at 2 levels.
+    let text = format!(
+        "seed = 1\n[input]\nmesh = {scan:?}\nexemplar = \"builtin:noise\"\n[[stage]]\nkind = \"retile\"\nvertices = {}\nlevels = 4\n",
+        8 * pieces
+    );
+    let p = Pipeline::from_source(ConfigSource::from_text("t.toml", &text)).unwrap();
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let mut w = World::new();
+    run_in_world(&p, &mut w, input).expect("runs");
+    let levels = w.resource::<Metrics>().stages[0]["level_vertices"]
+        .as_array()
+        .unwrap()
+        .len();
+    assert!((1..=2).contains(&levels), "{levels} levels");
+}

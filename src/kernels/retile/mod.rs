@@ -200,6 +200,12 @@ impl RetileSettings {
     }
 }
 
+/// Fewest vertices any connected piece keeps through remeshing: a
+/// triangle (a closed piece keeps at least a tetrahedron's 4; 3 is the
+/// bound that holds for every piece, so a target refused by it is truly
+/// out of reach).
+pub const MIN_VERTICES_PER_COMPONENT: usize = 3;
+
 /// Target vertex count of `level` given level 0's.
 fn level_target(level0: usize, level: u32) -> usize {
     ((level0 as f64) / 4f64.powi(level as i32)).round() as usize
@@ -269,6 +275,19 @@ pub enum RetileError {
         faces: usize,
         total: usize,
     },
+    /// The input has more connected pieces than the level can hold.
+    #[error(
+        "retile: the input has {components} connected pieces and each keeps at least \
+         {per_component} vertices, so level 0 cannot have {target} vertices (at least \
+         {floor}); ask for more vertices (a smaller `[input] texture_scale` value, or \
+         `retile.vertices`), or remove the small pieces from the mesh"
+    )]
+    TooManyComponents {
+        components: usize,
+        per_component: usize,
+        target: usize,
+        floor: usize,
+    },
     /// A component cannot be oriented consistently (a Möbius strip, say).
     #[error(
         "retile: the surface containing input triangle {face} (of the triangulated input) \
@@ -328,6 +347,19 @@ pub fn retile_with_progress(
         });
     }
     let v0 = settings.level0_vertices(area)?;
+    // Every connected piece keeps a few vertices whatever the target (a
+    // triangle at least): a level asking for fewer than that cannot land
+    // within 5 %. Checked before any remeshing; coarser levels below the
+    // floor are not attempted (the pyramid ends early).
+    let floor = MIN_VERTICES_PER_COMPONENT * prep.report.components;
+    if (v0 as f64) * (1.0 + RetileSettings::COUNT_TOLERANCE) < floor as f64 {
+        return Err(RetileError::TooManyComponents {
+            components: prep.report.components,
+            per_component: MIN_VERTICES_PER_COMPONENT,
+            target: v0,
+            floor,
+        });
+    }
     progress.set_length(
         (0..settings.levels)
             .map(|l| level_target(v0, l).max(1) as u64 * (u64::from(settings.iterations) + 1))
@@ -340,6 +372,16 @@ pub fn retile_with_progress(
     let mut levels = Vec::with_capacity(settings.levels as usize);
     for level in 0..settings.levels {
         let target = level_target(v0, level);
+        if level > 0 && (target as f64) * (1.0 + RetileSettings::COUNT_TOLERANCE) < floor as f64 {
+            tracing::warn!(
+                level,
+                target,
+                components = prep.report.components,
+                "retile: {} connected pieces need at least {floor} vertices, more than this level's target; the pyramid ends at {level} levels",
+                prep.report.components
+            );
+            break;
+        }
         let _span = tracing::debug_span!("retile_level", level, target).entered();
         progress.set_part(&format!("level {}/{}", level + 1, settings.levels));
         let plan = LevelPlan {
