@@ -63,8 +63,7 @@ impl TriangleAdjacency {
         for (t, tri) in tris.iter().enumerate() {
             for k in 0..3 {
                 let (a, b) = (tri[k], tri[(k + 1) % 3]);
-                let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
-                sides.push((key, (t as u32) * 3 + k as u32));
+                sides.push((crate::mesh::edge_key(a, b), (t as u32) * 3 + k as u32));
             }
         }
         sides.sort_unstable();

@@ -269,13 +269,7 @@ impl EdgeSides {
 fn non_manifold_vertex_count(mesh: &PolyMesh, topo: &Topology, sides: &EdgeSides) -> usize {
     let nc = mesh.corner_count();
     let mut parent: Vec<u32> = (0..nc as u32).collect();
-    fn find(parent: &mut [u32], mut x: u32) -> u32 {
-        while parent[x as usize] != x {
-            parent[x as usize] = parent[parent[x as usize] as usize];
-            x = parent[x as usize];
-        }
-        x
-    }
+    use super::union_find_root as find;
     // The corner of face `f` at vertex `v`.
     let corner_at = |f: u32, v: u32| {
         mesh.face_corners(f as usize)

@@ -26,6 +26,25 @@ pub struct Topology {
     pub corner_edge: Vec<u32>,
 }
 
+/// The key of the undirected edge between vertices `a` and `b` (the same
+/// for `(a, b)` and `(b, a)`), for sorting a mesh's sides into edges.
+#[inline]
+pub fn edge_key(a: u32, b: u32) -> u64 {
+    ((a.min(b) as u64) << 32) | a.max(b) as u64
+}
+
+/// The root of `x` in a union–find forest stored as parent links, with
+/// path halving (each visited link is pointed at its grandparent).
+#[inline]
+pub fn union_find_root(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let p = parent[parent[x as usize] as usize];
+        parent[x as usize] = p;
+        x = p;
+    }
+    x
+}
+
 fn csr_from_pairs(n: usize, pairs: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>) {
     let mut start = vec![0u32; n + 1];
     for &(k, _) in pairs {
@@ -55,8 +74,7 @@ impl Topology {
             for (i, c) in r.clone().enumerate() {
                 let a = mesh.corner_vertex[c];
                 let b = mesh.corner_vertex[r.start + (i + 1) % n];
-                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-                sides.push((((lo as u64) << 32) | hi as u64, c as u32));
+                sides.push((edge_key(a, b), c as u32));
             }
         }
         sides.par_sort_unstable();

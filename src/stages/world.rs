@@ -145,8 +145,6 @@ pub struct TextureScale {
     pub texels_per_unit: f32,
     /// Bounding-box diagonal of the input mesh, world units.
     pub diagonal: f32,
-    /// The exemplar's width, pixels.
-    pub exemplar_width: u32,
     /// `[input] texture_scale` as written, for messages.
     pub value: f64,
     /// `[input] texture_scale_unit`.
@@ -165,7 +163,6 @@ impl TextureScale {
         Self {
             texels_per_unit: unit.texels_per_unit(value, exemplar_width, diagonal) as f32,
             diagonal: diagonal as f32,
-            exemplar_width,
             value,
             unit,
         }
@@ -207,13 +204,7 @@ impl TextureScale {
             }
         ))
     }
-}
 
-/// Fewest vertices a texture scale may ask of a remeshing or subdivision
-/// stage (below it there is no texture to speak of).
-pub const MIN_DERIVED_VERTICES: usize = 12;
-
-impl TextureScale {
     /// A human-readable line for logs: the scale and where it comes from.
     pub fn describe(&self) -> String {
         format!(
@@ -223,6 +214,10 @@ impl TextureScale {
         )
     }
 }
+
+/// Fewest vertices a texture scale may ask of a remeshing or subdivision
+/// stage (below it there is no texture to speak of).
+pub const MIN_DERIVED_VERTICES: usize = 12;
 
 /// Per-stage metrics, written to `metrics.json` under `stages[i].metrics`.
 #[derive(Resource, Debug, Default)]

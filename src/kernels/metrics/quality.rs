@@ -336,15 +336,7 @@ pub fn structure_distance(output: &Image, exemplar: &Image) -> f32 {
     normalised_l1(&fo, &fe)
 }
 
-/// Union–find root with path halving.
-fn root(parent: &mut [u32], mut i: u32) -> u32 {
-    while parent[i as usize] != i {
-        let p = parent[parent[i as usize] as usize];
-        parent[i as usize] = p;
-        i = p;
-    }
-    i
-}
+use crate::mesh::union_find_root as root;
 
 /// Verbatim-copy statistics of a result whose source coordinates are known
 /// (see [`VerbatimStats`] for each figure), for an exemplar of

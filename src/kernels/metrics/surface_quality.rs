@@ -292,14 +292,7 @@ pub fn surface_verbatim(
     let known = |s: glam::Vec2| s.x.is_finite() && s.y.is_finite();
     let wrap = |d: f32, size: f32| d - size * (d / size).round();
     let mut parent: Vec<u32> = (0..nv as u32).collect();
-    fn root(parent: &mut [u32], mut i: u32) -> u32 {
-        while parent[i as usize] != i {
-            let p = parent[parent[i as usize] as usize];
-            parent[i as usize] = p;
-            i = p;
-        }
-        i
-    }
+    use crate::mesh::union_find_root as root;
     for &[a, b] in &r.topo.edges {
         let (sa, sb) = (sources[a as usize], sources[b as usize]);
         if !known(sa) || !known(sb) {

@@ -13,7 +13,7 @@
 
 use super::RetileError;
 use super::trimesh::{NONE, TriMesh, next, prev};
-use crate::mesh::PolyMesh;
+use crate::mesh::{PolyMesh, edge_key, union_find_root as root};
 use glam::Vec3;
 
 /// What preparing the input changed, so callers can tell the user.
@@ -132,20 +132,6 @@ pub(crate) fn prepare(input: &PolyMesh) -> Result<Prepared, RetileError> {
 /// A triangle's side along an edge: (edge key, triangle, corner).
 type Side = (u64, u32, u8);
 
-/// Undirected edge key.
-fn edge_key(a: u32, b: u32) -> u64 {
-    ((a.min(b) as u64) << 32) | a.max(b) as u64
-}
-
-/// Union-find root with path halving.
-fn root(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        parent[x as usize] = parent[parent[x as usize] as usize];
-        x = parent[x as usize];
-    }
-    x
-}
-
 /// Cuts every edge that three or more triangles share, as a scan's fins
 /// and flaps need: the triangles on the edge are paired greedily, each with
 /// the next one running along it in the opposite direction (a consistently
@@ -253,8 +239,7 @@ fn orient(tris: &mut [[u32; 3]], tri_source: &[u32]) -> Result<Vec<bool>, Retile
     for (t, tri) in tris.iter().enumerate() {
         for i in 0..3 {
             let (a, b) = (tri[i], tri[(i + 1) % 3]);
-            let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
-            sides.push((key, t as u32, a < b));
+            sides.push((edge_key(a, b), t as u32, a < b));
         }
     }
     sides.sort_unstable();

@@ -248,9 +248,8 @@ pub fn face_field(
     texels_per_unit: f32,
 ) -> Result<(FaceField, serde_json::Map<String, serde_json::Value>), String> {
     let mut metrics = serde_json::Map::new();
-    let diagonal = mesh
-        .bounding_box()
-        .map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
+    let bbox = mesh.bounding_box();
+    let diagonal = bbox.map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
     let unit = match settings.units {
         LengthUnit::Diagonal => diagonal,
         LengthUnit::World => 1.0,
@@ -276,7 +275,6 @@ pub fn face_field(
             field_from_vertex_frames(tri, frames, scale, up)
         }
         FieldMode::Constraints => {
-            let bbox = mesh.bounding_box();
             let mut constraints = Vec::with_capacity(settings.constraints.len());
             for (i, c) in settings.constraints.iter().enumerate() {
                 let at = position::resolve(c.at, c.at_bbox, bbox)
