@@ -7,6 +7,7 @@
 mod common;
 
 use bevy_ecs::prelude::*;
+use common::world_for;
 use glam::{Vec2, Vec3};
 use rand::{Rng, SeedableRng, seq::SliceRandom};
 use rand_pcg::Pcg64Mcg;
@@ -20,7 +21,7 @@ use surfsynth::kernels::metrics::SurfaceSignal;
 use surfsynth::kernels::sqrt2::sqrt2_subdivide;
 use surfsynth::kernels::sweep::{sweep_field, sweep_order};
 use surfsynth::mesh::{PolyMesh, Topology};
-use surfsynth::pipeline::{Pipeline, PipelineError, load_input, run_in_world};
+use surfsynth::pipeline::Pipeline;
 use surfsynth::stages::world::*;
 
 // ----- shared inputs -------------------------------------------------------------
@@ -624,14 +625,6 @@ fn matching_is_identical_at_one_and_two_threads() {
 }
 
 // ----- the stages in a pipeline --------------------------------------------------------
-
-fn world_for(config: &str) -> Result<World, PipelineError> {
-    let p =
-        Pipeline::from_source(ConfigSource::from_text("bm.toml", config)).expect("valid config");
-    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
-    let mut world = World::new();
-    run_in_world(&p, &mut world, input).map(|_| world)
-}
 
 const SUBDIVIDE_CONFIG: &str = r#"
 seed = 3

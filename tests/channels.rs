@@ -5,9 +5,10 @@
 mod common;
 
 use bevy_ecs::prelude::*;
+use common::world_for;
 use surfsynth::config::ConfigSource;
 use surfsynth::kernels::channels::{decode_normal, luminance_image};
-use surfsynth::pipeline::{Pipeline, PipelineError, load_input, run_in_world};
+use surfsynth::pipeline::{Pipeline, load_input};
 use surfsynth::stages::world::*;
 
 fn pipeline(text: &str) -> Pipeline {
@@ -19,13 +20,6 @@ fn input_error(text: &str) -> String {
     load_input(&p.input, &p.source.base_dir, &p.source.file)
         .expect_err("the input is refused")
         .to_string()
-}
-
-fn world_for(config: &str) -> Result<World, PipelineError> {
-    let p = pipeline(config);
-    let input = load_input(&p.input, &p.source.base_dir, &p.source.file)?;
-    let mut world = World::new();
-    run_in_world(&p, &mut world, input).map(|_| world)
 }
 
 const BRICKS: &str = r#"

@@ -4,12 +4,11 @@
 //! for `jump_image`.
 
 mod common;
-use bevy_ecs::prelude::*;
 use common::*;
 use glam::Vec2;
 use surfsynth::config::ConfigSource;
 use surfsynth::kernels::jump_map::JumpMap;
-use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
+use surfsynth::pipeline::Pipeline;
 use surfsynth::stages::world::*;
 
 fn config(mesh: &str, exemplar: &str, wrap: &str, scale: f32, order: &str) -> String {
@@ -37,26 +36,19 @@ order = "{order}"
     )
 }
 
-fn run_world(text: &str) -> World {
-    let p = Pipeline::from_source(ConfigSource::from_text("t.toml", text)).unwrap();
-    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
-    let mut w = World::new();
-    run_in_world(&p, &mut w, input).unwrap();
-    w
-}
-
 #[test]
 fn corner_uvs_stay_inside_an_inset_exemplar() {
     let bunny = shared("meshes/bunny_1k8.obj");
     let stones = shared("textures/stones.png");
     for order in ["emerging_front", "breadth_first", "random"] {
-        let mut w = run_world(&config(
+        let mut w = world_for(&config(
             bunny.to_str().unwrap(),
             stones.to_str().unwrap(),
             "clamp",
             40.0,
             order,
-        ));
+        ))
+        .unwrap();
         let active = w.resource::<ActiveMesh>().0;
         let mut q = w.query::<(&Geometry, &CornerUvs, &BlendUvs)>();
         let (g, uvs, blend) = q.get(&w, active).unwrap();
@@ -83,13 +75,14 @@ fn corner_uvs_stay_inside_an_inset_exemplar() {
 
 #[test]
 fn tileable_exemplar_wraps_and_no_vertex_needs_random_placement_but_the_start() {
-    let w = run_world(&config(
+    let w = world_for(&config(
         "builtin:icosphere",
         "builtin:noise",
         "repeat",
         40.0,
         "emerging_front",
-    ));
+    ))
+    .unwrap();
     let m = &w.resource::<Metrics>().stages[2];
     // The icosphere is one component: only its first vertex is placed at random.
     assert_eq!(m["random_assignments"], 1, "{m:?}");
@@ -125,7 +118,7 @@ fn planar_surface_result_looks_like_the_peers() {
         "exemplar_wrap = \"clamp\"",
         "exemplar_wrap = \"clamp\"\n[input.mesh_options]\nresolution = [33, 33]",
     );
-    let mut w = run_world(&text);
+    let mut w = world_for(&text).unwrap();
     let active = w.resource::<ActiveMesh>().0;
     let ex = w.resource::<Exemplar>().image.clone();
     let spacing = w.resource::<TexelSpacing>().0;
@@ -313,7 +306,7 @@ fn baked_atlas_renders_like_the_blended_uvs() {
         40.0,
         "emerging_front",
     ) + "\n[[stage]]\nkind = \"export\"\nformats = [\"baked\"]\nbake_size = 2048\n";
-    let mut w = run_world(&text);
+    let mut w = world_for(&text).unwrap();
     let active = w.resource::<ActiveMesh>().0;
     let ex = w.resource::<Exemplar>().clone();
     let (tri_mesh, atlas_uvs, baked) = w.resource::<ExportJob>().baked.clone().expect("baked");

@@ -10,7 +10,6 @@ mod common;
 use bevy_ecs::prelude::*;
 use std::path::Path;
 use surfsynth::config::ConfigSource;
-use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::world::*;
 
 /// Runs a shipped config in-process, on `mesh` instead of its own when
@@ -24,13 +23,9 @@ fn run_config(name: &str, mesh: Option<&Path>) -> Result<World, String> {
         input.insert("mesh".into(), m.display().to_string().into());
         input.remove("mesh_options");
     }
-    let text = toml::to_string(&table).unwrap();
-    let p =
-        Pipeline::from_source(ConfigSource::from_text(name, &text)).map_err(|e| e.to_string())?;
-    let input = load_input(&p.input, &dir, name).map_err(|e| e.to_string())?;
-    let mut w = World::new();
-    run_in_world(&p, &mut w, input).map_err(|e| e.to_string())?;
-    Ok(w)
+    let mut source = ConfigSource::from_text(name, &toml::to_string(&table).unwrap());
+    source.base_dir = dir;
+    common::world_from_source(source, |_| {}).map_err(|e| e.to_string())
 }
 
 fn quality(w: &World) -> [f64; 3] {
@@ -150,10 +145,7 @@ fn retile_refuses_up_front_a_target_below_one_triangle_per_piece() {
         "seed = 1\n[input]\nmesh = {scan:?}\nexemplar = \"builtin:noise\"\n[[stage]]\nkind = \"retile\"\nvertices = {}\nlevels = 4\n",
         8 * pieces
     );
-    let p = Pipeline::from_source(ConfigSource::from_text("t.toml", &text)).unwrap();
-    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
-    let mut w = World::new();
-    run_in_world(&p, &mut w, input).expect("runs");
+    let w = common::world_for(&text).expect("runs");
     let levels = w.resource::<Metrics>().stages[0]["level_vertices"]
         .as_array()
         .unwrap()

@@ -9,33 +9,20 @@ mod common;
 
 use bevy_ecs::prelude::*;
 use glam::Vec3;
-use surfsynth::config::ConfigSource;
 use surfsynth::mesh::PolyMesh;
 use surfsynth::mesh::Topology;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
-use surfsynth::pipeline::{LoadedInput, Pipeline, PipelineError, load_input, run_in_world};
+use surfsynth::pipeline::PipelineError;
 use surfsynth::stages::tangent_field::FaceField;
 use surfsynth::stages::world::*;
 
-fn pipeline(text: &str) -> Pipeline {
-    Pipeline::from_source(ConfigSource::from_text("positions.toml", text)).expect("valid config")
-}
-
-fn loaded(p: &Pipeline) -> LoadedInput {
-    load_input(&p.input, &p.source.base_dir, &p.source.file).expect("input loads")
-}
-
 /// Runs `config` on its input mesh, after `edit` changed that mesh.
 fn world_with(config: &str, edit: impl FnOnce(&mut PolyMesh)) -> Result<World, PipelineError> {
-    let p = pipeline(config);
-    let mut input = loaded(&p);
-    edit(&mut input.mesh);
-    let mut world = World::new();
-    run_in_world(&p, &mut world, input).map(|_| world)
+    common::world_with(config, |input| edit(&mut input.mesh))
 }
 
 fn world_for(config: &str) -> World {
-    world_with(config, |_| {}).expect("runs")
+    common::world_for(config).expect("runs")
 }
 
 fn frames(w: &World) -> Vec<surfsynth::kernels::frames::TangentFrame> {

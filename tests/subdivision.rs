@@ -2,6 +2,8 @@
 //! uniform step, the hierarchy helper and adaptive subdivision, on meshes
 //! built in code.
 
+mod common;
+
 use glam::{Vec2, Vec3};
 use surfsynth::kernels::sqrt2::{
     MAX_HIERARCHY_LEVELS, Sqrt2Settings, Subdivided, adaptive_sqrt2, interpolate_attribute,
@@ -893,9 +895,6 @@ fn distance_to_surface(fine: &PolyMesh, input: &PolyMesh) -> f32 {
 /// Runs the `subdivide_sqrt2` stage on `mesh` with `extra` settings and
 /// returns the finest level.
 fn subdivide_stage(mesh: &PolyMesh, extra: &str) -> PolyMesh {
-    use bevy_ecs::prelude::*;
-    use surfsynth::config::ConfigSource;
-    use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
     use surfsynth::stages::world::{ActiveMesh, Geometry};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("plate.ply");
@@ -903,10 +902,7 @@ fn subdivide_stage(mesh: &PolyMesh, extra: &str) -> PolyMesh {
     let text = format!(
         "seed = 1\n[input]\nmesh = {path:?}\nexemplar = \"builtin:noise\"\n[[stage]]\nkind = \"subdivide_sqrt2\"\nlevels = 4\n{extra}\n"
     );
-    let p = Pipeline::from_source(ConfigSource::from_text("t.toml", &text)).unwrap();
-    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
-    let mut w = World::new();
-    run_in_world(&p, &mut w, input).unwrap();
+    let w = common::world_for(&text).unwrap();
     let e = w.resource::<ActiveMesh>().0;
     w.get::<Geometry>(e).unwrap().0.clone()
 }

@@ -5,10 +5,7 @@
 
 mod common;
 
-use bevy_ecs::prelude::*;
 use glam::Vec3;
-use surfsynth::config::ConfigSource;
-use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::lapped_paste::components::{PasteOrder, PatchFaces, PatchUvs};
 use surfsynth::stages::world::*;
 
@@ -143,14 +140,12 @@ fn run_seeded(text: &str, scale: f32, offset: Vec3, seed: Option<u64>) -> Outcom
         Some(s) => text.replace("seed = 5", &format!("seed = {s}")),
         None => text.to_string(),
     };
-    let text = text.as_str();
-    let p = Pipeline::from_source(ConfigSource::from_text("scale.toml", text)).expect("valid");
-    let mut input = load_input(&p.input, &p.source.base_dir, &p.source.file).expect("input");
-    for q in &mut input.mesh.positions {
-        *q = *q * scale + offset;
-    }
-    let mut w = World::new();
-    run_in_world(&p, &mut w, input).expect("runs");
+    let mut w = common::world_with(&text, |input| {
+        for q in &mut input.mesh.positions {
+            *q = *q * scale + offset;
+        }
+    })
+    .expect("runs");
     let active = w.resource::<ActiveMesh>().0;
     let (values, stride, tolerance) = match w.get::<VertexColours>(active) {
         Some(c) => (c.values.clone(), c.channels, 1.0 / 255.0),
@@ -356,11 +351,9 @@ fn derived_sizes_follow_the_texture_scale() {
     let metrics_of = |stages: &str, scale: f64| {
         let text = format!("{HEADER}{stages}")
             .replace("texture_scale = 0.6", &format!("texture_scale = {scale}"));
-        let p = Pipeline::from_source(ConfigSource::from_text("derived.toml", &text)).unwrap();
-        let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
-        let area = f64::from(input.mesh.area());
-        let mut w = World::new();
-        run_in_world(&p, &mut w, input).expect("runs");
+        let mut area = 0.0;
+        let w =
+            common::world_with(&text, |input| area = f64::from(input.mesh.area())).expect("runs");
         let ts = *w.resource::<TextureScale>();
         let m = w.resource::<Metrics>().stages.clone();
         (m, area * f64::from(ts.texels_per_unit).powi(2), ts)

@@ -78,3 +78,34 @@ pub fn expect_refused(config: &str, extra: &[&str], needles: &[&str]) {
     );
 }
 pub mod messy;
+
+/// Runs the pipeline of `source` in-process, after `edit` changed its loaded
+/// input (the mesh, say), and returns the world with every stage's output.
+pub fn world_from_source(
+    source: surfsynth::config::ConfigSource,
+    edit: impl FnOnce(&mut surfsynth::pipeline::LoadedInput),
+) -> Result<bevy_ecs::world::World, surfsynth::pipeline::PipelineError> {
+    use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
+    let p = Pipeline::from_source(source)?;
+    let mut input = load_input(&p.input, &p.source.base_dir, &p.source.file)?;
+    edit(&mut input);
+    let mut world = bevy_ecs::world::World::new();
+    run_in_world(&p, &mut world, input).map(|()| world)
+}
+
+/// [`world_from_source`] for a config text (relative paths against the
+/// current directory), after `edit` changed its loaded input.
+pub fn world_with(
+    text: &str,
+    edit: impl FnOnce(&mut surfsynth::pipeline::LoadedInput),
+) -> Result<bevy_ecs::world::World, surfsynth::pipeline::PipelineError> {
+    world_from_source(
+        surfsynth::config::ConfigSource::from_text("test.toml", text),
+        edit,
+    )
+}
+
+/// [`world_with`] without an edit.
+pub fn world_for(text: &str) -> Result<bevy_ecs::world::World, surfsynth::pipeline::PipelineError> {
+    world_with(text, |_| {})
+}
