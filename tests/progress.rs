@@ -3,74 +3,29 @@
 //! `SURFSYNTH_PROGRESS_INTERVAL_MS` (10 s by default), nothing with `-q`,
 //! and progress never changes a result.
 
+mod common;
+
+use common::methods::{HEADER, method};
 use std::path::Path;
-use std::process::Command;
 
-const HEADER: &str = r#"
-seed = 5
-[input]
-mesh = "builtin:torus"
-exemplar = "builtin:bricks"
-exemplar_wrap = "clamp"
-texture_scale = 0.6
-[input.mesh_options]
-resolution = [24, 12]
-[input.exemplar_options]
-size = 32
-"#;
+/// The methods of `common::methods`, exported to PLY (the bake also to
+/// GLB, at the smallest atlas).
+fn wei_levoy() -> String {
+    format!("{}{EXPORT_PLY}", method("wei_levoy"))
+}
 
-/// Wei & Levoy on a retiled pyramid, then back onto the input mesh.
-const WEI_LEVOY: &str = r#"
-[[stage]]
-kind = "retile"
-levels = 2
-[[stage]]
-kind = "orientation"
-up = [0.0, 0.0, 1.0]
-[[stage]]
-kind = "init_colours"
-[[stage]]
-kind = "match"
-passes = 1
-[[stage]]
-kind = "map_back"
-[[stage]]
-kind = "export"
-formats = ["ply"]
-"#;
+fn graph_match() -> String {
+    format!("{}{EXPORT_PLY}", method("graph_match"))
+}
 
-/// Bangay & Morkel on a √2 hierarchy.
-const GRAPH_MATCH: &str = r#"
-[[stage]]
-kind = "subdivide_sqrt2"
-[[stage]]
-kind = "diffuse_orientation"
-[[stage]]
-kind = "graph_match"
-region = 5.0
-passes = [1]
-[[stage]]
-kind = "export"
-formats = ["ply"]
-"#;
+fn jump_bake() -> String {
+    format!(
+        "{}size = 256\n[[stage]]\nkind = \"export\"\nformats = [\"ply\", \"glb\"]\n",
+        method("bake")
+    )
+}
 
-/// Jump maps on the surface, baked into an atlas.
-const JUMP_BAKE: &str = r#"
-[[stage]]
-kind = "orientation"
-up = [0.0, 0.0, 1.0]
-[[stage]]
-kind = "jump_map"
-cache = false
-[[stage]]
-kind = "jump_surface"
-[[stage]]
-kind = "bake"
-size = 256
-[[stage]]
-kind = "export"
-formats = ["ply", "glb"]
-"#;
+const EXPORT_PLY: &str = "[[stage]]\nkind = \"export\"\nformats = [\"ply\"]\n";
 
 /// Height-map displacement with smoothing (needs `height_map` in `[input]`).
 const DISPLACE: &str = r#"
@@ -104,7 +59,7 @@ fn run_config(
     let path = dir.join("config.toml");
     std::fs::write(&path, config).expect("write config");
     let out = dir.join(format!("out-{interval_ms:?}-{}", extra.len()));
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_surfsynth"));
+    let mut cmd = common::bin();
     match interval_ms {
         Some(ms) => cmd.env("SURFSYNTH_PROGRESS_INTERVAL_MS", ms),
         None => cmd.env_remove("SURFSYNTH_PROGRESS_INTERVAL_MS"),
@@ -159,12 +114,12 @@ fn assert_logged(stderr: &str, stage: &str, part: &str) {
 #[test]
 fn long_stages_log_progress_off_a_terminal_and_not_with_quiet() {
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let (logged, ply) = run(dir.path(), WEI_LEVOY, "0", &[]);
+    let (logged, ply) = run(dir.path(), &wei_levoy(), "0", &[]);
     assert_logged(&logged, "retile", "level 1/2");
     assert_logged(&logged, "retile", "level 2/2");
     assert_logged(&logged, "match", "level 1/2");
     assert_logged(&logged, "map_back", "");
-    let (quiet, quiet_ply) = run(dir.path(), WEI_LEVOY, "0", &["-q"]);
+    let (quiet, quiet_ply) = run(dir.path(), &wei_levoy(), "0", &["-q"]);
     assert!(
         progress_lines(&quiet).is_empty(),
         "-q shows no progress: {quiet}"
@@ -178,7 +133,7 @@ fn default_interval_keeps_a_short_run_silent() {
     // a second or two.
     let dir = tempfile::tempdir().expect("a temporary folder");
     let started = std::time::Instant::now();
-    let (stderr, _) = run_config(dir.path(), &format!("{HEADER}{GRAPH_MATCH}"), None, &[]);
+    let (stderr, _) = run_config(dir.path(), &format!("{HEADER}{}", graph_match()), None, &[]);
     if started.elapsed().as_secs() < 9 {
         assert!(
             progress_lines(&stderr).is_empty(),
@@ -190,7 +145,7 @@ fn default_interval_keeps_a_short_run_silent() {
 #[test]
 fn graph_match_logs_levels_and_passes() {
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let (logged, ply) = run(dir.path(), GRAPH_MATCH, "0", &[]);
+    let (logged, ply) = run(dir.path(), &graph_match(), "0", &[]);
     assert_logged(&logged, "subdivide_sqrt2", "step 1");
     assert_logged(&logged, "graph_match", "level 1/");
     assert!(
@@ -199,7 +154,7 @@ fn graph_match_logs_levels_and_passes() {
             .any(|l| l.contains("graph_match level") && l.contains(" pass 1/1:")),
         "{logged}"
     );
-    let (quiet, quiet_ply) = run(dir.path(), GRAPH_MATCH, "0", &["--quiet"]);
+    let (quiet, quiet_ply) = run(dir.path(), &graph_match(), "0", &["--quiet"]);
     assert!(progress_lines(&quiet).is_empty(), "{quiet}");
     assert!(ply == quiet_ply, "progress changes the result");
 }
@@ -207,13 +162,13 @@ fn graph_match_logs_levels_and_passes() {
 #[test]
 fn jump_map_bake_and_export_log_their_phases() {
     let dir = tempfile::tempdir().expect("a temporary folder");
-    let (logged, ply) = run(dir.path(), JUMP_BAKE, "0", &[]);
+    let (logged, ply) = run(dir.path(), &jump_bake(), "0", &[]);
     assert_logged(&logged, "jump_map", "nearest neighbours");
     assert_logged(&logged, "jump_map", "filtering");
     assert_logged(&logged, "bake", "atlas");
     assert_logged(&logged, "bake", "texels");
     assert_logged(&logged, "export", "ply");
-    let (quiet, quiet_ply) = run(dir.path(), JUMP_BAKE, "0", &["-q"]);
+    let (quiet, quiet_ply) = run(dir.path(), &jump_bake(), "0", &["-q"]);
     assert!(progress_lines(&quiet).is_empty(), "{quiet}");
     assert!(ply == quiet_ply, "progress changes the result");
 }

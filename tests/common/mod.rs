@@ -2,6 +2,7 @@
 #![allow(dead_code)]
 
 pub mod gates;
+pub mod methods;
 pub mod peer;
 
 use std::path::{Path, PathBuf};
