@@ -334,6 +334,17 @@ fn bad_texture_scales_are_refused_naming_the_key() {
         &[],
         &["texture_scale_unit", "pixels_per_unit"],
     );
+    // An explicit count below what a texture needs, for either stage.
+    for stage in [
+        "[[stage]]\nkind = \"retile\"\nvertices = 5\n",
+        "[[stage]]\nkind = \"subdivide_sqrt2\"\ntarget_vertices = 5\n",
+    ] {
+        common::expect_refused(
+            &config("texture_scale = 0.5", stage),
+            &[],
+            &["vertices", "5 is too few", "texture_scale"],
+        );
+    }
     // 1e-7 of the diagonal per exemplar width: ~1e17 vertices.
     common::expect_refused(
         &config("texture_scale = 1e-7", "[[stage]]\nkind = \"retile\"\n"),

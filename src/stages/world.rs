@@ -219,6 +219,19 @@ impl TextureScale {
 /// stage (below it there is no texture to speak of).
 pub const MIN_DERIVED_VERTICES: usize = 12;
 
+/// Checks an explicit vertex count of a remeshing or subdivision stage:
+/// 0 (derive it from the texture scale) or [`MIN_DERIVED_VERTICES`]..=`max`
+/// (the upper bound is the parameter's range); the message for a count in
+/// between.
+pub fn check_vertex_count(value: u64, max: u64) -> Result<(), String> {
+    if (1..MIN_DERIVED_VERTICES as u64).contains(&value) {
+        return Err(format!(
+            "{value} is too few; allowed: 0 (derived from [input] texture_scale) or {MIN_DERIVED_VERTICES}..={max}"
+        ));
+    }
+    Ok(())
+}
+
 /// Per-stage metrics, written to `metrics.json` under `stages[i].metrics`.
 #[derive(Resource, Debug, Default)]
 pub struct Metrics {

@@ -70,16 +70,7 @@ impl StageSettings for RetileStageSettings {
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
-        if (1..MIN_DERIVED_VERTICES as u32).contains(&self.vertices) {
-            return Err((
-                "vertices".into(),
-                format!(
-                    "{} is too few; allowed: 0 (derived from [input] texture_scale) or {MIN_DERIVED_VERTICES}..=50000000",
-                    self.vertices
-                ),
-            ));
-        }
-        Ok(())
+        check_vertex_count(u64::from(self.vertices), 50_000_000).map_err(|m| ("vertices".into(), m))
     }
 }
 

@@ -127,16 +127,8 @@ impl StageSettings for SubdivideSqrt2Settings {
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
-        if (1..MIN_DERIVED_VERTICES as u64).contains(&self.target_vertices) {
-            return Err((
-                "target_vertices".into(),
-                format!(
-                    "{} is too few; allowed: 0 (derived from [input] texture_scale) or {MIN_DERIVED_VERTICES}..={MAX_HIERARCHY_VERTICES}",
-                    self.target_vertices
-                ),
-            ));
-        }
-        Ok(())
+        check_vertex_count(self.target_vertices, MAX_HIERARCHY_VERTICES as u64)
+            .map_err(|m| ("target_vertices".into(), m))
     }
 }
 
