@@ -113,9 +113,25 @@ fn main() {
                     )
                 })
                 .unwrap_or_default();
+            // The bake's own seconds and atlas (issue 15: linear in texels
+            // and faces, half the atlas filled).
+            let bake = m["stages"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .find(|s| s["kind"] == "bake")
+                .map(|s| {
+                    format!(
+                        "; bake {:.1} s, {} charts, fill {:.3}",
+                        s["seconds"].as_f64().unwrap_or(f64::NAN),
+                        s["metrics"]["atlas_charts"],
+                        s["metrics"]["atlas_fill"].as_f64().unwrap_or(f64::NAN)
+                    )
+                })
+                .unwrap_or_default();
             let v = report.vertices as f64;
             println!(
-                "| {method} | {} | {secs:.2} | {:.1} | {:.0} | {:.0} | {slowest} |",
+                "| {method} | {} | {secs:.2} | {:.1} | {:.0} | {:.0} | {slowest}{bake} |",
                 report.vertices,
                 secs / v * 1e6,
                 peak / 1e6,

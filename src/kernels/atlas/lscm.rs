@@ -29,6 +29,16 @@ fn local_indices(tris: &[[u32; 3]], faces: &[u32], local: &mut [u32]) -> (Vec<u3
     (verts, corners)
 }
 
+/// A corner of the chart, subtracted from its positions before they are
+/// projected: f32 coordinates of a scan far from the origin (a 0.1-unit
+/// face 200 units out) would otherwise round shared edges apart by more
+/// than the overlap test's margin, and every large chart would fail.
+fn chart_origin(positions: &[Vec3], tris: &[[u32; 3]], faces: &[u32]) -> Vec3 {
+    faces
+        .first()
+        .map_or(Vec3::ZERO, |&f| positions[tris[f as usize][0] as usize])
+}
+
 /// An orthonormal basis (a, b) of the plane normal to `n`, with a × b = n.
 fn plane_basis(n: Vec3) -> (Vec3, Vec3) {
     let a = n.any_orthonormal_vector();
@@ -45,11 +55,12 @@ pub fn project_chart(
     _local: &mut [u32],
 ) -> Vec<[Vec2; 3]> {
     let (a, b) = plane_basis(normal);
+    let origin = chart_origin(positions, tris, faces);
     faces
         .iter()
         .map(|&f| {
             tris[f as usize].map(|v| {
-                let p = positions[v as usize];
+                let p = positions[v as usize] - origin;
                 Vec2::new(p.dot(a), p.dot(b))
             })
         })
@@ -69,11 +80,13 @@ pub fn flatten_chart(
     let (verts, corners) = local_indices(tris, faces, local);
     let n = verts.len();
     let (a, b) = plane_basis(normal);
+    let origin = chart_origin(positions, tris, faces);
+    let (a, b) = (a.as_dvec3(), b.as_dvec3());
     let mut x: Vec<DVec2> = verts
         .iter()
         .map(|&v| {
-            let p = positions[v as usize];
-            DVec2::new(p.dot(a) as f64, p.dot(b) as f64)
+            let p = (positions[v as usize] - origin).as_dvec3();
+            DVec2::new(p.dot(a), p.dot(b))
         })
         .collect();
     // Per triangle: √area × gradients of the three hat functions.
@@ -204,10 +217,13 @@ pub fn flatten_chart(
     if !x.iter().all(|p| p.is_finite()) {
         return None;
     }
+    // Centred before rounding to f32, so precision follows the chart's
+    // size, not its distance from the origin.
+    let centre = x.iter().copied().sum::<DVec2>() / n as f64;
     Some(
         corners
             .iter()
-            .map(|c| c.map(|v| x[v as usize].as_vec2()))
+            .map(|c| c.map(|v| (x[v as usize] - centre).as_vec2()))
             .collect(),
     )
 }

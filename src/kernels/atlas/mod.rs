@@ -10,21 +10,33 @@
 //!    chart, so any triangle soup is accepted.
 //! 2. **Flattening** ([`lscm`]): least-squares conformal maps (Lévy et al.
 //!    2002) solved by preconditioned conjugate gradients from the projection
-//!    onto the seed's tangent plane. A chart whose map flips or overlaps a
-//!    face falls back to the projection; if that fails too it is split in two
-//!    (by growth order) and each part is flattened again, down to single
-//!    triangles, which never fail. Every chart is then scaled to its 3-D
-//!    area, so texel density is the same on average in every chart.
-//! 3. **Packing** ([`pack`]): each chart turned to its minimum-area
-//!    rectangle, bottom-left skyline packing, binary search of the largest
-//!    common scale that fits with [`AtlasSettings::padding_px`] texels of
-//!    gutter around every chart.
-//! 4. **Texels** ([`raster`]): which face covers each texel centre, and
+//!    onto the seed's tangent plane, in coordinates relative to a corner of
+//!    the chart (f32 coordinates far from the origin would round shared
+//!    edges apart and fail every large chart of a scan). A chart whose map
+//!    flips or overlaps a face falls back to the projection; if that fails
+//!    too it is split in two (by growth order) and each part is flattened
+//!    again, down to single triangles, which never fail. Every chart is
+//!    then scaled to its 3-D area, so texel density is the same on average
+//!    in every chart.
+//! 3. **Small charts** ([`merge`]): a chart of at most
+//!    [`merge::SMALL_CHART_FACES`] faces (single faces left by noise, the
+//!    faces of a small component) is unfolded face by face into the
+//!    neighbouring chart it shares the longest edges with, wherever that
+//!    neither flips nor overlaps; grown charts are rescaled to their area.
+//! 4. **Packing** ([`pack`]): each chart turned to its minimum-area
+//!    rectangle; at a trial scale its footprint (texel rows per texel
+//!    column, grown by [`AtlasSettings::padding_px`] texels of gutter) is
+//!    placed, tallest first and in the best of four quarter turns, on a
+//!    column skyline, so charts nest into each other's outlines instead of
+//!    their bounding rectangles; a bisection finds the largest common scale
+//!    that fits.
+//! 5. **Texels** ([`raster`]): which face covers each texel centre, and
 //!    dilation of chart texels into the gutters so bilinear filtering and
 //!    mipmaps do not bleed the background in.
 
 pub mod bake;
 pub mod lscm;
+pub mod merge;
 pub mod pack;
 pub mod raster;
 pub mod segment;
@@ -172,6 +184,41 @@ pub fn build_uv_atlas_with_progress(
     })
 }
 
+/// The singular values (σ₁ ≥ σ₂) of the linear map taking the 3-D triangle
+/// `p` to the flat triangle `q`; `None` for a degenerate 3-D triangle.
+pub fn singular_values(p: [Vec3; 3], q: &[Vec2; 3]) -> Option<(f32, f32)> {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let n = e1.cross(e2);
+    let n2 = n.length_squared();
+    if n2.is_nan() || n2 <= 0.0 {
+        return None;
+    }
+    // The face's own orthonormal frame.
+    let x = e1.normalize();
+    let y = n.cross(e1).normalize();
+    let (a1, a2) = (Vec2::new(e1.length(), 0.0), Vec2::new(e2.dot(x), e2.dot(y)));
+    let (b1, b2) = (q[1] - q[0], q[2] - q[0]);
+    let det = a1.x * a2.y - a2.x * a1.y;
+    // J · [a1 a2] = [b1 b2]  →  J = [b1 b2] · [a1 a2]⁻¹.
+    let inv = [[a2.y / det, -a2.x / det], [-a1.y / det, a1.x / det]];
+    let j = [
+        [
+            b1.x * inv[0][0] + b2.x * inv[1][0],
+            b1.x * inv[0][1] + b2.x * inv[1][1],
+        ],
+        [
+            b1.y * inv[0][0] + b2.y * inv[1][0],
+            b1.y * inv[0][1] + b2.y * inv[1][1],
+        ],
+    ];
+    let fro2 = j[0][0].powi(2) + j[0][1].powi(2) + j[1][0].powi(2) + j[1][1].powi(2);
+    let d = (j[0][0] * j[1][1] - j[0][1] * j[1][0]).abs();
+    let disc = (fro2 * fro2 - 4.0 * d * d).max(0.0).sqrt();
+    let s1 = (0.5 * (fro2 + disc)).sqrt();
+    let s2 = (0.5 * (fro2 - disc)).max(0.0).sqrt();
+    (s1.is_finite() && s2.is_finite()).then_some((s1, s2))
+}
+
 /// Distortion of an atlas, per face and per chart.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct AtlasDistortion {
@@ -206,32 +253,12 @@ pub fn distortion(
         if !(area3 > 0.0 && area2 > 0.0) {
             continue;
         }
+        let Some((s1, s2)) = singular_values(p, &q) else {
+            continue;
+        };
         let c = charts.chart_of_face[f] as usize;
         chart_area[c].0 += area3 as f64;
         chart_area[c].1 += area2 as f64;
-        // Jacobian from the face's own orthonormal frame to the atlas.
-        let x = e1.normalize();
-        let y = e1.cross(e2).cross(e1).normalize();
-        let (a1, a2) = (Vec2::new(e1.length(), 0.0), Vec2::new(e2.dot(x), e2.dot(y)));
-        let (b1, b2) = (q[1] - q[0], q[2] - q[0]);
-        let det = a1.x * a2.y - a2.x * a1.y;
-        // J · [a1 a2] = [b1 b2]  →  J = [b1 b2] · [a1 a2]⁻¹.
-        let inv = [[a2.y / det, -a2.x / det], [-a1.y / det, a1.x / det]];
-        let j = [
-            [
-                b1.x * inv[0][0] + b2.x * inv[1][0],
-                b1.x * inv[0][1] + b2.x * inv[1][1],
-            ],
-            [
-                b1.y * inv[0][0] + b2.y * inv[1][0],
-                b1.y * inv[0][1] + b2.y * inv[1][1],
-            ],
-        ];
-        let fro2 = j[0][0].powi(2) + j[0][1].powi(2) + j[1][0].powi(2) + j[1][1].powi(2);
-        let d = (j[0][0] * j[1][1] - j[0][1] * j[1][0]).abs();
-        let disc = (fro2 * fro2 - 4.0 * d * d).max(0.0).sqrt();
-        let s1 = (0.5 * (fro2 + disc)).sqrt();
-        let s2 = (0.5 * (fro2 - disc)).max(0.0).sqrt();
         let stretch = if s2 > 0.0 { s1 / s2 } else { f32::INFINITY };
         faces.push((area3, area2 / area3, stretch));
     }

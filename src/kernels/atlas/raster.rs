@@ -86,6 +86,11 @@ impl TriangleHash {
         )
     }
 
+    /// The side of a cell.
+    pub fn cell(&self) -> f32 {
+        self.cell
+    }
+
     /// Whether `t` overlaps a triangle in the hash.
     pub fn overlaps(&mut self, t: &[Vec2; 3]) -> bool {
         let (x0, y0, x1, y1) = self.cell_range(t);

@@ -3,6 +3,7 @@
 //! layout.
 
 use super::lscm::{flatten_chart, project_chart};
+use super::merge::absorb_small_charts;
 use super::raster::flat_and_disjoint;
 use super::{AtlasSettings, Charts};
 use crate::progress::Progress;
@@ -172,11 +173,13 @@ pub fn segment_charts_with_progress(
         count += 1;
         progress.inc(grown);
     }
-    Charts {
+    let mut charts = Charts {
         count: count as usize,
         chart_of_face,
         corner_st,
-    }
+    };
+    absorb_small_charts(positions, tris, &nb, &mut charts);
+    charts
 }
 
 /// Reusable per-vertex and per-face marks.
@@ -199,7 +202,11 @@ impl Scratch {
 }
 
 /// The edge-connected components of `faces`, each in breadth-first order.
-fn edge_components(faces: &[u32], nb: &[[u32; 3]], scratch: &mut Scratch) -> Vec<Vec<u32>> {
+pub(crate) fn edge_components(
+    faces: &[u32],
+    nb: &[[u32; 3]],
+    scratch: &mut Scratch,
+) -> Vec<Vec<u32>> {
     scratch.stamp += 2;
     let (member, done) = (scratch.stamp - 1, scratch.stamp);
     for &f in faces {
