@@ -221,6 +221,8 @@ fn oversampled_and_plain_matching_pick_the_same_texel() {
             averaging: true,
             graph_cut: false,
             cut_sigma: 1.0,
+            candidates: Default::default(),
+            jump_cost: 0.0,
         };
         let centre = (20 * 41 + 20) as u32;
         let q = Vec2::new(
@@ -301,6 +303,8 @@ fn synthesise_plane(
         averaging: true,
         graph_cut,
         cut_sigma: 0.15,
+        candidates: Default::default(),
+        jump_cost: 0.0,
     };
     let mut state: Option<SynthesisState> = None;
     for (li, (mesh, parents)) in levels.iter().enumerate() {
@@ -737,6 +741,7 @@ kind = "graph_match"
 region = 5.0
 passes = [2, 1]
 graph_cut = GRAPH_CUT
+candidates = "CANDIDATES"
 
 [[stage]]
 kind = "export"
@@ -746,8 +751,15 @@ preview_size = 64
 
 #[test]
 fn pipeline_builds_levels_frames_sweep_and_colours() {
-    for graph_cut in [false, true] {
-        let config = PIPELINE.replace("GRAPH_CUT", &graph_cut.to_string());
+    for (graph_cut, candidates) in [
+        (false, "exhaustive"),
+        (true, "exhaustive"),
+        (false, "coherent"),
+        (true, "coherent"),
+    ] {
+        let config = PIPELINE
+            .replace("GRAPH_CUT", &graph_cut.to_string())
+            .replace("CANDIDATES", candidates);
         let w = world_for(&config).expect("runs");
         let pyramid = w.resource::<Sqrt2Pyramid>().0.clone();
         let ex = w.resource::<Exemplar>().image.clone();
@@ -825,20 +837,27 @@ fn pipeline_builds_levels_frames_sweep_and_colours() {
 
 #[test]
 fn pipeline_is_identical_at_one_and_two_threads() {
-    let config = PIPELINE.replace("GRAPH_CUT", "true");
-    let colours = |threads: usize| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(|| {
-                let w = world_for(&config).expect("runs");
-                let e = w.resource::<ActiveMesh>().0;
-                w.get::<VertexColours>(e).unwrap().values.clone()
-            })
-    };
-    let (a, b) = (colours(1), colours(2));
-    assert!(a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()));
+    for candidates in ["exhaustive", "coherent"] {
+        let config = PIPELINE
+            .replace("GRAPH_CUT", "true")
+            .replace("CANDIDATES", candidates);
+        let colours = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| {
+                    let w = world_for(&config).expect("runs");
+                    let e = w.resource::<ActiveMesh>().0;
+                    w.get::<VertexColours>(e).unwrap().values.clone()
+                })
+        };
+        let (a, b) = (colours(1), colours(2));
+        assert!(
+            a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+            "{candidates}"
+        );
+    }
 }
 
 #[test]
@@ -1018,6 +1037,8 @@ fn graph_cut_colours_more_than_the_target_even_when_k_min_is_one() {
         averaging: true,
         graph_cut: false,
         cut_sigma: 1.0,
+        candidates: Default::default(),
+        jump_cost: 0.0,
     };
     assert_eq!(region_k(1.0, 1.0, 1.0, 1.0, 1, 1), 1);
     // Interior vertices far apart, so their regions never overlap.
@@ -1059,19 +1080,19 @@ fn graph_cut_colours_more_than_the_target_even_when_k_min_is_one() {
     );
 }
 
-/// Runs graph_match with its stage defaults on a 64² brick plane at one
-/// exemplar texel per world unit; returns the share of light (mortar)
-/// pixels in the result and in the exemplar, and the result with the
-/// exemplar.
-fn bm_defaults_on_a_brick_plane(seed: u64) -> (f64, f64, Image, Image) {
+/// Runs graph_match with its stage defaults plus `extra` (lines of its
+/// `[[stage]]` table) on a 64² plane of the shared `texture` at one
+/// exemplar texel per world unit; returns the result, the exemplar (RGB) and
+/// the run's `metrics.json`.
+fn bm_plane(texture: &str, seed: u64, extra: &str) -> (Image, Image, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
-    let brick = common::shared("textures/brick.png");
+    let path = common::shared(&format!("textures/{texture}.png"));
     let config = format!(
         r#"seed = {seed}
 [input]
 mesh = "builtin:plane"
 mesh_options = {{ resolution = [5, 5], size = 63.0 }}
-exemplar = {brick:?}
+exemplar = {path:?}
 exemplar_wrap = "clamp"
 texture_scale = 1.0
 texture_scale_unit = "pixels_per_unit"
@@ -1082,20 +1103,32 @@ target_vertices = 4096
 kind = "diffuse_orientation"
 [[stage]]
 kind = "graph_match"
+{extra}
 [[stage]]
 kind = "export"
 formats = ["plane"]
 plane_size = [64, 64]
 "#
     );
-    let cfg = dir.path().join("bm_defaults.toml");
+    let cfg = dir.path().join("bm.toml");
     std::fs::write(&cfg, config).unwrap();
     let out = dir.path().join("out");
     let (code, _, stderr) =
         common::run_cli(&["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     assert_eq!(code, 0, "{stderr}");
-    let ex = common::gates::to_rgb(&surfsynth::image::load_image(&brick).unwrap());
+    let ex = common::gates::to_rgb(&surfsynth::image::load_image(&path).unwrap());
     let img = common::gates::to_rgb(&surfsynth::image::load_image(&out.join("plane.png")).unwrap());
+    let metrics: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
+    (img, ex, metrics)
+}
+
+/// Runs graph_match with its stage defaults on a 64² brick plane at one
+/// exemplar texel per world unit; returns the share of light (mortar)
+/// pixels in the result and in the exemplar, and the result with the
+/// exemplar.
+fn bm_defaults_on_a_brick_plane(seed: u64) -> (f64, f64, Image, Image) {
+    let (img, ex, _) = bm_plane("brick", seed, "");
     // Mortar is the light part of the exemplar.
     let light = |im: &Image| {
         let n = im.pixel_count();
@@ -1152,5 +1185,46 @@ fn stage_defaults_keep_brick_layout_near_the_peer_on_a_plane() {
         };
         let failures = common::gates::gate_failures(&ours, &peer, &gate);
         assert!(failures.is_empty(), "seed {seed}: {}", failures.join("\n"));
+    }
+}
+
+/// Copied-region area on the mesh (`result.quality.verbatim.mean_region_area`,
+/// exemplar pixels²: the area of the patch a random vertex lies in, patches
+/// joined across mesh edges whose sources differ by the edge's own offset;
+/// larger = fewer seams; the plane image's measure would compare nearest-
+/// vertex sources of pixels, which the √2 lattice does not line up with)
+/// and the plane image's coherence p90 of a 64² plane run.
+fn regions_and_p90(metrics: &serde_json::Value) -> (f64, f64) {
+    let q = &metrics["result"]["quality"];
+    (
+        q["verbatim"]["mean_region_area"].as_f64().unwrap(),
+        q["plane"]["coherence_p90"].as_f64().unwrap(),
+    )
+}
+
+/// Issue 12: with coherent candidates (an extension), the graph cut has its
+/// point — each match continues its neighbours' patches, so the imprint
+/// agrees with the surface around it and the cut takes larger pieces: the
+/// copied regions grow (fewer seams) against the paper's exhaustive search
+/// with the same cut, and against coherent candidates without the cut,
+/// without a worse coherence p90.
+#[test]
+fn coherent_candidates_give_graph_cuts_fewer_seams() {
+    for texture in ["brick", "planks"] {
+        let run = |extra: &str| regions_and_p90(&bm_plane(texture, 3, extra).2);
+        let (paper_cut, paper_p90) = run("graph_cut = true");
+        let (coherent, _) = run("candidates = \"coherent\"");
+        let (coherent_cut, coherent_p90) = run("graph_cut = true\ncandidates = \"coherent\"");
+        println!(
+            "{texture}: region area (px) exhaustive+cut {paper_cut:.1}, coherent {coherent:.1}, coherent+cut {coherent_cut:.1}; p90 {paper_p90:.5} vs {coherent_p90:.5}"
+        );
+        assert!(
+            coherent_cut > 1.2 * paper_cut && coherent_cut > 1.2 * coherent,
+            "{texture}: region area coherent+cut {coherent_cut:.1} vs exhaustive+cut {paper_cut:.1}, coherent {coherent:.1}"
+        );
+        assert!(
+            coherent_p90 <= 1.1 * paper_p90,
+            "{texture}: coherence p90 {coherent_p90:.5} vs {paper_p90:.5}"
+        );
     }
 }

@@ -20,6 +20,15 @@
 //!    exemplar imprint where a minimum cut says so (§3.4,
 //!    [`crate::kernels::graph_cut_transfer`]).
 //!
+//! With [`Candidates::Coherent`] (an extension beyond the paper) step 3
+//! scores only k-coherent candidates instead of every texel: the sources of
+//! the coloured region vertices within two edges, shifted back by their
+//! offsets, and the texels most similar to each in appearance space
+//! ([`MatchImages::prepare_similar`]), a jump costing `jump_cost` more than a
+//! shift. Matches then continue their neighbours' patches, so the graph cut
+//! of step 4 finds imprints that agree with the surface and takes larger
+//! pieces (fewer seams).
+//!
 //! [`match_pass`] runs this over a vertex order. Vertices whose k-regions
 //! are disjoint do not see each other's results, so batches of vertices
 //! with pairwise disjoint regions are matched in parallel (consecutive ones
@@ -33,7 +42,7 @@ mod search;
 mod stack;
 
 pub use region::{KRegion, RegionScratch, k_for_side, k_region, mean_edge_lengths, region_k};
-pub use search::{BestMatch, MatchGroups, Sample, best_match};
+pub use search::{BestMatch, MatchGroups, Sample, best_candidate, best_match};
 pub use stack::{ImageLevels, MatchImages};
 
 use crate::image::sample::Wrap;
@@ -73,7 +82,34 @@ pub struct GraphMatchSettings {
     pub graph_cut: bool,
     /// `σ` of eq. 1; > 0.
     pub cut_sigma: f32,
+    /// Where the matched texel `Q` is looked for.
+    pub candidates: Candidates,
+    /// With coherent candidates: a jump to a similar texel must beat the
+    /// shifts by this fraction of its sum (its sum is scaled by
+    /// `1 + jump_cost`); ≥ 0.
+    pub jump_cost: f32,
 }
+
+/// Where [`match_pass`] looks for a vertex's texel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Candidates {
+    /// Every texel of the level (Algorithm 1; the paper).
+    #[default]
+    Exhaustive,
+    /// k-coherent candidates (an extension; Ashikhmin 2001, Tong et al.
+    /// 2002): the source of each coloured region vertex within two edges,
+    /// shifted back by its offset, and the pixels most similar to that
+    /// source in appearance space ([`MatchImages::prepare_similar`]), each
+    /// shifted the same way. The region's full colour sum picks among them.
+    /// Falls back to the exhaustive search where no region vertex within
+    /// two edges is coloured or the level has no similarity sets.
+    Coherent,
+}
+
+/// Region vertices at most this many edges from the centre give coherent
+/// candidates.
+const COHERENT_DEPTH: u32 = 2;
 
 impl Default for GraphMatchSettings {
     fn default() -> Self {
@@ -85,6 +121,8 @@ impl Default for GraphMatchSettings {
             averaging: true,
             graph_cut: false,
             cut_sigma: 1.0,
+            candidates: Candidates::Exhaustive,
+            jump_cost: 0.0,
         }
     }
 }
@@ -581,7 +619,17 @@ fn match_vertex(
         let t = state.texels[w as usize] / factor - region.offset[i];
         seeds.push([t.x.floor() as i32, t.y.floor() as i32]);
     }
-    let q = match best_match(images, lp, &groups, &seeds, parallel) {
+    let coherent = if settings.candidates == Candidates::Coherent {
+        coherent_candidates(images, lp, factor, region, state)
+    } else {
+        Vec::new()
+    };
+    let found = if coherent.is_empty() {
+        best_match(images, lp, &groups, &seeds, parallel)
+    } else {
+        best_candidate(images, lp, &groups, &coherent, 1.0 + settings.jump_cost)
+    };
+    let q = match found {
         Some(b) => [b.x, b.y],
         None => {
             stats.random_starts = 1;
@@ -663,4 +711,60 @@ fn match_vertex(
         colours: out_colours,
         stats,
     }
+}
+
+/// The k-coherent candidates of a region on level `lp` ([`Candidates::Coherent`]):
+/// for every coloured region vertex within [`COHERENT_DEPTH`] edges, its
+/// source texel and the texels most similar to it, each shifted back by the
+/// vertex's offset; texels outside a clamped exemplar are dropped, a
+/// repeating one wraps them. Distinct, in region order, each marked `true`
+/// when it is a jump (a similar texel's shift, not a source's). Empty when
+/// the level has no similarity sets or no such vertex is coloured.
+fn coherent_candidates(
+    images: &MatchImages,
+    lp: usize,
+    factor: f32,
+    region: &KRegion,
+    state: &SynthesisState,
+) -> Vec<([u32; 2], bool)> {
+    let Some(similar) = images.similar(lp) else {
+        return Vec::new();
+    };
+    let img = images.image(lp);
+    let (w, h) = (img.width as i64, img.height as i64);
+    let repeat = images.wrap() == Wrap::Repeat;
+    let admit = |x: i64, y: i64| -> Option<[u32; 2]> {
+        if repeat {
+            Some([x.rem_euclid(w) as u32, y.rem_euclid(h) as u32])
+        } else if (0..w).contains(&x) && (0..h).contains(&y) {
+            Some([x as u32, y as u32])
+        } else {
+            None
+        }
+    };
+    let mut out: Vec<([u32; 2], bool)> = Vec::new();
+    for (i, &v) in region.vertices.iter().enumerate() {
+        if region.depth[i] > COHERENT_DEPTH || !state.coloured[v as usize] {
+            continue;
+        }
+        let t = state.texels[v as usize] / factor;
+        let Some([sx, sy]) = admit(t.x.floor() as i64, t.y.floor() as i64) else {
+            continue;
+        };
+        let o = region.offset[i].round();
+        let (ox, oy) = (o.x as i64, o.y as i64);
+        let p = sy * w as u32 + sx;
+        for (j, &s) in std::iter::once(&p).chain(similar.similar_of(p)).enumerate() {
+            let (x, y) = ((s % w as u32) as i64, (s / w as u32) as i64);
+            let Some(c) = admit(x - ox, y - oy) else {
+                continue;
+            };
+            match out.iter_mut().find(|(o, _)| *o == c) {
+                // A texel that is some vertex's shift is not a jump.
+                Some(o) => o.1 &= j > 0,
+                None => out.push((c, j > 0)),
+            }
+        }
+    }
+    out
 }
