@@ -88,7 +88,23 @@ pub struct GraphMatchSettings {
     /// shifts by this fraction of its sum (its sum is scaled by
     /// `1 + jump_cost`); ≥ 0.
     pub jump_cost: f32,
+    /// Results that follow the texture, not the tessellation: region
+    /// vertices less than half a texel from a matched vertex take the texel
+    /// under them and are not matched on their own in the same pass
+    /// ([`FOOTPRINT`]), and a cut's edge weights are scaled by the edges'
+    /// lengths in texels. Off, every vertex is matched and eq. 1 is used as
+    /// printed (the paper).
+    pub density_invariant: bool,
 }
+
+/// Radius, in texels of the matched level, of a matched vertex's footprint:
+/// region vertices closer than this read the matched texel itself (their
+/// offset rounds to zero), so matching them on their own would compare
+/// almost the same samples again. Sharing it makes the number of matches
+/// per pass follow the texture's area in texels rather than the vertex
+/// count on meshes denser than the texture (linear time on dense scans);
+/// on meshes with edges of a texel or more it never applies.
+pub const FOOTPRINT: f32 = 0.5;
 
 /// Where [`match_pass`] looks for a vertex's texel.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
@@ -123,6 +139,7 @@ impl Default for GraphMatchSettings {
             cut_sigma: 1.0,
             candidates: Candidates::Exhaustive,
             jump_cost: 0.0,
+            density_invariant: false,
         }
     }
 }
@@ -237,8 +254,12 @@ impl SynthesisState {
 pub struct PassStats {
     /// Vertices matched.
     pub matched: u64,
-    /// Vertices skipped because a graph cut of the same pass coloured them.
+    /// Vertices skipped because a graph cut or a matched vertex's footprint
+    /// ([`FOOTPRINT`]) coloured them earlier in the same pass.
     pub covered_by_cuts: u64,
+    /// Vertices coloured as part of a matched vertex's footprint (not taken
+    /// by its cut).
+    pub footprint_vertices: u64,
     /// Vertices that had no coloured region vertex and took a random texel.
     pub random_starts: u64,
     /// Region vertices compared per candidate, summed over matched vertices,
@@ -265,6 +286,7 @@ impl std::ops::AddAssign for PassStats {
     fn add_assign(&mut self, o: Self) {
         self.matched += o.matched;
         self.covered_by_cuts += o.covered_by_cuts;
+        self.footprint_vertices += o.footprint_vertices;
         self.random_starts += o.random_starts;
         self.comparisons_plain += o.comparisons_plain;
         self.comparisons_averaged += o.comparisons_averaged;
@@ -644,6 +666,9 @@ fn match_vertex(
     let qc = Vec2::new(q[0] as f32 + 0.5, q[1] as f32 + 0.5);
     let mut writes = vec![(centre, wrap_texel(images, qc * factor), lp as u8)];
     let mut out_colours = images.image(lp).pixel(q[0], q[1]).to_vec();
+    // Region vertices written so far (local ids).
+    let mut written = vec![false; region.len()];
+    written[0] = true;
     if settings.graph_cut && region.len() > 1 {
         let n = region.len();
         let mut texture = vec![0.0f32; n * ch];
@@ -673,6 +698,15 @@ fn match_vertex(
             border[i] = region.depth[i] == region.k;
             distance[i] = region.offset[i].length();
         }
+        let edge_factor: Vec<f32> = if settings.density_invariant {
+            region
+                .edges
+                .iter()
+                .map(|&[a, b]| (region.offset[a as usize] - region.offset[b as usize]).length())
+                .collect()
+        } else {
+            Vec::new()
+        };
         let cut = graph_cut_transfer(
             &TransferRegion {
                 channels: ch,
@@ -684,6 +718,7 @@ fn match_vertex(
                 distance: &distance,
                 target: 0,
                 diameter: settings.region_texels,
+                edge_factor: &edge_factor,
             },
             settings.cut_sigma,
         );
@@ -695,6 +730,7 @@ fn match_vertex(
         stats.cut_flow_gap = (cut.cost - cut.flow).abs();
         for i in 1..n {
             if cut.take_texture[i] {
+                written[i] = true;
                 let [x, y] = texel_of(i);
                 let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 writes.push((
@@ -704,6 +740,26 @@ fn match_vertex(
                 ));
                 out_colours.extend_from_slice(&texture[i * ch..(i + 1) * ch]);
             }
+        }
+    }
+    if settings.density_invariant {
+        for i in 1..region.len() {
+            let o = region.offset[i];
+            if written[i] || o.length() >= FOOTPRINT {
+                continue;
+            }
+            let (x, y) = (
+                q[0] as i64 + o.x.round() as i64,
+                q[1] as i64 + o.y.round() as i64,
+            );
+            // The colour of the texel under it; its coordinate exactly.
+            writes.push((
+                region.vertices[i],
+                wrap_texel(images, (qc + o) * factor),
+                levels[i] as u8,
+            ));
+            out_colours.extend_from_slice(images.image(levels[i]).texel(x, y, images.wrap()));
+            stats.footprint_vertices += 1;
         }
     }
     Outcome {

@@ -26,6 +26,14 @@
 //! 0.30 → 0.08 on brick (the mortar net no longer breaks into fragments on
 //! grey), lower on every shared texture, at 5–15× the time.
 //!
+//! `density_invariant` (default on; off = the paper) makes the result
+//! follow the texture rather than the tessellation on meshes denser than
+//! the texture: vertices within half a texel of a matched vertex take the
+//! texel under them instead of being matched again, and cut edges are
+//! weighted by their length in texels (`kernels::graph_match::FOOTPRINT`).
+//! On meshes with edges of about a texel (the planar benchmark, the √2
+//! hierarchies `subdivide_sqrt2` builds) neither changes much.
+//!
 //! `candidates = "coherent"` (an extension; the paper's exhaustive search
 //! is the default and the reference reproduction) scores k-coherent
 //! candidates instead of every texel (`kernels::graph_match`,
@@ -97,6 +105,9 @@ pub struct GraphMatchStageSettings {
     pub similar: u32,
     /// Extra relative cost of a jump over a shift (coherent candidates).
     pub jump_cost: f32,
+    /// Footprint sharing and length-weighted cuts (results follow the
+    /// texture, not the tessellation).
+    pub density_invariant: bool,
 }
 
 impl Default for GraphMatchStageSettings {
@@ -116,6 +127,7 @@ impl Default for GraphMatchStageSettings {
             candidates: Candidates::Exhaustive,
             similar: 4,
             jump_cost: JUMP_COST,
+            density_invariant: true,
         }
     }
 }
@@ -199,6 +211,12 @@ impl StageSettings for GraphMatchStageSettings {
             unit: "fraction of the region's colour sum",
             range: ParamRange::Float(0.0, 10.0),
             doc: "with candidates = coherent: a jump to a similar texel is taken only when its sum of squared differences, times 1 + jump_cost, is below every shift's (Ashikhmin-style bias toward continuing patches; 0 = plain minimum)",
+        },
+        ParamDoc {
+            name: "density_invariant",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "true (default): results follow the texture, not the tessellation — region vertices less than half a texel from a matched vertex take the texel under them and are not matched again in that pass (the same samples, §3.3.3's oversampling), and graph-cut edge weights are scaled by the edge's length in texels (the cut's cost is seam length × mismatch, as on a continuous surface); so on meshes denser than the texture the matches per pass follow its area in texels, not the vertex count (linear time on dense scans); on meshes with edges of about a texel both change little; false = every vertex matched and eq. 1 as printed (the paper)",
         },
         ParamDoc {
             name: "similar",
@@ -380,6 +398,7 @@ impl Stage for GraphMatch {
                 cut_sigma: settings.cut_sigma,
                 candidates: settings.candidates,
                 jump_cost: settings.jump_cost,
+                density_invariant: settings.density_invariant,
             };
             let mut images = images;
             if settings.candidates == Candidates::Coherent {
