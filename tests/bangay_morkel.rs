@@ -1228,7 +1228,8 @@ fn coherent_candidates_give_graph_cuts_fewer_seams() {
         );
         // A guard against garbage, not a gain: a sharper result sits
         // farther from its nearest exemplar window (on the 256² benchmark
-        // the coherent p90 is 0.9–1.3× the exhaustive cut's).
+        // the coherent p90 is 0.95–1.4× the exhaustive cut's, 1.0 or below on
+        // brick and planks).
         assert!(
             coherent_p90 <= 1.3 * paper_p90,
             "{texture}: coherence p90 {coherent_p90:.5} vs {paper_p90:.5}"
