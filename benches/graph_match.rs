@@ -70,6 +70,9 @@ fn bench_pass(c: &mut Criterion) {
         averaging: true,
         graph_cut: false,
         cut_sigma: 0.15,
+        candidates: Default::default(),
+        jump_cost: 0.0,
+        density_invariant: false,
     };
     let mut order: Vec<u32> = (0..nv as u32).collect();
     order.shuffle(&mut rand_pcg::Pcg64Mcg::seed_from_u64(1));

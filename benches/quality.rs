@@ -57,7 +57,7 @@ use surfsynth::output::{write_bytes_atomic, write_png};
 use surfsynth::pipeline::{Pipeline, RunOptions};
 
 /// The methods of `configs/plane/<method>.toml` (a public interface).
-const METHODS: [&str; 9] = [
+const METHODS: [&str; 10] = [
     "jump_pixel",
     "jump_patch",
     "jump_surface",
@@ -67,6 +67,7 @@ const METHODS: [&str; 9] = [
     "coherent",
     "bangay_morkel",
     "bangay_morkel_graph_cut",
+    "bangay_morkel_coherent",
 ];
 
 /// The name of the peer's rows.

@@ -58,7 +58,7 @@ fn small(method: &str) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
 }
 
-const METHODS: [&str; 9] = [
+const METHODS: [&str; 10] = [
     "jump_pixel",
     "jump_patch",
     "jump_surface",
@@ -68,6 +68,7 @@ const METHODS: [&str; 9] = [
     "coherent",
     "bangay_morkel",
     "bangay_morkel_graph_cut",
+    "bangay_morkel_coherent",
 ];
 
 /// Runs `configs/plane/METHOD.toml` small on stones into `out`; returns the folder.

@@ -294,9 +294,23 @@ fn derived_sizes_follow_the_texture_scale() {
         );
         assert!(m[0].get("warning").is_none(), "{:?}", m[0]);
     }
-    // A mesh already finer than the scale asks: one level, with a warning.
+    // A mesh already finer than the scale asks is remeshed coarser and
+    // refined back to the target within a step (a step on a closed
+    // triangle mesh about triples the count, V' = V + F); without that, one
+    // level, with a warning.
     let (m, want, _) = metrics_of("[[stage]]\nkind = \"subdivide_sqrt2\"\n", 3.0);
     assert!(want < 288.0, "{want}");
+    assert!(m[0].get("coarsened_input_vertices").is_some(), "{:?}", m[0]);
+    let sizes = m[0]["level_vertices_coarse_to_fine"].as_array().unwrap();
+    let finest = number(sizes.last().unwrap());
+    assert!(
+        sizes.len() >= 2 && (finest / want).ln().abs() <= 3f64.sqrt().ln() + 0.05,
+        "{sizes:?} for {want}"
+    );
+    let (m, _, _) = metrics_of(
+        "[[stage]]\nkind = \"subdivide_sqrt2\"\ncoarsen_dense_input = false\n",
+        3.0,
+    );
     let warning = m[0]["warning"].as_str().expect("a warning");
     assert!(warning.contains("one-level"), "{warning}");
 

@@ -30,6 +30,11 @@ pub struct TransferRegion<'a> {
     pub target: u32,
     /// `r` of eq. 1: the diameter of the texture neighbourhood, texels.
     pub diameter: f32,
+    /// Per edge of `edges`, a factor on its weight: its length in texels
+    /// makes the cut's cost the seam's length times the mismatch along it,
+    /// whatever the mesh density (Boykov & Kolmogorov 2003's geo-cuts);
+    /// empty = 1 for every edge (eq. 1 as printed).
+    pub edge_factor: &'a [f32],
 }
 
 /// Which vertices take the texture, and the seam.
@@ -90,13 +95,15 @@ pub fn graph_cut_transfer(region: &TransferRegion, sigma: f32) -> TransferCut {
         .collect();
     let denom = sigma as f64 * (region.diameter as f64).powi(2);
     let mut g = FlowGraph::with_capacity(n, region.edges.len());
-    for &[a, b] in region.edges {
+    for (e, &[a, b]) in region.edges.iter().enumerate() {
+        let factor = region.edge_factor.get(e).map_or(1.0, |&f| f as f64);
         let (xa, xb) = (
             region.distance[a as usize] as f64,
             region.distance[b as usize] as f64,
         );
-        let w =
-            (mismatch[a as usize] + mismatch[b as usize]) * (-(xa * xa + xb * xb) / denom).exp();
+        let w = factor
+            * (mismatch[a as usize] + mismatch[b as usize])
+            * (-(xa * xa + xb * xb) / denom).exp();
         g.add_edge(a, b, w, w);
     }
     for v in 0..n {

@@ -20,6 +20,15 @@
 //!    exemplar imprint where a minimum cut says so (§3.4,
 //!    [`crate::kernels::graph_cut_transfer`]).
 //!
+//! With [`Candidates::Coherent`] (an extension beyond the paper) step 3
+//! scores only k-coherent candidates instead of every texel: the sources of
+//! the coloured region vertices within two edges, shifted back by their
+//! offsets, and the texels most similar to each in appearance space
+//! ([`MatchImages::prepare_similar`]), a jump costing `jump_cost` more than a
+//! shift. Matches then continue their neighbours' patches, so the graph cut
+//! of step 4 finds imprints that agree with the surface and takes larger
+//! pieces (fewer seams).
+//!
 //! [`match_pass`] runs this over a vertex order. Vertices whose k-regions
 //! are disjoint do not see each other's results, so batches of vertices
 //! with pairwise disjoint regions are matched in parallel (consecutive ones
@@ -33,7 +42,7 @@ mod search;
 mod stack;
 
 pub use region::{KRegion, RegionScratch, k_for_side, k_region, mean_edge_lengths, region_k};
-pub use search::{BestMatch, MatchGroups, Sample, best_match};
+pub use search::{BestMatch, MatchGroups, Sample, best_candidate, best_match};
 pub use stack::{ImageLevels, MatchImages};
 
 use crate::image::sample::Wrap;
@@ -73,7 +82,50 @@ pub struct GraphMatchSettings {
     pub graph_cut: bool,
     /// `σ` of eq. 1; > 0.
     pub cut_sigma: f32,
+    /// Where the matched texel `Q` is looked for.
+    pub candidates: Candidates,
+    /// With coherent candidates: a jump to a similar texel must beat the
+    /// shifts by this fraction of its sum (its sum is scaled by
+    /// `1 + jump_cost`); ≥ 0.
+    pub jump_cost: f32,
+    /// Results that follow the texture, not the tessellation: region
+    /// vertices less than half a texel from a matched vertex take the texel
+    /// under them and are not matched on their own in the same pass
+    /// ([`FOOTPRINT`]), and a cut's edge weights are scaled by the edges'
+    /// lengths in texels. Off, every vertex is matched and eq. 1 is used as
+    /// printed (the paper).
+    pub density_invariant: bool,
 }
+
+/// Radius, in texels of the matched level, of a matched vertex's footprint:
+/// region vertices closer than this read the matched texel itself (their
+/// offset rounds to zero), so matching them on their own would compare
+/// almost the same samples again. Sharing it makes the number of matches
+/// per pass follow the texture's area in texels rather than the vertex
+/// count on meshes denser than the texture (linear time on dense scans);
+/// on meshes with edges of a texel or more it never applies.
+pub const FOOTPRINT: f32 = 0.5;
+
+/// Where [`match_pass`] looks for a vertex's texel.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Candidates {
+    /// Every texel of the level (Algorithm 1; the paper).
+    #[default]
+    Exhaustive,
+    /// k-coherent candidates (an extension; Ashikhmin 2001, Tong et al.
+    /// 2002): the source of each coloured region vertex within two edges,
+    /// shifted back by its offset, and the pixels most similar to that
+    /// source in appearance space ([`MatchImages::prepare_similar`]), each
+    /// shifted the same way. The region's full colour sum picks among them.
+    /// Falls back to the exhaustive search where no region vertex within
+    /// two edges is coloured or the level has no similarity sets.
+    Coherent,
+}
+
+/// Region vertices at most this many edges from the centre give coherent
+/// candidates.
+const COHERENT_DEPTH: u32 = 2;
 
 impl Default for GraphMatchSettings {
     fn default() -> Self {
@@ -85,6 +137,9 @@ impl Default for GraphMatchSettings {
             averaging: true,
             graph_cut: false,
             cut_sigma: 1.0,
+            candidates: Candidates::Exhaustive,
+            jump_cost: 0.0,
+            density_invariant: false,
         }
     }
 }
@@ -199,8 +254,12 @@ impl SynthesisState {
 pub struct PassStats {
     /// Vertices matched.
     pub matched: u64,
-    /// Vertices skipped because a graph cut of the same pass coloured them.
+    /// Vertices skipped because a graph cut or a matched vertex's footprint
+    /// ([`FOOTPRINT`]) coloured them earlier in the same pass.
     pub covered_by_cuts: u64,
+    /// Vertices coloured as part of a matched vertex's footprint (not taken
+    /// by its cut).
+    pub footprint_vertices: u64,
     /// Vertices that had no coloured region vertex and took a random texel.
     pub random_starts: u64,
     /// Region vertices compared per candidate, summed over matched vertices,
@@ -227,6 +286,7 @@ impl std::ops::AddAssign for PassStats {
     fn add_assign(&mut self, o: Self) {
         self.matched += o.matched;
         self.covered_by_cuts += o.covered_by_cuts;
+        self.footprint_vertices += o.footprint_vertices;
         self.random_starts += o.random_starts;
         self.comparisons_plain += o.comparisons_plain;
         self.comparisons_averaged += o.comparisons_averaged;
@@ -581,7 +641,17 @@ fn match_vertex(
         let t = state.texels[w as usize] / factor - region.offset[i];
         seeds.push([t.x.floor() as i32, t.y.floor() as i32]);
     }
-    let q = match best_match(images, lp, &groups, &seeds, parallel) {
+    let coherent = if settings.candidates == Candidates::Coherent {
+        coherent_candidates(images, lp, factor, region, state)
+    } else {
+        Vec::new()
+    };
+    let found = if coherent.is_empty() {
+        best_match(images, lp, &groups, &seeds, parallel)
+    } else {
+        best_candidate(images, lp, &groups, &coherent, 1.0 + settings.jump_cost)
+    };
+    let q = match found {
         Some(b) => [b.x, b.y],
         None => {
             stats.random_starts = 1;
@@ -596,6 +666,9 @@ fn match_vertex(
     let qc = Vec2::new(q[0] as f32 + 0.5, q[1] as f32 + 0.5);
     let mut writes = vec![(centre, wrap_texel(images, qc * factor), lp as u8)];
     let mut out_colours = images.image(lp).pixel(q[0], q[1]).to_vec();
+    // Region vertices written so far (local ids).
+    let mut written = vec![false; region.len()];
+    written[0] = true;
     if settings.graph_cut && region.len() > 1 {
         let n = region.len();
         let mut texture = vec![0.0f32; n * ch];
@@ -625,6 +698,15 @@ fn match_vertex(
             border[i] = region.depth[i] == region.k;
             distance[i] = region.offset[i].length();
         }
+        let edge_factor: Vec<f32> = if settings.density_invariant {
+            region
+                .edges
+                .iter()
+                .map(|&[a, b]| (region.offset[a as usize] - region.offset[b as usize]).length())
+                .collect()
+        } else {
+            Vec::new()
+        };
         let cut = graph_cut_transfer(
             &TransferRegion {
                 channels: ch,
@@ -636,6 +718,7 @@ fn match_vertex(
                 distance: &distance,
                 target: 0,
                 diameter: settings.region_texels,
+                edge_factor: &edge_factor,
             },
             settings.cut_sigma,
         );
@@ -647,6 +730,7 @@ fn match_vertex(
         stats.cut_flow_gap = (cut.cost - cut.flow).abs();
         for i in 1..n {
             if cut.take_texture[i] {
+                written[i] = true;
                 let [x, y] = texel_of(i);
                 let at = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
                 writes.push((
@@ -658,9 +742,85 @@ fn match_vertex(
             }
         }
     }
+    if settings.density_invariant {
+        for i in 1..region.len() {
+            let o = region.offset[i];
+            if written[i] || o.length() >= FOOTPRINT {
+                continue;
+            }
+            let (x, y) = (
+                q[0] as i64 + o.x.round() as i64,
+                q[1] as i64 + o.y.round() as i64,
+            );
+            // The colour of the texel under it; its coordinate exactly.
+            writes.push((
+                region.vertices[i],
+                wrap_texel(images, (qc + o) * factor),
+                levels[i] as u8,
+            ));
+            out_colours.extend_from_slice(images.image(levels[i]).texel(x, y, images.wrap()));
+            stats.footprint_vertices += 1;
+        }
+    }
     Outcome {
         writes,
         colours: out_colours,
         stats,
     }
+}
+
+/// The k-coherent candidates of a region on level `lp` ([`Candidates::Coherent`]):
+/// for every coloured region vertex within [`COHERENT_DEPTH`] edges, its
+/// source texel and the texels most similar to it, each shifted back by the
+/// vertex's offset; texels outside a clamped exemplar are dropped, a
+/// repeating one wraps them. Distinct, in region order, each marked `true`
+/// when it is a jump (a similar texel's shift, not a source's). Empty when
+/// the level has no similarity sets or no such vertex is coloured.
+fn coherent_candidates(
+    images: &MatchImages,
+    lp: usize,
+    factor: f32,
+    region: &KRegion,
+    state: &SynthesisState,
+) -> Vec<([u32; 2], bool)> {
+    let Some(similar) = images.similar(lp) else {
+        return Vec::new();
+    };
+    let img = images.image(lp);
+    let (w, h) = (img.width as i64, img.height as i64);
+    let repeat = images.wrap() == Wrap::Repeat;
+    let admit = |x: i64, y: i64| -> Option<[u32; 2]> {
+        if repeat {
+            Some([x.rem_euclid(w) as u32, y.rem_euclid(h) as u32])
+        } else if (0..w).contains(&x) && (0..h).contains(&y) {
+            Some([x as u32, y as u32])
+        } else {
+            None
+        }
+    };
+    let mut out: Vec<([u32; 2], bool)> = Vec::new();
+    for (i, &v) in region.vertices.iter().enumerate() {
+        if region.depth[i] > COHERENT_DEPTH || !state.coloured[v as usize] {
+            continue;
+        }
+        let t = state.texels[v as usize] / factor;
+        let Some([sx, sy]) = admit(t.x.floor() as i64, t.y.floor() as i64) else {
+            continue;
+        };
+        let o = region.offset[i].round();
+        let (ox, oy) = (o.x as i64, o.y as i64);
+        let p = sy * w as u32 + sx;
+        for (j, &s) in std::iter::once(&p).chain(similar.similar_of(p)).enumerate() {
+            let (x, y) = ((s % w as u32) as i64, (s / w as u32) as i64);
+            let Some(c) = admit(x - ox, y - oy) else {
+                continue;
+            };
+            match out.iter_mut().find(|(o, _)| *o == c) {
+                // A texel that is some vertex's shift is not a jump.
+                Some(o) => o.1 &= j > 0,
+                None => out.push((c, j > 0)),
+            }
+        }
+    }
+    out
 }

@@ -176,6 +176,36 @@ pub fn best_match(
     })
 }
 
+/// The texel among `candidates` (texels of level `level`, each marked when
+/// it is a jump) with the smallest sum of [`best_match`], a jump's sum
+/// scaled by `jump_factor`; ties go to the lowest `y · width + x`. `None`
+/// when `groups` or `candidates` is empty. The distance returned is the
+/// unscaled sum.
+pub fn best_candidate(
+    images: &MatchImages,
+    level: usize,
+    groups: &MatchGroups,
+    candidates: &[([u32; 2], bool)],
+    jump_factor: f32,
+) -> Option<BestMatch> {
+    if groups.is_empty() {
+        return None;
+    }
+    let w = images.planes(level).width as u32;
+    candidates
+        .iter()
+        .map(|&([x, y], jump)| {
+            let d = distance_at(images, groups, x as usize, y as usize);
+            (if jump { d * jump_factor } else { d }, y * w + x, d)
+        })
+        .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+        .map(|(_, i, distance)| BestMatch {
+            x: i % w,
+            y: i / w,
+            distance,
+        })
+}
+
 /// The sum at one candidate, with exactly the operations of `score_tile`.
 fn distance_at(images: &MatchImages, groups: &MatchGroups, x: usize, y: usize) -> f32 {
     let ch = groups.channels;
@@ -288,29 +318,86 @@ mod tests {
         Image::from_data(w, h, c, data).unwrap()
     }
 
+    /// The `(2r + 1)²` window of `img` around `q` as level-0 samples, each
+    /// offset repeated `copies(dx, dy)` times, with its colours.
+    fn window(
+        img: &Image,
+        images: &MatchImages,
+        q: [i32; 2],
+        r: i32,
+        wrap: Wrap,
+        copies: impl Fn(i32, i32) -> u32,
+    ) -> (Vec<Sample>, Vec<f32>) {
+        let mut samples = Vec::new();
+        let mut colours = Vec::new();
+        for dy in -r..=r {
+            for dx in -r..=r {
+                for _ in 0..copies(dx, dy) {
+                    samples.push(Sample {
+                        level: 0,
+                        offset: images.reduce_offset(0, [dx, dy]),
+                    });
+                    colours.extend_from_slice(img.texel(
+                        (q[0] + dx) as i64,
+                        (q[1] + dy) as i64,
+                        wrap,
+                    ));
+                }
+            }
+        }
+        (samples, colours)
+    }
+
+    #[test]
+    fn best_candidate_prefers_shifts_by_the_jump_factor() {
+        let img = noise(40, 30, 3, 3);
+        let images = MatchImages::new(&img, ImageLevels::Stack, 1, Wrap::Repeat);
+        let (samples, colours) = window(&img, &images, [17, 9], 1, Wrap::Repeat, |_, _| 1);
+        let mut g = MatchGroups::new();
+        g.build(&samples, &colours, 3, true);
+        let exact = best_match(&images, 0, &g, &[], false).unwrap();
+        assert_eq!((exact.x, exact.y), (17, 9));
+        let other = [3u32, 4];
+        let d_other = best_candidate(&images, 0, &g, &[(other, false)], 1.0)
+            .unwrap()
+            .distance;
+        assert!(d_other > 0.0);
+        // The window itself (sum 0) wins even as a jump.
+        let both = [([17u32, 9u32], true), (other, false)];
+        let b = best_candidate(&images, 0, &g, &both, 1.0).unwrap();
+        assert_eq!((b.x, b.y, b.distance), (17, 9, 0.0));
+        // A jump whose sum is above a shift's never wins; one below it wins
+        // only when below by more than the factor.
+        let (near, far) = ([18u32, 9u32], [16u32, 9u32]);
+        let d = |c: [u32; 2]| {
+            best_candidate(&images, 0, &g, &[(c, false)], 1.0)
+                .unwrap()
+                .distance
+        };
+        let (lo, hi) = if d(near) < d(far) {
+            (near, far)
+        } else {
+            (far, near)
+        };
+        let ratio = d(hi) / d(lo);
+        assert!(ratio > 1.0);
+        let pick = |f: f32| {
+            let b = best_candidate(&images, 0, &g, &[(hi, false), (lo, true)], f).unwrap();
+            [b.x, b.y]
+        };
+        assert_eq!(pick(1.0), lo);
+        assert_eq!(pick(ratio * 1.01), hi);
+        assert!(best_candidate(&images, 0, &g, &[], 1.0).is_none());
+    }
+
     #[test]
     fn finds_a_copied_window_with_and_without_averaging_and_pruning() {
         for wrap in [Wrap::Repeat, Wrap::Clamp] {
             let img = noise(45, 37, 3, 7);
             let images = MatchImages::new(&img, ImageLevels::Stack, 1, wrap);
-            let (qx, qy) = (40i32, 3i32);
-            let mut samples = Vec::new();
-            let mut colours = Vec::new();
-            for dy in -2i32..=2 {
-                for dx in -2..=2 {
-                    for _ in 0..(1 + (dx + dy).unsigned_abs() % 3) {
-                        samples.push(Sample {
-                            level: 0,
-                            offset: images.reduce_offset(0, [dx, dy]),
-                        });
-                        colours.extend_from_slice(img.texel(
-                            (qx + dx) as i64,
-                            (qy + dy) as i64,
-                            wrap,
-                        ));
-                    }
-                }
-            }
+            let (samples, colours) = window(&img, &images, [40, 3], 2, wrap, |dx, dy| {
+                1 + (dx + dy).unsigned_abs() % 3
+            });
             for averaging in [false, true] {
                 let mut g = MatchGroups::new();
                 g.build(&samples, &colours, 3, averaging);

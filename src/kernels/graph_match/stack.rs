@@ -4,6 +4,7 @@
 
 use crate::image::pyramid::{gaussian_pyramid, gaussian_stack};
 use crate::image::{Image, sample::Wrap};
+use crate::kernels::coherent::appearance::{AppearanceLevel, AppearanceSpec, appearance_level};
 
 /// Candidates are scored this many at a time (adjacent texels of one row).
 pub(super) const TILE: usize = 32;
@@ -91,6 +92,9 @@ pub struct MatchImages {
     channels: usize,
     images: Vec<Image>,
     planes: Vec<Planes>,
+    /// Per level, appearance vectors and k-coherence sets, where prepared
+    /// ([`MatchImages::prepare_similar`]).
+    similar: Vec<Option<AppearanceLevel>>,
 }
 
 impl MatchImages {
@@ -112,9 +116,45 @@ impl MatchImages {
             kind,
             wrap,
             channels: exemplar.channels as usize,
+            similar: vec![None; images.len()],
             images,
             planes,
         }
+    }
+
+    /// Computes, for each of `levels` (out-of-range ones are ignored), every
+    /// texel's `k` most similar texels of that level
+    /// ([`crate::kernels::coherent::appearance`]: leading principal
+    /// components of Gaussian-weighted 5 × 5 neighbourhoods, points spaced
+    /// like the level's texels, `2ˡ` level-0 texels on a stack, capped at a
+    /// fifth of the exemplar), for [`super::Candidates::Coherent`].
+    /// Deterministic; `seed` picks the sample the components are fitted on.
+    pub fn prepare_similar(&mut self, levels: &[usize], k: usize, seed: u64) {
+        for &l in levels {
+            if l >= self.images.len() || self.similar[l].is_some() {
+                continue;
+            }
+            let img = &self.images[l];
+            let cap = (img.width.min(img.height) as f32 / 5.0).max(1.0);
+            let spacing = match self.kind {
+                ImageLevels::Stack => ((1u64 << l.min(62)) as f32).min(cap),
+                ImageLevels::Pyramid => 1.0,
+            };
+            let spec = AppearanceSpec {
+                window: 5,
+                spacing,
+                dims: 8,
+                k,
+                seed: crate::kernels::mix(seed, l as u64, 0xC0DE),
+                wrap: self.wrap,
+            };
+            self.similar[l] = Some(appearance_level(img, &spec));
+        }
+    }
+
+    /// The similarity sets of level `l`, if prepared.
+    pub fn similar(&self, l: usize) -> Option<&AppearanceLevel> {
+        self.similar.get(l)?.as_ref()
     }
 
     /// The largest useful level count: levels until the blur (or the

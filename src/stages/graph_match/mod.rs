@@ -25,12 +25,28 @@
 //! defaults (region 5 texels, k 1..=10, passes [2, 1]): structure distance
 //! 0.30 → 0.08 on brick (the mortar net no longer breaks into fragments on
 //! grey), lower on every shared texture, at 5–15× the time.
+//!
+//! `density_invariant` (default on; off = the paper) makes the result
+//! follow the texture rather than the tessellation on meshes denser than
+//! the texture: vertices within half a texel of a matched vertex take the
+//! texel under them instead of being matched again, and cut edges are
+//! weighted by their length in texels (`kernels::graph_match::FOOTPRINT`).
+//! On meshes with edges of about a texel (the planar benchmark, the √2
+//! hierarchies `subdivide_sqrt2` builds) neither changes much.
+//!
+//! `candidates = "coherent"` (an extension; the paper's exhaustive search
+//! is the default and the reference reproduction) scores k-coherent
+//! candidates instead of every texel (`kernels::graph_match`,
+//! `Candidates::Coherent`): 2–4× faster, and with `graph_cut` it gives the
+//! cut its point — larger copied pieces, fewer seams
+//! (`configs/plane/bangay_morkel_coherent.toml`; measured in README,
+//! "Bangay–Morkel with coherent candidates").
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::graph_match::{
-    BatchRule, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats, SynthesisState,
-    match_pass_with_progress, mean_edge_lengths,
+    BatchRule, Candidates, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats,
+    SynthesisState, match_pass_with_progress, mean_edge_lengths,
 };
 use crate::kernels::sweep::{sweep_field, sweep_order};
 use crate::mesh::Topology;
@@ -83,6 +99,15 @@ pub struct GraphMatchStageSettings {
     pub graph_cut: bool,
     /// σ of eq. 1.
     pub cut_sigma: f32,
+    /// Exhaustive search (the paper) or k-coherent candidates (extension).
+    pub candidates: Candidates,
+    /// Similar texels per texel for coherent candidates (k of k-coherence).
+    pub similar: u32,
+    /// Extra relative cost of a jump over a shift (coherent candidates).
+    pub jump_cost: f32,
+    /// Footprint sharing and length-weighted cuts (results follow the
+    /// texture, not the tessellation).
+    pub density_invariant: bool,
 }
 
 impl Default for GraphMatchStageSettings {
@@ -99,6 +124,10 @@ impl Default for GraphMatchStageSettings {
             averaging: true,
             graph_cut: false,
             cut_sigma: 1.0,
+            candidates: Candidates::Exhaustive,
+            similar: 4,
+            jump_cost: JUMP_COST,
+            density_invariant: true,
         }
     }
 }
@@ -171,6 +200,30 @@ impl StageSettings for GraphMatchStageSettings {
             range: ParamRange::Float(1e-3, 1e3),
             doc: "σ of eq. 1: edge weights fall as exp(−(x_A² + x_B²)/(σ r²)) away from the matched vertex",
         },
+        ParamDoc {
+            name: "candidates",
+            unit: "",
+            range: ParamRange::OneOf(&["exhaustive", "coherent"]),
+            doc: "where a vertex's texel is looked for: exhaustive = every texel of the level (Algorithm 1, the paper); coherent = an extension: the sources of the coloured region vertices within two edges shifted back by their offsets, and the `similar` texels most like each (k-coherence, Tong et al. 2002), so matches continue their neighbours' patches and graph cuts take larger pieces; the coarsest level's first pass stays exhaustive (it lays out the pattern)",
+        },
+        ParamDoc {
+            name: "jump_cost",
+            unit: "fraction of the region's colour sum",
+            range: ParamRange::Float(0.0, 10.0),
+            doc: "with candidates = coherent: a jump to a similar texel is taken only when its sum of squared differences, times 1 + jump_cost, is below every shift's (Ashikhmin-style bias toward continuing patches; 0 = plain minimum)",
+        },
+        ParamDoc {
+            name: "density_invariant",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "true (default): results follow the texture, not the tessellation — region vertices less than half a texel from a matched vertex take the texel under them and are not matched again in that pass (the same samples, §3.3.3's oversampling), and graph-cut edge weights are scaled by the edge's length in texels (the cut's cost is seam length × mismatch, as on a continuous surface); so on meshes denser than the texture the matches per pass follow its area in texels, not the vertex count (linear time on dense scans); on meshes with edges of about a texel both change little; false = every vertex matched and eq. 1 as printed (the paper)",
+        },
+        ParamDoc {
+            name: "similar",
+            unit: "texels",
+            range: ParamRange::Int(0, 32),
+            doc: "with candidates = coherent: texels of similar appearance kept per exemplar texel (k of k-coherence; appearance = 8 principal components of 5 × 5 neighbourhoods at the level's texel spacing); 0 = shifts only",
+        },
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
@@ -186,6 +239,9 @@ impl StageSettings for GraphMatchStageSettings {
         Ok(())
     }
 }
+
+/// Default `jump_cost` (see the parameter).
+pub const JUMP_COST: f32 = 0.2;
 
 /// Largest derived `k_max`: a k-region of radius 16 holds 545 vertices on a
 /// quad mesh, which bounds the work per vertex.
@@ -340,7 +396,27 @@ impl Stage for GraphMatch {
                 averaging: settings.averaging,
                 graph_cut: settings.graph_cut,
                 cut_sigma: settings.cut_sigma,
+                candidates: settings.candidates,
+                jump_cost: settings.jump_cost,
+                density_invariant: settings.density_invariant,
             };
+            let mut images = images;
+            if settings.candidates == Candidates::Coherent {
+                let _span = tracing::info_span!("similarity_sets", k = settings.similar).entered();
+                // The image levels vertices are matched on, over every mesh level.
+                let mut used = vec![false; images.levels()];
+                for &e in &levels {
+                    if let Ok((g, ..)) = meshes.get(e) {
+                        let topo = Topology::build(&g.0);
+                        for &m in &mean_edge_lengths(&g.0.positions, &topo) {
+                            used[images.level_for(r_scale * m)] = true;
+                        }
+                    }
+                }
+                let used: Vec<usize> = (0..used.len()).filter(|&l| used[l]).collect();
+                images.prepare_similar(&used, settings.similar as usize, seed.derive(idx, 0xC0DE));
+            }
+            let images = images;
             metrics.record(idx, "r_scale", r_scale);
             metrics.record(idx, "region", region);
             metrics.record(idx, "k_min", settings.k_min);
@@ -425,10 +501,21 @@ impl Stage for GraphMatch {
                         o.shuffle(&mut seed.rng(idx, ((li as u64) << 16) | pass as u64));
                         (o, BatchRule::Relaxed)
                     };
+                    // The first coarse pass lays the pattern out by
+                    // exhaustive matching; coherent candidates would copy
+                    // the exemplar verbatim from the first vertex on.
+                    let pass_kernel = if li == 0 && pass == 0 {
+                        GraphMatchSettings {
+                            candidates: Candidates::Exhaustive,
+                            ..kernel
+                        }
+                    } else {
+                        kernel
+                    };
                     let s = match_pass_with_progress(
                         &level,
                         &images,
-                        &kernel,
+                        &pass_kernel,
                         &order,
                         rule,
                         seed.derive(idx, (1 << 40) | ((li as u64) << 16) | pass as u64),

@@ -71,7 +71,15 @@ pub struct SubdivideSqrt2Settings {
     /// surface itself (the paper's, which rounds edges and shrinks thin
     /// parts level by level).
     pub on_input_surface: bool,
+    /// When the input is denser than the target (more than twice its
+    /// vertices), start from the input remeshed coarse instead of a
+    /// one-level hierarchy.
+    pub coarsen_dense_input: bool,
 }
+
+/// Most uniform steps above a coarsened input: its remesh has at least
+/// `target / 2^COARSEN_STEPS` vertices.
+const COARSEN_STEPS: u32 = 6;
 
 impl Default for SubdivideSqrt2Settings {
     fn default() -> Self {
@@ -82,6 +90,7 @@ impl Default for SubdivideSqrt2Settings {
             adaptive_factor: 1.5,
             vertex_relaxation: 0.5,
             on_input_surface: true,
+            coarsen_dense_input: true,
         }
     }
 }
@@ -124,12 +133,52 @@ impl StageSettings for SubdivideSqrt2Settings {
             range: ParamRange::Any("true | false"),
             doc: "put every subdivided vertex back on the input surface (closest point on an input triangle facing the same way): thin walls and sharp edges keep their shape (tests/subdivision.rs measures 0.125 → 0 of a 0.1 wall); false = the paper's approximating surface, which rounds edges and shrinks thin parts",
         },
+        ParamDoc {
+            name: "coarsen_dense_input",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "when the input has more than twice the target's vertices (a dense scan), the coarsest level is the input remeshed evenly (retile's remesher) to target / 2^s vertices (s ≤ 6, fewer when the input's pieces need more vertices), and √2 steps refine it back to the target on the input surface: synthesis runs at the texture's density, in time linear in the texture's area, and `map_back` then colours the input mesh; the input's vertex ids and attributes are not kept on the levels (key orientations by `at`/`at_bbox`). false = a one-level hierarchy on the input (the paper assumes a coarse input)",
+        },
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
         check_vertex_count(self.target_vertices, MAX_HIERARCHY_VERTICES as u64)
             .map_err(|m| ("target_vertices".into(), m))
     }
+}
+
+/// `input` remeshed evenly (one level of `retile`'s isotropic remesher) to
+/// `target / 2^s` vertices for the largest `s ≤ COARSEN_STEPS` whose count
+/// the input's connected pieces allow (at least 12 vertices), with `s`;
+/// `None` when not even `target / 2` is possible.
+fn coarsened(
+    input: &crate::mesh::PolyMesh,
+    target: usize,
+    seed: u64,
+) -> Option<(crate::mesh::PolyMesh, u32)> {
+    use crate::kernels::retile::{RetileError, RetileSettings, retile_with_progress};
+    let progress = Progress::new(0, "subdivide_sqrt2 (remeshing the dense input)");
+    for steps in (1..=COARSEN_STEPS).rev() {
+        let n = target >> steps;
+        if n < RetileSettings::MIN_LEVEL_VERTICES as usize {
+            continue;
+        }
+        let settings = RetileSettings {
+            levels: 1,
+            seed,
+            ..RetileSettings::with_vertices(n as u32)
+        };
+        match retile_with_progress(input, &settings, &progress) {
+            Ok(mut p) => {
+                progress.finish();
+                return Some((p.levels.swap_remove(0).mesh, steps));
+            }
+            // Too many pieces for so few vertices: try a finer base.
+            Err(RetileError::TooManyComponents { .. } | RetileError::TargetUnreachable { .. }) => {}
+            Err(_) => return None,
+        }
+    }
+    None
 }
 
 /// Carries a per-vertex attribute to a refined level: identity parents copy
@@ -273,6 +322,7 @@ impl Stage for SubdivideSqrt2 {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,
                texture_scale: Res<TextureScale>,
+               seed: Res<RunSeed>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                meshes: SourceQuery| {
@@ -351,6 +401,31 @@ impl Stage for SubdivideSqrt2 {
                 }
                 _ => 0,
             };
+            // A dense input (more than twice the target) is remeshed coarse
+            // first, so the hierarchy refines at the texture's density.
+            let mut coarse = coarse;
+            if settings.coarsen_dense_input
+                && settings.adaptive_passes == 0
+                && target > 0
+                && coarse.vertex_count() > 2 * target
+            {
+                match coarsened(&coarse, target, seed.derive(idx, 0xC0A5)) {
+                    Some((mesh, steps)) => {
+                        metrics.record(idx, "coarsened_input_vertices", coarse.vertex_count());
+                        metrics.record(idx, "coarsened_to", mesh.vertex_count());
+                        tracing::info!(
+                            "subdivide_sqrt2: the input has {} vertices for a target of {target}: remeshed to {} vertices, refined in about {steps} steps",
+                            coarse.vertex_count(),
+                            mesh.vertex_count()
+                        );
+                        coarse = mesh;
+                        attrs = Attributes::default();
+                    }
+                    None => tracing::warn!(
+                        "subdivide_sqrt2: the dense input could not be remeshed coarser (too many small pieces for {target} vertices); synthesising on the input itself"
+                    ),
+                }
+            }
             // Counted in vertices of the finest level: a step costs about
             // what it adds (V' = V + F, about 2V).
             let start_vertices = coarse.vertex_count();
