@@ -12,7 +12,7 @@ use surfsynth::kernels::jump_map::{
     Boundary, JumpMapSettings, PixelOrder, PixelSynthesisSettings, analyse, synthesize_sources,
 };
 use surfsynth::kernels::jump_surface::{
-    SurfaceSynthSettings, corner_uvs, edge_offsets, synthesize_surface,
+    SurfaceSynthSettings, corner_side_offsets, corner_uvs, edge_offsets, synthesize_surface,
 };
 use surfsynth::mesh::Topology;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
@@ -80,13 +80,8 @@ fn jump_maps(c: &mut Criterion) {
             b.iter(|| {
                 let offsets = edge_offsets(&mesh.positions, &frames, &scale, &topo);
                 let out = synthesize_surface(&topo, &offsets, &map, &s, &Default::default());
-                corner_uvs(
-                    &mesh,
-                    &topo,
-                    &offsets,
-                    &out.texel,
-                    (map.width(), map.height()),
-                )
+                let sides = corner_side_offsets(&mesh, &topo, &offsets);
+                corner_uvs(&mesh, &sides, &out.texel, (map.width(), map.height()))
             })
         });
     }

@@ -29,7 +29,12 @@ const CONFIGS: [(&str, &str); 6] = [
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let bin = root.join("target/release/surfsynth");
+    // The binary `cargo build` writes: under `$CARGO_TARGET_DIR` when set
+    // (relative to the crate root, where cargo runs benches), else `target/`.
+    let target = std::env::var_os("CARGO_TARGET_DIR")
+        .map(|t| root.join(t))
+        .unwrap_or_else(|| root.join("target"));
+    let bin = target.join("release/surfsynth");
     let built = Command::new(env!("CARGO"))
         .args(["build", "--release", "--bin", "surfsynth"])
         .current_dir(root)

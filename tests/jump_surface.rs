@@ -309,9 +309,10 @@ fn baked_atlas_renders_like_the_blended_uvs() {
     let mut w = world_for(&text).unwrap();
     let active = w.resource::<ActiveMesh>().0;
     let ex = w.resource::<Exemplar>().clone();
-    let (tri_mesh, atlas_uvs, baked) = w.resource::<ExportJob>().baked.clone().expect("baked");
+    let baked = w.resource::<ExportJob>().baked.clone().expect("baked");
     let mut q = w.query::<(&Geometry, &BlendUvs)>();
     let (g, blend) = q.get(&w, active).unwrap();
+    let (tri_mesh, atlas_uvs) = surfsynth::output::export::baked_mesh(&g.0, baked.width);
     let view = View {
         azimuth_deg: 30.0,
         elevation_deg: 40.0,

@@ -116,13 +116,16 @@ fn edge_offset(
     a: usize,
     b: usize,
 ) -> Vec2 {
-    // Symmetric in (a, b) so both directions share one basis.
+    // Symmetric in (a, b) so both directions share one basis; where the
+    // mean degenerates (opposite frames), the lower vertex's frame, so the
+    // fallback is symmetric too and the offsets stay exactly antisymmetric.
     let (fa, fb) = (&frames[a], &frames[b]);
-    let up = (fa.t + fb.t).try_normalize().unwrap_or(fa.t);
+    let low = &frames[a.min(b)];
+    let up = (fa.t + fb.t).try_normalize().unwrap_or(low.t);
     let right_avg = fa.s + fb.s;
     let right = (right_avg - up * up.dot(right_avg))
         .try_normalize()
-        .unwrap_or(fa.s);
+        .unwrap_or(low.s);
     let k = 0.5 * (scale[a] + scale[b]);
     let d = positions[b] - positions[a];
     Vec2::new(d.dot(right), -d.dot(up)) * k
@@ -383,14 +386,68 @@ pub fn synthesize_surface<J: JumpLookup>(
     out
 }
 
+/// The texture-space offset of every face side: entry `c` is the offset of
+/// the edge from corner `c`'s vertex to the next corner's (§6.3), taken from
+/// `offsets` ([`edge_offsets`]); zero for a side joining a vertex to itself.
+/// With these, [`corner_uvs`] needs neither the topology nor the per-edge
+/// offsets, which can be dropped first (together some 180 bytes per vertex).
+pub fn corner_side_offsets(mesh: &PolyMesh, topo: &Topology, offsets: &[Vec2]) -> Vec<Vec2> {
+    let mut out = vec![Vec2::ZERO; mesh.corner_count()];
+    fill_by_face(mesh, &mut out, |f, slots| {
+        let face = mesh.face(f);
+        let k = face.len();
+        for (i, slot) in slots.iter_mut().enumerate() {
+            *slot = offset_between(topo, offsets, face[i], face[(i + 1) % k]).unwrap_or(Vec2::ZERO);
+        }
+    });
+    out
+}
+
+/// Fills `out` (one entry per corner, or per fan triangle when its length is
+/// `corners − 2·faces`) in parallel, handing `fill(f, slots)` face `f`'s
+/// entries. Exact-size output: no intermediate lists.
+fn fill_by_face<T: Send>(mesh: &PolyMesh, out: &mut [T], fill: impl Fn(usize, &mut [T]) + Sync) {
+    let per_triangle = out.len() != mesh.corner_count();
+    // First entry of face f: its first corner, or its first fan triangle
+    // (face_start[f] − 2f: each face of k corners has k − 2 triangles).
+    let first = |f: usize| {
+        let c = mesh.face_start[f] as usize;
+        if per_triangle { c - 2 * f } else { c }
+    };
+    let nf = mesh.face_count();
+    // Faces in chunks of about 4096 entries, cut at face boundaries.
+    let mut rest = &mut out[..];
+    let mut chunks = Vec::new();
+    let mut f = 0;
+    while f < nf {
+        let mut g = f + 1;
+        while g < nf && first(g) - first(f) < 4096 {
+            g += 1;
+        }
+        let len = if g < nf { first(g) } else { first(nf) } - first(f);
+        let (head, tail) = rest.split_at_mut(len);
+        chunks.push((f..g, head));
+        rest = tail;
+        f = g;
+    }
+    chunks.into_par_iter().for_each(|(faces, mut slots)| {
+        for f in faces {
+            let n = mesh.face_corners(f).len() - if per_triangle { 2 } else { 0 };
+            let (mine, more) = std::mem::take(&mut slots).split_at_mut(n);
+            fill(f, mine);
+            slots = more;
+        }
+    });
+}
+
 /// Per-corner texture coordinates (§6.5), in `[0, 1]` units of the exemplar
 /// (v down). Returns the single-base UVs (each face's first corner as base),
 /// and for every fan triangle of [`PolyMesh::triangulate_corners`] the UVs of
 /// its three corners for each of the three base choices, for the blend.
+/// `sides` come from [`corner_side_offsets`].
 pub fn corner_uvs(
     mesh: &PolyMesh,
-    topo: &Topology,
-    offsets: &[Vec2],
+    sides: &[Vec2],
     texel: &[Vec2],
     dims: (u32, u32),
 ) -> (Vec<Vec2>, Vec<[[Vec2; 3]; 3]>) {
@@ -399,19 +456,30 @@ pub fn corner_uvs(
     // Address of face corner `j` seen from base corner `b` of face `f`: the
     // base address plus the edge offsets along the shorter way round the
     // face (for a triangle always the direct edge, which the validity test
-    // of §6.5 covers); halfway round a polygon, the mean of both ways.
+    // of §6.5 covers); halfway round a polygon, the mean of both ways. A
+    // step backwards subtracts the side's offset: offsets are antisymmetric
+    // exactly.
     let walk = |f: usize, b: usize, j: usize| -> Vec2 {
         let face = mesh.face(f);
+        let side = &sides[mesh.face_corners(f)];
         let k = face.len();
         let base = texel[face[b] as usize];
         let fwd = (j + k - b) % k;
-        let path = |step: usize, count: usize| {
+        let forward = |count: usize| {
             let mut p = base;
             let mut i = b;
             for _ in 0..count {
-                let next = (i + step) % k;
-                p += offset_between(topo, offsets, face[i], face[next]).unwrap_or(Vec2::ZERO);
-                i = next;
+                p += side[i];
+                i = (i + 1) % k;
+            }
+            p
+        };
+        let backward = |count: usize| {
+            let mut p = base;
+            let mut i = b;
+            for _ in 0..count {
+                i = (i + k - 1) % k;
+                p += -side[i];
             }
             p
         };
@@ -419,33 +487,32 @@ pub fn corner_uvs(
         if fwd == 0 {
             base
         } else if fwd < back {
-            path(1, fwd)
+            forward(fwd)
         } else if back < fwd {
-            path(k - 1, back)
+            backward(back)
         } else {
-            (path(1, fwd) + path(k - 1, back)) * 0.5
+            (forward(fwd) + backward(back)) * 0.5
         }
     };
-    let single: Vec<Vec2> = (0..mesh.face_count())
-        .into_par_iter()
-        .flat_map_iter(|f| (0..mesh.face_corners(f).len()).map(move |j| to_uv(walk(f, 0, j))))
-        .collect();
-    let (tris, face_of) = mesh.triangulate_corners();
-    let blend = tris
-        .par_iter()
-        .zip(&face_of)
-        .map(|(t, &f)| {
-            let start = mesh.face_start[f as usize];
-            let local = t.map(|c| (c - start) as usize);
-            let mut layers = [[Vec2::ZERO; 3]; 3];
+    let mut single = vec![Vec2::ZERO; mesh.corner_count()];
+    fill_by_face(mesh, &mut single, |f, slots| {
+        for (j, uv) in slots.iter_mut().enumerate() {
+            *uv = to_uv(walk(f, 0, j));
+        }
+    });
+    let triangles = mesh.corner_count().saturating_sub(2 * mesh.face_count());
+    let mut blend = vec![[[Vec2::ZERO; 3]; 3]; triangles];
+    fill_by_face(mesh, &mut blend, |f, slots| {
+        // Fan triangle t of the face has local corners (0, t + 1, t + 2).
+        for (t, layers) in slots.iter_mut().enumerate() {
+            let local = [0, t + 1, t + 2];
             for (b, layer) in layers.iter_mut().enumerate() {
                 for (j, uv) in layer.iter_mut().enumerate() {
-                    *uv = to_uv(walk(f as usize, local[b], local[j]));
+                    *uv = to_uv(walk(f, local[b], local[j]));
                 }
             }
-            layers
-        })
-        .collect();
+        }
+    });
     (single, blend)
 }
 
@@ -531,7 +598,8 @@ mod tests {
                 assert!(q.cmpge(Vec2::splat(-1e-3)).all() && q.cmple(Vec2::splat(9.001)).all());
             }
         }
-        let (single, blend) = corner_uvs(&m, &t, &off, &out.texel, (10, 10));
+        let sides = corner_side_offsets(&m, &t, &off);
+        let (single, blend) = corner_uvs(&m, &sides, &out.texel, (10, 10));
         assert!(
             single
                 .iter()

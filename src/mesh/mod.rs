@@ -232,8 +232,10 @@ impl PolyMesh {
     /// Fan-triangulates every face. Returns, per triangle, its three corner
     /// indices (so per-corner attributes carry over) and the face it came from.
     pub fn triangulate_corners(&self) -> (Vec<[u32; 3]>, Vec<u32>) {
-        let mut tris = Vec::with_capacity(self.corner_count());
-        let mut face_of = Vec::with_capacity(self.corner_count());
+        // A face of k corners gives k − 2 triangles.
+        let count = self.corner_count().saturating_sub(2 * self.face_count());
+        let mut tris = Vec::with_capacity(count);
+        let mut face_of = Vec::with_capacity(count);
         for f in 0..self.face_count() {
             let r = self.face_corners(f);
             let c0 = r.start as u32;

@@ -5,6 +5,7 @@ use crate::mesh::PolyMesh;
 use crate::progress::Progress;
 use crate::stages::world::{ExportJob, PasteExport};
 use std::fmt::Write as _;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Writes the job's files into `dir`; returns their paths. Progress (the
@@ -48,12 +49,13 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                 )?);
             }
             "baked" => {
-                if let Some((mesh, uvs, image)) = &job.baked {
+                if let Some(image) = &job.baked {
                     let stem = format!("{}_baked", job.stem);
+                    let (mesh, uvs) = baked_mesh(&job.mesh, image.width);
                     files.extend(super::obj::write_obj(
                         dir,
                         &stem,
-                        mesh,
+                        &mesh,
                         Some(uvs.as_slice()),
                         Some(image),
                         None,
@@ -122,6 +124,18 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
     Ok(files)
 }
 
+/// The mesh of format `baked`: `mesh` fan-triangulated, with the atlas
+/// coordinates of every triangle's cell in a `size`² atlas
+/// ([`atlas_corner_uvs`](crate::kernels::bake_triangles::atlas_corner_uvs)).
+pub fn baked_mesh(mesh: &PolyMesh, size: u32) -> (PolyMesh, Vec<glam::Vec2>) {
+    let triangles = mesh.triangulated();
+    let n = triangles.face_count();
+    let uvs = (0..n)
+        .flat_map(|t| crate::kernels::bake_triangles::atlas_corner_uvs(t, n, size))
+        .collect();
+    (triangles, uvs)
+}
+
 /// The `.obj` text of a lapped texture for runtime pasting (Praun et al.
 /// 2000 §4): the mesh's vertices once, then one group per paste in paste
 /// order, each with its own texture coordinates (`vt u (1 − v)`, OBJ's
@@ -133,33 +147,25 @@ pub fn encode_pastes_obj(
     pastes: &PasteExport,
     mtl: &str,
 ) -> Result<String, OutputError> {
-    let corners: usize = pastes.pastes.iter().map(|p| p.uvs.len()).sum();
-    let faces: usize = pastes.pastes.iter().map(|p| p.faces.len()).sum();
-    let mut s = String::with_capacity(32 * (mesh.vertex_count() + corners) + 24 * faces);
-    let draws = faces as f64 / mesh.face_count().max(1) as f64;
-    let _ = writeln!(
-        s,
-        "# written by surfsynth: a lapped texture for runtime pasting\n\
-         # {} pastes; draw the groups in order with alpha blending (each face is drawn {draws:.2} times on average)\n\
-         mtllib {mtl}",
-        pastes.pastes.len()
-    );
-    for p in &mesh.positions {
-        let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
-    }
-    super::obj::push_vertex_normals(&mut s, mesh);
-    for paste in &pastes.pastes {
-        for uv in &paste.uvs {
-            let _ = writeln!(s, "vt {} {}", uv.x, 1.0 - uv.y);
-        }
-    }
-    let mut vt = 1usize;
+    check_pastes(mesh, pastes)?;
+    let mut bytes = Vec::new();
+    stream_pastes_obj(&mut bytes, mesh, pastes, mtl).map_err(|e| OutputError::Encode {
+        what: "pastes OBJ".into(),
+        message: format!("writing into memory: {e}"),
+    })?;
+    String::from_utf8(bytes).map_err(|e| OutputError::Encode {
+        what: "pastes OBJ".into(),
+        message: e.to_string(),
+    })
+}
+
+/// Checks that every paste names faces of `mesh` and holds one texture
+/// coordinate per corner of them, as [`stream_pastes_obj`] needs.
+pub fn check_pastes(mesh: &PolyMesh, pastes: &PasteExport) -> Result<(), OutputError> {
     for (i, paste) in pastes.pastes.iter().enumerate() {
-        let _ = writeln!(s, "g paste_{i:05}\nusemtl patch_{}\ns 1", paste.texture);
         let mut used = 0usize;
         for &f in &paste.faces {
-            let Some(face) = ((f as usize) < mesh.face_count()).then(|| mesh.face(f as usize))
-            else {
+            if f as usize >= mesh.face_count() {
                 return Err(OutputError::Encode {
                     what: "pastes OBJ".into(),
                     message: format!(
@@ -167,14 +173,8 @@ pub fn encode_pastes_obj(
                         mesh.face_count()
                     ),
                 });
-            };
-            s.push('f');
-            for &v in face {
-                let _ = write!(s, " {}/{}/{}", v + 1, vt, v + 1);
-                vt += 1;
-                used += 1;
             }
-            s.push('\n');
+            used += mesh.face_corners(f as usize).len();
         }
         if used != paste.uvs.len() {
             return Err(OutputError::Encode {
@@ -186,7 +186,48 @@ pub fn encode_pastes_obj(
             });
         }
     }
-    Ok(s)
+    Ok(())
+}
+
+/// Writes the text of [`encode_pastes_obj`] to `w` line by line.
+/// Preconditions: [`check_pastes`] accepted `pastes` (else this may panic).
+pub fn stream_pastes_obj(
+    w: &mut dyn Write,
+    mesh: &PolyMesh,
+    pastes: &PasteExport,
+    mtl: &str,
+) -> std::io::Result<()> {
+    let faces: usize = pastes.pastes.iter().map(|p| p.faces.len()).sum();
+    let draws = faces as f64 / mesh.face_count().max(1) as f64;
+    writeln!(
+        w,
+        "# written by surfsynth: a lapped texture for runtime pasting\n\
+         # {} pastes; draw the groups in order with alpha blending (each face is drawn {draws:.2} times on average)\n\
+         mtllib {mtl}",
+        pastes.pastes.len()
+    )?;
+    for p in &mesh.positions {
+        writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
+    }
+    super::obj::write_vertex_normals(w, mesh)?;
+    for paste in &pastes.pastes {
+        for uv in &paste.uvs {
+            writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y)?;
+        }
+    }
+    let mut vt = 1usize;
+    for (i, paste) in pastes.pastes.iter().enumerate() {
+        writeln!(w, "g paste_{i:05}\nusemtl patch_{}\ns 1", paste.texture)?;
+        for &f in &paste.faces {
+            w.write_all(b"f")?;
+            for &v in mesh.face(f as usize) {
+                write!(w, " {}/{}/{}", v + 1, vt, v + 1)?;
+                vt += 1;
+            }
+            w.write_all(b"\n")?;
+        }
+    }
+    Ok(())
 }
 
 /// Writes `dir/STEM_pastes.obj`, `dir/STEM_pastes.mtl` (materials
@@ -200,7 +241,7 @@ pub fn write_pastes(
 ) -> Result<Vec<PathBuf>, OutputError> {
     let obj_path = dir.join(format!("{stem}_pastes.obj"));
     let mtl_name = format!("{stem}_pastes.mtl");
-    let text = encode_pastes_obj(mesh, pastes, &mtl_name)?;
+    check_pastes(mesh, pastes)?;
     let mut files = vec![obj_path.clone()];
     let mut mtl = String::from("# written by surfsynth: lapped-texture patches (straight alpha)\n");
     for (k, img) in pastes.textures.iter().enumerate() {
@@ -216,7 +257,7 @@ pub fn write_pastes(
     let mtl_path = dir.join(&mtl_name);
     write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;
     files.push(mtl_path);
-    write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
+    write_atomic(&obj_path, |w| stream_pastes_obj(w, mesh, pastes, &mtl_name))?;
     Ok(files)
 }
 
@@ -232,7 +273,7 @@ pub fn write_baked_obj(
 ) -> Result<Vec<PathBuf>, OutputError> {
     let obj_path = dir.join(format!("{stem}.obj"));
     let mtl_name = format!("{stem}.mtl");
-    let text = super::obj::encode_obj(&asset.mesh, Some(&asset.uvs), None, Some(&mtl_name))?;
+    super::obj::check_obj(&asset.mesh, Some(&asset.uvs), None)?;
     let mut files = vec![obj_path.clone()];
     let png = format!("{stem}.png");
     write_png(&dir.join(&png), &asset.colour)?;
@@ -250,7 +291,9 @@ pub fn write_baked_obj(
     let mtl_path = dir.join(&mtl_name);
     write_atomic(&mtl_path, |w| w.write_all(mtl.as_bytes()))?;
     files.push(mtl_path);
-    write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
+    write_atomic(&obj_path, |w| {
+        super::obj::stream_obj(w, &asset.mesh, Some(&asset.uvs), None, Some(&mtl_name))
+    })?;
     Ok(files)
 }
 

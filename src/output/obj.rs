@@ -19,7 +19,7 @@ use super::{OutputError, write_atomic, write_png};
 use crate::image::Image;
 use crate::mesh::PolyMesh;
 use glam::Vec2;
-use std::fmt::Write as _;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// Name of the one material the `.mtl` file defines.
@@ -40,6 +40,9 @@ fn encode_error(message: String) -> OutputError {
 ///   the common `v x y z r g b` extension (1 channel is grey; alpha dropped).
 /// - `mtl`: the `.mtl` file name to reference with `mtllib`/`usemtl`.
 ///
+/// The text of a million-vertex mesh is some 300 MB: files are streamed
+/// with [`stream_obj`] instead; this is for tests and small meshes.
+///
 /// # Errors
 /// [`OutputError::Encode`] when an attribute array has the wrong length or
 /// the colours have a channel count outside `1..=4`.
@@ -49,6 +52,19 @@ pub fn encode_obj(
     vertex_colours: Option<(&[f32], usize)>,
     mtl: Option<&str>,
 ) -> Result<String, OutputError> {
+    check_obj(mesh, corner_uvs, vertex_colours)?;
+    let mut bytes = Vec::with_capacity(64 * (mesh.vertex_count() + mesh.corner_count()) + 64);
+    stream_obj(&mut bytes, mesh, corner_uvs, vertex_colours, mtl)
+        .map_err(|e| encode_error(format!("writing into memory: {e}")))?;
+    String::from_utf8(bytes).map_err(|e| encode_error(e.to_string()))
+}
+
+/// Checks the attribute arrays [`stream_obj`] writes (see [`encode_obj`]).
+pub fn check_obj(
+    mesh: &PolyMesh,
+    corner_uvs: Option<&[Vec2]>,
+    vertex_colours: Option<(&[f32], usize)>,
+) -> Result<(), OutputError> {
     let nv = mesh.vertex_count();
     if let Some(uvs) = corner_uvs
         && uvs.len() != mesh.corner_count()
@@ -68,51 +84,64 @@ pub fn encode_obj(
             values.len()
         )));
     }
-    let mut s = String::with_capacity(32 * (nv + mesh.corner_count()) + 64);
-    s.push_str("# written by surfsynth\n");
+    Ok(())
+}
+
+/// Writes the `.obj` text of [`encode_obj`] to `w` line by line, holding
+/// no copy of it. Preconditions: [`check_obj`] accepted the arguments
+/// (otherwise this may panic on an index).
+pub fn stream_obj(
+    w: &mut dyn Write,
+    mesh: &PolyMesh,
+    corner_uvs: Option<&[Vec2]>,
+    vertex_colours: Option<(&[f32], usize)>,
+    mtl: Option<&str>,
+) -> std::io::Result<()> {
+    w.write_all(b"# written by surfsynth\n")?;
     if let Some(mtl) = mtl {
-        let _ = writeln!(s, "mtllib {mtl}");
+        writeln!(w, "mtllib {mtl}")?;
     }
     for (v, p) in mesh.positions.iter().enumerate() {
-        let _ = write!(s, "v {} {} {}", p.x, p.y, p.z);
+        write!(w, "v {} {} {}", p.x, p.y, p.z)?;
         if let Some((values, channels)) = vertex_colours {
             let rgb = crate::image::pixel_rgb(&values[v * channels..(v + 1) * channels]);
-            let _ = write!(s, " {} {} {}", rgb[0], rgb[1], rgb[2]);
+            write!(w, " {} {} {}", rgb[0], rgb[1], rgb[2])?;
         }
-        s.push('\n');
+        w.write_all(b"\n")?;
     }
-    push_vertex_normals(&mut s, mesh);
+    write_vertex_normals(w, mesh)?;
     if let Some(uvs) = corner_uvs {
         for uv in uvs {
-            let _ = writeln!(s, "vt {} {}", uv.x, 1.0 - uv.y);
+            writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y)?;
         }
     }
     if mtl.is_some() {
-        let _ = writeln!(s, "usemtl {MATERIAL_NAME}");
+        writeln!(w, "usemtl {MATERIAL_NAME}")?;
     }
-    s.push_str("s 1\n");
+    w.write_all(b"s 1\n")?;
     for f in 0..mesh.face_count() {
-        s.push('f');
+        w.write_all(b"f")?;
         for c in mesh.face_corners(f) {
             let v = mesh.corner_vertex[c] + 1;
             if corner_uvs.is_some() {
-                let _ = write!(s, " {v}/{}/{v}", c + 1);
+                write!(w, " {v}/{}/{v}", c + 1)?;
             } else {
-                let _ = write!(s, " {v}//{v}");
+                write!(w, " {v}//{v}")?;
             }
         }
-        s.push('\n');
+        w.write_all(b"\n")?;
     }
-    Ok(s)
+    Ok(())
 }
 
-/// Appends one `vn` line per vertex: the mesh's area-weighted unit vertex
+/// Writes one `vn` line per vertex: the mesh's area-weighted unit vertex
 /// normals, so `vn` number `v + 1` belongs to vertex `v + 1` and a face
 /// corner references the same index for both.
-pub(crate) fn push_vertex_normals(s: &mut String, mesh: &PolyMesh) {
+pub(crate) fn write_vertex_normals(w: &mut dyn Write, mesh: &PolyMesh) -> std::io::Result<()> {
     for n in mesh.vertex_normals() {
-        let _ = writeln!(s, "vn {} {} {}", n.x, n.y, n.z);
+        writeln!(w, "vn {} {} {}", n.x, n.y, n.z)?;
     }
+    Ok(())
 }
 
 /// The `.mtl` text: one white diffuse material textured with `png`.
@@ -154,7 +183,7 @@ pub fn write_obj(
     let obj_path = dir.join(format!("{stem}.obj"));
     let mut written = vec![obj_path.clone()];
     let mtl_name = texture.map(|_| format!("{stem}.mtl"));
-    let text = encode_obj(mesh, corner_uvs, vertex_colours, mtl_name.as_deref())?;
+    check_obj(mesh, corner_uvs, vertex_colours)?;
     if let (Some(img), Some(mtl_name)) = (texture, &mtl_name) {
         let png_name = format!("{stem}.png");
         let png_path = dir.join(&png_name);
@@ -165,7 +194,9 @@ pub fn write_obj(
         written.push(mtl_path);
         written.push(png_path);
     }
-    write_atomic(&obj_path, |w| w.write_all(text.as_bytes()))?;
+    write_atomic(&obj_path, |w| {
+        stream_obj(w, mesh, corner_uvs, vertex_colours, mtl_name.as_deref())
+    })?;
     Ok(written)
 }
 

@@ -11,8 +11,9 @@
 //! face has 256 corners or more (so small meshes keep the common layout every
 //! reader knows, and any polygon still fits).
 
-use super::{OutputError, write_bytes_atomic};
+use super::{OutputError, write_atomic};
 use crate::mesh::PolyMesh;
+use std::io::Write;
 use std::path::Path;
 
 /// Per-vertex colours: values in `[0, 1]`, `channels` per vertex.
@@ -36,18 +37,12 @@ pub(crate) fn colour_byte(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
-/// Encodes `mesh` as binary little-endian PLY bytes.
-///
-/// # Errors
-/// [`OutputError::Encode`] when `colours` has a channel count outside `1..=4`
-/// or a length other than `vertices × channels`, an extra property has a
-/// length other than the vertex count or a name that is not a plain
-/// identifier (or clashes with another property).
-pub fn encode_ply(
+/// Checks the attributes and builds the header (see [`encode_ply`]).
+fn ply_header(
     mesh: &PolyMesh,
     colours: Option<VertexColours>,
     extra: &[ExtraProperty],
-) -> Result<Vec<u8>, OutputError> {
+) -> Result<PlyHeader, OutputError> {
     let nv = mesh.vertex_count();
     let nf = mesh.face_count();
     let mut header =
@@ -101,16 +96,56 @@ pub fn encode_ply(
     header.push_str(&format!(
         "element face {nf}\nproperty list {count_type} int vertex_indices\nend_header\n"
     ));
+    Ok(PlyHeader {
+        text: header,
+        wide_counts,
+    })
+}
 
+/// The checked header of a PLY file and the face-count type it declares.
+struct PlyHeader {
+    text: String,
+    wide_counts: bool,
+}
+
+/// Encodes `mesh` as binary little-endian PLY bytes (in memory: for tests
+/// and small meshes; [`write_ply`] streams to the file).
+///
+/// # Errors
+/// [`OutputError::Encode`] when `colours` has a channel count outside `1..=4`
+/// or a length other than `vertices × channels`, an extra property has a
+/// length other than the vertex count or a name that is not a plain
+/// identifier (or clashes with another property).
+pub fn encode_ply(
+    mesh: &PolyMesh,
+    colours: Option<VertexColours>,
+    extra: &[ExtraProperty],
+) -> Result<Vec<u8>, OutputError> {
+    let header = ply_header(mesh, colours, extra)?;
+    let mut out = Vec::with_capacity(
+        header.text.len() + mesh.vertex_count() * 32 + mesh.face_count() + 4 * mesh.corner_count(),
+    );
+    stream_ply(&mut out, &header, mesh, colours, extra)
+        .map_err(|e| encode_error(format!("writing into memory: {e}")))?;
+    Ok(out)
+}
+
+/// Writes the header and the elements to `w`, a vertex or a face at a time.
+fn stream_ply(
+    w: &mut dyn Write,
+    header: &PlyHeader,
+    mesh: &PolyMesh,
+    colours: Option<VertexColours>,
+    extra: &[ExtraProperty],
+) -> std::io::Result<()> {
+    w.write_all(header.text.as_bytes())?;
     let colour_bytes = colours.map_or(0, |(_, c)| if c % 2 == 0 { 4 } else { 3 });
-    let vertex_bytes = 24 + colour_bytes + 4 * extra.len();
     let normals = mesh.vertex_normals();
-    let mut out =
-        Vec::with_capacity(header.len() + nv * vertex_bytes + nf + 4 * mesh.corner_count());
-    out.extend_from_slice(header.as_bytes());
+    let mut row: Vec<u8> = Vec::with_capacity(28 + 4 * extra.len());
     for (v, (p, n)) in mesh.positions.iter().zip(&normals).enumerate() {
+        row.clear();
         for x in p.to_array().into_iter().chain(n.to_array()) {
-            out.extend_from_slice(&x.to_le_bytes());
+            row.extend_from_slice(&x.to_le_bytes());
         }
         if let Some((values, channels)) = colours {
             let c = &values[v * channels..(v + 1) * channels];
@@ -120,37 +155,41 @@ pub fn encode_ply(
                 3 => [c[0], c[1], c[2], 1.0],
                 _ => [c[0], c[1], c[2], c[3]],
             };
-            out.extend(rgba[..colour_bytes].iter().map(|&x| colour_byte(x)));
+            row.extend(rgba[..colour_bytes].iter().map(|&x| colour_byte(x)));
         }
         for (_, values) in extra {
-            out.extend_from_slice(&values[v].to_le_bytes());
+            row.extend_from_slice(&values[v].to_le_bytes());
         }
+        w.write_all(&row)?;
     }
     for face in mesh.faces() {
+        row.clear();
         // Corner counts fit `u32`: `PolyMesh` offsets are `u32`.
         let degree = face.len() as u32;
-        if wide_counts {
-            out.extend_from_slice(&degree.to_le_bytes());
+        if header.wide_counts {
+            row.extend_from_slice(&degree.to_le_bytes());
         } else {
-            out.push(degree as u8);
+            row.push(degree as u8);
         }
         for &v in face {
-            out.extend_from_slice(&(v as i32).to_le_bytes());
+            row.extend_from_slice(&(v as i32).to_le_bytes());
         }
+        w.write_all(&row)?;
     }
-    Ok(out)
+    Ok(())
 }
 
-/// Writes `mesh` as binary little-endian PLY to `path`, atomically. See
-/// [`encode_ply`] for the layout and errors.
+/// Writes `mesh` as binary little-endian PLY to `path`, atomically,
+/// streaming it (no copy of the file in memory). See [`encode_ply`] for the
+/// layout and errors.
 pub fn write_ply(
     path: &Path,
     mesh: &PolyMesh,
     colours: Option<VertexColours>,
     extra: &[ExtraProperty],
 ) -> Result<(), OutputError> {
-    let bytes = encode_ply(mesh, colours, extra)?;
-    write_bytes_atomic(path, &bytes)
+    let header = ply_header(mesh, colours, extra)?;
+    write_atomic(path, |w| stream_ply(w, &header, mesh, colours, extra))
 }
 
 #[cfg(test)]

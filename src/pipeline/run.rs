@@ -143,6 +143,16 @@ pub fn run_in_world(
     world: &mut World,
     input: LoadedInput,
 ) -> Result<(), PipelineError> {
+    run_schedule(pipeline, world, input)?;
+    crate::stages::export::finish_export_job(world, crate::stages::export::Transfer::Copy)
+}
+
+/// [`run_in_world`] without filling the export job's arrays.
+fn run_schedule(
+    pipeline: &Pipeline,
+    world: &mut World,
+    input: LoadedInput,
+) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
     setup_world(pipeline, world, input);
     let mut schedule = build_schedule(pipeline);
@@ -205,18 +215,14 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         "exemplar_size": [input.exemplar.width, input.exemplar.height, input.exemplar.channels],
     });
     let mut world = World::new();
-    run_in_world(pipeline, &mut world, input)?;
+    run_schedule(pipeline, &mut world, input)?;
 
     let _span = tracing::info_span!("write_outputs").entered();
     let mut files = Vec::new();
     let config_path = staged.join("config.toml");
     crate::output::write_bytes_atomic(&config_path, pipeline.resolved_toml().as_bytes())?;
     files.push(config_path);
-    let job = std::mem::take(&mut *world.resource_mut::<ExportJob>());
-    files.extend(crate::output::export::write_export(&staged, &job)?);
-
     let timings = world.resource::<StageTimings>().0.clone();
-    let metrics_res = world.resource::<Metrics>();
     let active = world.resource::<ActiveMesh>().0;
     let result_counts = world
         .get::<Geometry>(active)
@@ -243,6 +249,15 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
             })
         })
         .unwrap_or(serde_json::Value::Null);
+    let metrics_res = std::mem::take(&mut *world.resource_mut::<Metrics>());
+    // Everything metrics.json needs is read: the world's arrays (mesh,
+    // frames, texture coordinates: about half the peak memory at a million
+    // vertices) go before the files are written.
+    crate::stages::export::finish_export_job(&mut world, crate::stages::export::Transfer::Move)?;
+    let job = std::mem::take(&mut *world.resource_mut::<ExportJob>());
+    drop(world);
+    files.extend(crate::output::export::write_export(&staged, &job)?);
+    drop(job);
     let stages: Vec<serde_json::Value> = pipeline
         .stages
         .iter()

@@ -273,12 +273,45 @@ pub struct StageTimings(pub Vec<StageTiming>);
 pub struct StageFailure(pub Option<crate::pipeline::PipelineError>);
 
 /// What the `export` stage asks the runner to write (systems do no file I/O).
+/// The entity whose arrays an [`ExportJob`] writes, and which of them.
+#[derive(Clone, Copy, Debug)]
+pub struct ExportSource {
+    /// The active mesh at export time.
+    pub entity: Entity,
+    /// The export stage's position in the pipeline (1-based, for errors).
+    pub stage: usize,
+    /// Its `VertexColours` go to the files.
+    pub colours: bool,
+    /// Which texture coordinates go to the OBJ.
+    pub uvs: ExportUvs,
+    /// The export system's tick: a later change of these components is an
+    /// error (the previews would not show what the files hold).
+    pub tick: bevy_ecs::change_detection::Tick,
+}
+
+/// The texture coordinates an export writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExportUvs {
+    /// None.
+    None,
+    /// `CornerUvs`, addressing the exemplar.
+    Corner,
+    /// The `AtlasTexture`'s coordinates and image (lapped textures).
+    Atlas,
+}
+
 #[derive(Resource, Debug, Default)]
 pub struct ExportJob {
     /// Requested formats (`ply`, `obj`, `preview`).
     pub formats: Vec<String>,
     /// File name stem of the mesh outputs.
     pub stem: String,
+    /// Where `mesh`, `colours` and `uvs` come from: the export stage names
+    /// the entity, and [`crate::stages::export::finish_export_job`] fills
+    /// them at the end of the run (moved out of the world by
+    /// `pipeline::run`, which drops the world next, so a million-vertex
+    /// mesh and its coordinates are never held twice).
+    pub source: Option<ExportSource>,
     /// The result mesh.
     pub mesh: PolyMesh,
     /// Its vertex colours, if the result has them.
@@ -294,9 +327,10 @@ pub struct ExportJob {
     pub previews: Vec<Image>,
     /// Further images to write as PNG, by file name (`jump_image.png`, ...).
     pub images: Vec<(String, Image)>,
-    /// The result baked into a texture atlas: the triangulated mesh, its
-    /// per-corner atlas coordinates and the atlas image.
-    pub baked: Option<(PolyMesh, Vec<Vec2>, Image)>,
+    /// The result baked into a per-triangle atlas image; the writer makes
+    /// the triangulated mesh and its atlas coordinates from `mesh`
+    /// (`output::export::baked_mesh`).
+    pub baked: Option<Image>,
     /// Lapped-texture pastes for runtime pasting (format `pastes`).
     pub pastes: Option<PasteExport>,
     /// The `bake` stage's atlas of the original mesh (formats `glb`,

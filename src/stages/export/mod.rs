@@ -4,7 +4,7 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::output::render::{Layer, RenderOptions, Shading, render_views};
-use crate::pipeline::{Datum, Stage, StageCtx};
+use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::stages::lapped_paste::components::*;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
@@ -100,19 +100,24 @@ impl StageSettings for ExportSettings {
 }
 
 /// Bakes per-corner UVs (blended when blend layers exist) into a
-/// per-triangle atlas; `None` when the result has no UVs.
+/// per-triangle atlas image; `None` when the result has no UVs. The
+/// triangulated mesh and its atlas coordinates are made when the file is
+/// written ([`crate::output::export::baked_mesh`]), not held meanwhile.
 fn bake(
     mesh: &crate::mesh::PolyMesh,
     uvs: Option<&CornerUvs>,
     blend: Option<&BlendUvs>,
     exemplar: &Exemplar,
     size: u32,
-) -> Option<(crate::mesh::PolyMesh, Vec<glam::Vec2>, crate::image::Image)> {
-    use crate::kernels::bake_triangles::{atlas_corner_uvs, bake_blended};
-    let (tris, _) = mesh.triangulate_corners();
-    let layers: Vec<[[glam::Vec2; 3]; 3]> = match (blend, uvs) {
-        (Some(b), _) if b.0.len() == tris.len() => b.0.clone(),
-        (_, Some(u)) if u.0.len() == mesh.corner_count() => tris
+) -> Option<crate::image::Image> {
+    use crate::kernels::bake_triangles::bake_blended;
+    let triangles = mesh.corner_count().saturating_sub(2 * mesh.face_count());
+    // The blend layers are borrowed, not copied (144 bytes per vertex).
+    let layers: std::borrow::Cow<[[[glam::Vec2; 3]; 3]]> = match (blend, uvs) {
+        (Some(b), _) if b.0.len() == triangles => std::borrow::Cow::Borrowed(&b.0),
+        (_, Some(u)) if u.0.len() == mesh.corner_count() => mesh
+            .triangulate_corners()
+            .0
             .iter()
             .map(|t| {
                 let l = t.map(|c| u.0[c as usize]);
@@ -121,16 +126,7 @@ fn bake(
             .collect(),
         _ => return None,
     };
-    let image = bake_blended(&layers, &exemplar.image, exemplar.wrap, size);
-    let triangles: Vec<[u32; 3]> = tris
-        .iter()
-        .map(|t| t.map(|c| mesh.corner_vertex[c as usize]))
-        .collect();
-    let tri_mesh = crate::mesh::PolyMesh::from_triangles(mesh.positions.clone(), &triangles);
-    let atlas_uvs: Vec<glam::Vec2> = (0..tris.len())
-        .flat_map(|t| atlas_corner_uvs(t, tris.len(), size))
-        .collect();
-    Some((tri_mesh, atlas_uvs, image))
+    Some(bake_blended(&layers, &exemplar.image, exemplar.wrap, size))
 }
 
 type ExportQuery<'w, 's> = Query<
@@ -186,7 +182,8 @@ impl Stage for Export {
             Option<Res<TexturePatchOrigins>>,
             Option<Res<SynthesisedImage>>,
         ),
-               originals: Query<(Entity, &Geometry, &VertexColours), With<SourceMesh>>| {
+               originals: Query<(Entity, &Geometry, &VertexColours), With<SourceMesh>>,
+               ticks: bevy_ecs::system::SystemChangeTick| {
             let Ok((geometry, colours, uvs, blend, atlas, source_texels)) = meshes.get(active.0)
             else {
                 return;
@@ -235,7 +232,9 @@ impl Stage for Export {
                         uvs: &u.0,
                         blend: blend
                             .map(|b| b.0.as_slice())
-                            .filter(|b| b.len() == mesh.triangulate_corners().0.len()),
+                            .filter(|b| {
+                                b.len() == mesh.corner_count().saturating_sub(2 * mesh.face_count())
+                            }),
                         texture: ex,
                         wrap: exemplar.wrap,
                     })),
@@ -364,9 +363,9 @@ impl Stage for Export {
             let paste_export = (lapped_ok && settings.formats.iter().any(|f| f == "pastes"))
                 .then(|| runtime_pastes(mesh, &lapped, patch_textures));
             let export_uvs = match (uvs, atlas) {
-                (Some(u), _) => Some((u.0.clone(), exemplar.image.clone())),
-                (None, Some(a)) => Some((a.uvs.clone(), a.image.clone())),
-                (None, None) => None,
+                (Some(_), _) => ExportUvs::Corner,
+                (None, Some(_)) => ExportUvs::Atlas,
+                (None, None) => ExportUvs::None,
             };
             // PLY carries colours per vertex only: a per-corner-UV result
             // gets the colour its preview shows at each vertex.
@@ -424,9 +423,16 @@ impl Stage for Export {
             *job = ExportJob {
                 formats: settings.formats.clone(),
                 stem: settings.name.clone(),
-                mesh: mesh.clone(),
-                colours: colours.cloned(),
-                uvs: export_uvs,
+                source: Some(ExportSource {
+                    entity: active.0,
+                    stage: ctx.index + 1,
+                    colours: colours.is_some(),
+                    uvs: export_uvs,
+                    tick: ticks.this_run(),
+                }),
+                mesh: Default::default(),
+                colours: None,
+                uvs: None,
                 corner_colours,
                 previews,
                 images,
@@ -442,6 +448,78 @@ impl Stage for Export {
         })
         .into_configs()
     }
+}
+
+/// How [`finish_export_job`] gets the arrays out of the world.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transfer {
+    /// Copies them: the world stays whole (tests read it after a run).
+    Copy,
+    /// Moves them out, leaving empty components: for a runner that drops
+    /// the world before writing files.
+    Move,
+}
+
+/// Fills the export job's mesh, colours and texture coordinates from the
+/// entity the `export` stage named ([`ExportSource`]). The export system
+/// does not copy them: at a million vertices they are ~100 bytes per vertex
+/// the run would otherwise hold twice through the result metrics.
+///
+/// # Errors
+/// When a stage after `export` changed the exported mesh, colours or
+/// coordinates (the previews show the state at export time, the files would
+/// not): put `export` last.
+pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), PipelineError> {
+    let Some(source) = world.resource::<ExportJob>().source else {
+        return Ok(());
+    };
+    let e = source.entity;
+    let now = world.read_change_tick();
+    let entity = world
+        .get_entity(e)
+        .map_err(|_| PipelineError::Internal("the exported mesh entity is gone".into()))?;
+    let changed = |t: Option<bevy_ecs::change_detection::Tick>| {
+        t.is_some_and(|t| t.is_newer_than(source.tick, now))
+    };
+    if changed(entity.get_ref::<Geometry>().map(|r| r.last_changed()))
+        || changed(entity.get_ref::<VertexColours>().map(|r| r.last_changed()))
+        || changed(entity.get_ref::<CornerUvs>().map(|r| r.last_changed()))
+        || changed(entity.get_ref::<AtlasTexture>().map(|r| r.last_changed()))
+    {
+        return Err(PipelineError::Stage {
+            index: source.stage,
+            kind: Export::KIND.into(),
+            message: "a stage after `export` changed the mesh it exports; put `export` last".into(),
+        });
+    }
+    fn get<T: Component<Mutability = bevy_ecs::component::Mutable> + Clone + Default>(
+        world: &mut World,
+        e: Entity,
+        transfer: Transfer,
+    ) -> Option<T> {
+        match transfer {
+            Transfer::Copy => world.get::<T>(e).cloned(),
+            Transfer::Move => world.get_mut::<T>(e).map(|mut c| std::mem::take(&mut *c)),
+        }
+    }
+    let mesh = get::<Geometry>(world, e, transfer).unwrap_or_default().0;
+    let colours = if source.colours {
+        get::<VertexColours>(world, e, transfer)
+    } else {
+        None
+    };
+    let uvs = match source.uvs {
+        ExportUvs::None => None,
+        ExportUvs::Corner => get::<CornerUvs>(world, e, transfer)
+            .map(|u| (u.0, world.resource::<Exemplar>().image.clone())),
+        ExportUvs::Atlas => get::<AtlasTexture>(world, e, transfer).map(|a| (a.uvs, a.image)),
+    };
+    let mut job = world.resource_mut::<ExportJob>();
+    job.mesh = mesh;
+    job.colours = colours;
+    job.uvs = uvs;
+    job.source = None;
+    Ok(())
 }
 
 /// What the export reads of a paste entity.

@@ -7,7 +7,7 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::jump_map::Boundary;
 use crate::kernels::jump_surface::{
-    SurfaceSynthSettings, corner_uvs, edge_offsets, synthesize_surface,
+    SurfaceSynthSettings, corner_side_offsets, corner_uvs, edge_offsets, synthesize_surface,
 };
 use crate::kernels::vertex_order::VertexOrder;
 use crate::mesh::Topology;
@@ -200,16 +200,15 @@ impl Stage for JumpSurface {
                 synthesize_surface(&topo, &offsets, map, &synth, &progress)
             };
             progress.finish();
+            // The topology and the per-edge offsets (some 180 bytes per
+            // vertex) go before the texture coordinates are made.
+            let sides = corner_side_offsets(mesh, &topo, &offsets);
+            drop((topo, offsets));
             let (single, blend) = {
                 let _s = tracing::info_span!("corner_uvs").entered();
-                corner_uvs(
-                    mesh,
-                    &topo,
-                    &offsets,
-                    &out.texel,
-                    (map.width(), map.height()),
-                )
+                corner_uvs(mesh, &sides, &out.texel, (map.width(), map.height()))
             };
+            drop(sides);
             let secs = started.elapsed().as_secs_f64();
             let n = mesh.vertex_count();
             metrics.record(ctx.index, "vertices", n);
@@ -222,7 +221,10 @@ impl Stage for JumpSurface {
             if mean_scale > 0.0 {
                 spacing.0 = 1.0 / mean_scale;
             }
-            let texels: Vec<Vec2> = out.texel.iter().map(|p| *p + Vec2::splat(0.5)).collect();
+            let mut texels = out.texel;
+            for p in &mut texels {
+                *p += Vec2::splat(0.5);
+            }
             commands.entity(active.0).insert((
                 CornerUvs(single),
                 BlendUvs(blend),
