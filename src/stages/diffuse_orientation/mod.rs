@@ -142,7 +142,7 @@ impl StageSettings for DiffuseOrientationSettings {
             range: ParamRange::Any(
                 "list of { vertex = N | at = [x, y, z] | at_bbox = [u, v, w], up = [x, y, z] }",
             ),
-            doc: "texture up direction at key vertices: ids of the coarsest level (= input mesh ids), or the vertex nearest a position given in world coordinates (`at`) or as fractions 0..1 of the coarsest level's bounding box (`at_bbox`, 0 = min, 1 = max)",
+            doc: "texture up direction at key vertices: ids of the coarsest level (= input mesh ids, unless `subdivide_sqrt2` remeshed a dense input — `coarsen_dense_input` — whose ids are the remesh's: name places with `at`/`at_bbox` then), or the vertex nearest a position given in world coordinates (`at`) or as fractions 0..1 of the coarsest level's bounding box (`at_bbox`, 0 = min, 1 = max)",
         },
         ParamDoc {
             name: "smoothing_passes",
