@@ -81,7 +81,7 @@ fn jump_maps(c: &mut Criterion) {
                 let offsets = edge_offsets(&mesh.positions, &frames, &scale, &topo);
                 let out = synthesize_surface(&topo, &offsets, &map, &s, &Default::default());
                 let sides = corner_side_offsets(&mesh, &topo, &offsets);
-                corner_uvs(&mesh, &sides, &out.texel, (map.width(), map.height()))
+                corner_uvs(&mesh, sides, &out.texel, (map.width(), map.height()))
             })
         });
     }

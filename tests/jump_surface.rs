@@ -54,12 +54,12 @@ fn corner_uvs_stay_inside_an_inset_exemplar() {
         let (g, uvs, blend) = q.get(&w, active).unwrap();
         assert_eq!(uvs.0.len(), g.0.corner_count());
         let (tris, _) = g.0.triangulate_corners();
-        assert_eq!(blend.0.len(), tris.len());
+        let blend = blend.0.to_vec(&g.0);
+        assert_eq!(blend.len(), tris.len());
         let inside = |uv: &Vec2| uv.cmpge(Vec2::ZERO).all() && uv.cmple(Vec2::ONE).all();
         let bad = uvs.0.iter().filter(|uv| !inside(uv)).count();
         assert_eq!(bad, 0, "{order}: every corner UV inside the exemplar");
         let bad_blend = blend
-            .0
             .iter()
             .flat_map(|l| l.iter().flatten())
             .filter(|uv| !inside(uv))
@@ -321,7 +321,7 @@ fn baked_atlas_renders_like_the_blended_uvs() {
     let a = render(
         &g.0,
         &Shading::BlendedUvs {
-            layers: &blend.0,
+            layers: blend.of(&g.0).expect("blend layers fit the mesh"),
             texture: &ex.image,
             wrap: ex.wrap,
         },

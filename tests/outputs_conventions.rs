@@ -239,7 +239,11 @@ fn jump_surface_ply_has_the_blended_exemplar_colour_at_each_vertex() {
     let (count, channels, colours) = read_ply_colours(&bytes);
     let active = w.resource::<ActiveMesh>().0;
     let mesh = &w.get::<Geometry>(active).unwrap().0;
-    let blend = &w.get::<BlendUvs>(active).expect("blend layers").0;
+    let blend = w
+        .get::<BlendUvs>(active)
+        .expect("blend layers")
+        .0
+        .to_vec(mesh);
     let exemplar = w.resource::<Exemplar>();
     assert_eq!(count, mesh.vertex_count());
     assert_eq!(channels, 3, "RGB exemplar, RGB colours");
@@ -249,7 +253,7 @@ fn jump_surface_ply_has_the_blended_exemplar_colour_at_each_vertex() {
     let mut sum = vec![[0.0f64; 3]; count];
     let mut n = vec![0u32; count];
     let mut px = [0.0f32; 3];
-    for (tri, layer) in tris.iter().zip(blend) {
+    for (tri, layer) in tris.iter().zip(&blend) {
         for k in 0..3 {
             let v = mesh.corner_vertex[tri[k] as usize] as usize;
             let uv: Vec2 = layer[k][k];

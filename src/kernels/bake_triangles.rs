@@ -38,7 +38,12 @@ pub fn atlas_corner_uvs(t: usize, count: usize, size: u32) -> [Vec2; 3] {
 /// Bakes the blended texture of `layers` (per fan triangle, the corner UVs
 /// for each base vertex) into a `size`² atlas. The colour at a point is
 /// Σ_b λ_b · texture(Σ_k λ_k · uv[b][k]), λ the barycentric coordinates.
-pub fn bake_blended(layers: &[[[Vec2; 3]; 3]], texture: &Image, wrap: Wrap, size: u32) -> Image {
+pub fn bake_blended(
+    layers: crate::kernels::jump_surface::Blend<'_>,
+    texture: &Image,
+    wrap: Wrap,
+    size: u32,
+) -> Image {
     let c = texture.channels as usize;
     let count = layers.len();
     let cells = (count.div_ceil(2) as f64).sqrt().ceil().max(1.0) as usize;
@@ -69,7 +74,7 @@ pub fn bake_blended(layers: &[[[Vec2; 3]; 3]], texture: &Image, wrap: Wrap, size
                 let b = barycentric_clamped(p, tri);
                 let dst = &mut row[x * c..(x + 1) * c];
                 dst.fill(0.0);
-                for (base, uvs) in layers[t].iter().enumerate() {
+                for (base, uvs) in layers.get(t).iter().enumerate() {
                     let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];
                     texture.sample_uv(uv.x, uv.y, wrap, &mut px);
                     for (d, s) in dst.iter_mut().zip(&px) {
@@ -136,7 +141,7 @@ mod tests {
             .map(|t| [[Vec2::new((t as f32 + 0.5) / 5.0, 0.5); 3]; 3])
             .collect();
         let size = 64;
-        let baked = bake_blended(&layers, &tex, Wrap::Clamp, size);
+        let baked = bake_blended((&layers[..]).into(), &tex, Wrap::Clamp, size);
         for t in 0..5 {
             let tri = atlas_corner_uvs(t, 5, size);
             let c = (tri[0] + tri[1] + tri[2]) / 3.0;
@@ -154,7 +159,7 @@ mod tests {
             Vec2::new(0.75, 0.25),
             Vec2::new(0.25, 0.75),
         ];
-        let baked = bake_blended(&[[uv; 3]], &tex, Wrap::Clamp, 32);
+        let baked = bake_blended((&[[uv; 3]][..]).into(), &tex, Wrap::Clamp, 32);
         // The triangle's first corner sits at the cell's bottom-left.
         let tri = atlas_corner_uvs(0, 1, 32);
         let p = tri[0] * 0.6 + tri[1] * 0.2 + tri[2] * 0.2;

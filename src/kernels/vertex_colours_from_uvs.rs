@@ -31,7 +31,7 @@ use glam::Vec2;
 pub fn vertex_colours_from_corner_uvs(
     mesh: &PolyMesh,
     uvs: &[Vec2],
-    blend: Option<&[[[Vec2; 3]; 3]]>,
+    blend: Option<crate::kernels::jump_surface::Blend<'_>>,
     texture: &Image,
     wrap: Wrap,
 ) -> (Vec<f32>, usize) {
@@ -54,7 +54,8 @@ pub fn vertex_colours_from_corner_uvs(
     let (tris, _) = mesh.triangulate_corners();
     match blend.filter(|b| b.len() == tris.len()) {
         Some(layers) => {
-            for (tri, layer) in tris.iter().zip(layers) {
+            for (t, tri) in tris.iter().enumerate() {
+                let layer = layers.get(t);
                 for k in 0..3 {
                     let v = mesh.corner_vertex[tri[k] as usize] as usize;
                     add(v, layer[k][k], &mut sum, &mut count);
@@ -125,8 +126,13 @@ mod tests {
             l[k] = right;
         }
         let uvs = [left; 6];
-        let (c, _) =
-            vertex_colours_from_corner_uvs(&m, &uvs, Some(&[layer, layer]), &tex, Wrap::Clamp);
+        let (c, _) = vertex_colours_from_corner_uvs(
+            &m,
+            &uvs,
+            Some((&[layer, layer][..]).into()),
+            &tex,
+            Wrap::Clamp,
+        );
         assert_eq!(&c[..4], &[1.0; 4]);
     }
 }

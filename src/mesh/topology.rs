@@ -63,6 +63,38 @@ fn csr_from_pairs(n: usize, pairs: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>) {
     (start, list)
 }
 
+/// Faces of each vertex as CSR (offsets, list), by counting: faces in
+/// increasing order, a face listed once however often the vertex occurs in it.
+fn vertex_faces_csr(mesh: &PolyMesh) -> (Vec<u32>, Vec<u32>) {
+    let nv = mesh.vertex_count();
+    let first_in_face = |f: usize, i: usize| {
+        let face = mesh.face(f);
+        !face[..i].contains(&face[i])
+    };
+    let mut vertex_face_start = vec![0u32; nv + 1];
+    for f in 0..mesh.face_count() {
+        for (i, &v) in mesh.face(f).iter().enumerate() {
+            if first_in_face(f, i) {
+                vertex_face_start[v as usize + 1] += 1;
+            }
+        }
+    }
+    for i in 0..nv {
+        vertex_face_start[i + 1] += vertex_face_start[i];
+    }
+    let mut fill = vertex_face_start.clone();
+    let mut vertex_face_list = vec![0u32; vertex_face_start[nv] as usize];
+    for f in 0..mesh.face_count() {
+        for (i, &v) in mesh.face(f).iter().enumerate() {
+            if first_in_face(f, i) {
+                vertex_face_list[fill[v as usize] as usize] = f as u32;
+                fill[v as usize] += 1;
+            }
+        }
+    }
+    (vertex_face_start, vertex_face_list)
+}
+
 impl Topology {
     /// Builds the adjacency of `mesh`. O(corners · log corners).
     ///
@@ -144,33 +176,7 @@ impl Topology {
         }
         drop(fill);
 
-        // Faces of each vertex, by counting: faces in increasing order, a
-        // face listed once however often the vertex occurs in it.
-        let first_in_face = |f: usize, i: usize| {
-            let face = mesh.face(f);
-            !face[..i].contains(&face[i])
-        };
-        let mut vertex_face_start = vec![0u32; nv + 1];
-        for f in 0..mesh.face_count() {
-            for (i, &v) in mesh.face(f).iter().enumerate() {
-                if first_in_face(f, i) {
-                    vertex_face_start[v as usize + 1] += 1;
-                }
-            }
-        }
-        for i in 0..nv {
-            vertex_face_start[i + 1] += vertex_face_start[i];
-        }
-        let mut fill = vertex_face_start.clone();
-        let mut vertex_face_list = vec![0u32; vertex_face_start[nv] as usize];
-        for f in 0..mesh.face_count() {
-            for (i, &v) in mesh.face(f).iter().enumerate() {
-                if first_in_face(f, i) {
-                    vertex_face_list[fill[v as usize] as usize] = f as u32;
-                    fill[v as usize] += 1;
-                }
-            }
-        }
+        let (vertex_face_start, vertex_face_list) = vertex_faces_csr(mesh);
 
         Self {
             edges,
@@ -181,6 +187,38 @@ impl Topology {
             vertex_face_start,
             vertex_face_list,
             corner_edge,
+        }
+    }
+
+    /// A partial topology with only [`Self::edges`] and
+    /// [`Self::vertex_faces`] (equal to [`Self::build`]'s); the edge-face
+    /// lists, corner edges and one-rings are empty ([`Self::neighbours`] is
+    /// empty for every vertex). For readers of those two only, such as the
+    /// result metrics: about 52 bytes per vertex instead of 140, and the
+    /// build sorts 8-byte edge keys instead of 16-byte sides.
+    pub fn build_edges_and_vertex_faces(mesh: &PolyMesh) -> Self {
+        let nv = mesh.vertex_count();
+        let mut keys: Vec<u64> = Vec::with_capacity(mesh.corner_count());
+        for face in mesh.faces() {
+            let n = face.len();
+            for i in 0..n {
+                keys.push(edge_key(face[i], face[(i + 1) % n]));
+            }
+        }
+        keys.par_sort_unstable();
+        keys.dedup();
+        let edges: Vec<[u32; 2]> = keys.iter().map(|&k| [(k >> 32) as u32, k as u32]).collect();
+        drop(keys);
+        let (vertex_face_start, vertex_face_list) = vertex_faces_csr(mesh);
+        Self {
+            edges,
+            edge_face_start: Vec::new(),
+            edge_face_list: Vec::new(),
+            neighbour_start: vec![0; nv + 1],
+            neighbour_list: Vec::new(),
+            vertex_face_start,
+            vertex_face_list,
+            corner_edge: Vec::new(),
         }
     }
 
@@ -321,6 +359,24 @@ mod tests {
             .map(|i| Vec3::new((i % 3) as f32, (i / 3) as f32, 0.0))
             .collect();
         PolyMesh::from_polygons(p, [&[0u32, 1, 4, 3][..], &[1, 2, 5, 4][..]])
+    }
+
+    /// The partial topology's edges and vertex faces equal the full one's,
+    /// also with a repeated vertex in a face.
+    #[test]
+    fn partial_topology_matches_the_full_one() {
+        let p = (0..6)
+            .map(|i| Vec3::new((i % 3) as f32, (i / 3) as f32, 0.0))
+            .collect();
+        let faces: [&[u32]; 3] = [&[0, 1, 4, 3], &[1, 2, 5, 4], &[4, 5, 4, 2]];
+        let mesh = PolyMesh::from_polygons(p, faces);
+        let full = Topology::build(&mesh);
+        let part = Topology::build_edges_and_vertex_faces(&mesh);
+        assert_eq!(part.edges, full.edges);
+        assert_eq!(part.vertex_count(), full.vertex_count());
+        for v in 0..6 {
+            assert_eq!(part.vertex_faces(v), full.vertex_faces(v), "vertex {v}");
+        }
     }
 
     #[test]

@@ -143,8 +143,31 @@ pub fn run_in_world(
     world: &mut World,
     input: LoadedInput,
 ) -> Result<(), PipelineError> {
-    run_schedule(pipeline, world, input)?;
+    run_schedule(pipeline, world, input, Keep::All)?;
     crate::stages::export::finish_export_job(world, crate::stages::export::Transfer::Copy)
+}
+
+/// What the world keeps once the stages are done.
+#[derive(Clone, Copy, PartialEq)]
+enum Keep {
+    /// Everything, for callers that inspect the world ([`run_in_world`]).
+    All,
+    /// Only what the result metrics and the export job read: the jump-map
+    /// blend layers (144 bytes per vertex) and per-vertex scales go before
+    /// the result metrics build their topology.
+    Read,
+}
+
+/// Removes the components no step after the last stage reads (see
+/// [`Keep::Read`]).
+fn release_unread(world: &mut World) {
+    let entities: Vec<Entity> = world
+        .query_filtered::<Entity, Or<(With<BlendUvs>, With<VertexScale>)>>()
+        .iter(world)
+        .collect();
+    for e in entities {
+        world.entity_mut(e).remove::<(BlendUvs, VertexScale)>();
+    }
 }
 
 /// [`run_in_world`] without filling the export job's arrays.
@@ -152,10 +175,20 @@ fn run_schedule(
     pipeline: &Pipeline,
     world: &mut World,
     input: LoadedInput,
+    keep: Keep,
 ) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
     setup_world(pipeline, world, input);
     let mut schedule = build_schedule(pipeline);
+    if keep == Keep::Read {
+        let n = pipeline.stages.len();
+        let release = release_unread.before(ResultMetricsSet);
+        if n > 0 {
+            schedule.add_systems(release.after(StageSet(n - 1)));
+        } else {
+            schedule.add_systems(release);
+        }
+    }
     schedule.run(world);
     if let Some(err) = world.resource_mut::<StageFailure>().0.take() {
         return Err(err);
@@ -215,7 +248,7 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         "exemplar_size": [input.exemplar.width, input.exemplar.height, input.exemplar.channels],
     });
     let mut world = World::new();
-    run_schedule(pipeline, &mut world, input)?;
+    run_schedule(pipeline, &mut world, input, Keep::Read)?;
 
     let _span = tracing::info_span!("write_outputs").entered();
     let mut files = Vec::new();

@@ -396,9 +396,26 @@ pub struct SynthesisedImage {
 
 /// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
 /// the texture coordinates of its three corners for each of the three choices
-/// of base vertex: the 3-way blend of Zelinka & Garland §6.5.
+/// of base vertex: the 3-way blend of Zelinka & Garland §6.5, stored
+/// compactly (per-vertex texels and per-corner side offsets; read through
+/// [`BlendUvs::of`]).
 #[derive(Component, Clone, Debug, Default)]
-pub struct BlendUvs(pub Vec<[[Vec2; 3]; 3]>);
+pub struct BlendUvs(pub crate::kernels::jump_surface::BlendLayers);
+
+impl BlendUvs {
+    /// The layers for `mesh`, or `None` when they were made for another mesh.
+    pub fn of<'a>(
+        &'a self,
+        mesh: &'a crate::mesh::PolyMesh,
+    ) -> Option<crate::kernels::jump_surface::Blend<'a>> {
+        self.0
+            .fits(mesh)
+            .then_some(crate::kernels::jump_surface::Blend::Compact {
+                layers: &self.0,
+                mesh,
+            })
+    }
+}
 
 /// The exemplar's jump map (Zelinka & Garland 2004 §4), made by `jump_map`.
 #[derive(Resource, Clone, Debug)]

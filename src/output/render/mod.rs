@@ -115,7 +115,7 @@ pub enum Shading<'a> {
     /// are blended with linear alpha ramps (the barycentric coordinate of each
     /// base vertex).
     BlendedUvs {
-        layers: &'a [[[Vec2; 3]; 3]],
+        layers: crate::kernels::jump_surface::Blend<'a>,
         texture: &'a Image,
         wrap: Wrap,
     },
@@ -329,17 +329,30 @@ impl shade::Scene<'_> {
             hi,
         );
         let light = camera.key_light();
-        let tris = raster::setup(
-            &self.mesh.positions,
-            &self.mesh.corner_vertex,
-            &self.tris,
-            &camera,
-            hi,
-            hi,
-        );
+        // Set-up data is not kept for the whole mesh: binning keeps triangle
+        // indices, and each strip sets its triangles up again (the same
+        // deterministic computation) into scratch reused by its worker.
+        let projected = raster::project(&self.mesh.positions, &camera);
+        let setup = |t: u32| {
+            raster::setup(
+                t,
+                self.tris[t as usize],
+                &projected,
+                &self.mesh.positions,
+                &self.mesh.corner_vertex,
+                &camera,
+                hi,
+                hi,
+            )
+        };
         let strip_hi = (STRIP_ROWS * ss) as i32;
         let strips = size.div_ceil(STRIP_ROWS) as usize;
-        let (start, items) = raster::bin_strips(&tris, strip_hi, strips);
+        let (start, items) = raster::bin_strips(
+            self.tris.len(),
+            |t| setup(t).map(|tri| (tri.bounds[1], tri.bounds[3])),
+            strip_hi,
+            strips,
+        );
 
         let width = hi as usize;
         let row_len = size as usize * 3;
@@ -355,17 +368,19 @@ impl shade::Scene<'_> {
             .par_chunks_mut(STRIP_ROWS as usize * row_len)
             .enumerate()
             .for_each_init(
-                // Scratch z-buffers, reused across the strips of one worker
+                // Scratch z-buffers and set-up triangles, reused across the strips of one worker
                 // (`raster_strip` clears them, so reuse cannot change results).
-                || (Vec::new(), Vec::new()),
-                |(depth, id), (s, out)| {
+                || (Vec::new(), Vec::new(), Vec::new()),
+                |(depth, id, tris), (s, out)| {
                     let rows_lo = out.len() / row_len;
                     let rows_hi = rows_lo * ss as usize;
                     let row0 = s as i32 * strip_hi;
                     depth.resize(rows_hi * width, 0.0f32);
                     id.resize(rows_hi * width, u32::MAX);
                     let bin = &items[start[s] as usize..start[s + 1] as usize];
-                    raster::raster_strip(&tris, bin, row0, rows_hi as i32, width, depth, id);
+                    tris.clear();
+                    tris.extend(bin.iter().filter_map(|&t| setup(t)));
+                    raster::raster_strip(tris, row0, rows_hi as i32, width, depth, id);
                     for ly in 0..rows_lo {
                         for lx in 0..size as usize {
                             let mut acc = [0.0f32; 3];

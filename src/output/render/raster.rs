@@ -68,94 +68,116 @@ impl Tri {
     }
 }
 
-/// Projects every vertex and sets up every triangle of `tris` (mesh corner
-/// triples) that is in front of the camera, not degenerate on screen and
-/// covers at least one sample of a `width`×`height` grid. Order is kept.
-pub(crate) fn setup(
-    positions: &[Vec3],
-    corner_vertex: &[u32],
-    tris: &[[u32; 3]],
-    camera: &Camera,
-    width: u32,
-    height: u32,
-) -> Vec<Tri> {
-    let projected: Vec<Option<(f32, f32, f32)>> = positions
+/// A vertex projected to the screen: sub-pixel x, y and `1 / view depth`;
+/// `None` behind the camera or too far off-screen to snap.
+pub(crate) type Projected = Option<(f32, f32, f32)>;
+
+/// Projects every vertex for [`setup`] (16 bytes per vertex, one view).
+pub(crate) fn project(positions: &[Vec3], camera: &Camera) -> Vec<Projected> {
+    positions
         .par_iter()
         .map(|&p| {
             camera.project(p).filter(|&(x, y, _)| {
                 (x * SUBPIXEL as f32).abs() < LIMIT && (y * SUBPIXEL as f32).abs() < LIMIT
             })
         })
-        .collect();
-    tris.par_iter()
-        .enumerate()
-        .filter_map(|(t, corners)| {
-            let v = corners.map(|c| corner_vertex[c as usize] as usize);
-            let p = [projected[v[0]]?, projected[v[1]]?, projected[v[2]]?];
-            let snap = |f: f32| (f * SUBPIXEL as f32).round() as i32;
-            let mut x = p.map(|q| snap(q.0));
-            let mut y = p.map(|q| snap(q.1));
-            let mut inv_w = p.map(|q| q.2);
-            let mut corners = *corners;
-            let area = edge(
-                x[0] as i64,
-                y[0] as i64,
-                x[1] as i64,
-                y[1] as i64,
-                x[2] as i64,
-                y[2] as i64,
-            );
-            if area == 0 {
-                return None;
-            }
-            if area < 0 {
-                x.swap(1, 2);
-                y.swap(1, 2);
-                inv_w.swap(1, 2);
-                corners.swap(1, 2);
-            }
-            // Pixels whose sample centre lies in the snapped bounding box.
-            let lo = |m: i32| (m as i64 - HALF + SUBPIXEL - 1).div_euclid(SUBPIXEL) as i32;
-            let hi = |m: i32| (m as i64 - HALF).div_euclid(SUBPIXEL) as i32;
-            let (xmin, xmax) = (x.iter().min()?, x.iter().max()?);
-            let (ymin, ymax) = (y.iter().min()?, y.iter().max()?);
-            let bounds = [
-                lo(*xmin).max(0),
-                lo(*ymin).max(0),
-                hi(*xmax).min(width as i32 - 1),
-                hi(*ymax).min(height as i32 - 1),
-            ];
-            if bounds[0] > bounds[2] || bounds[1] > bounds[3] {
-                return None;
-            }
-            let world = v.map(|i| positions[i]);
-            let normal = (world[1] - world[0]).cross(world[2] - world[0]);
-            let back = normal.dot(camera.eye - world[0]) < 0.0;
-            Some(Tri {
-                x,
-                y,
-                inv_w,
-                corners,
-                source: t as u32,
-                back,
-                bounds,
-            })
-        })
         .collect()
 }
 
+/// Sets up triangle `t` of the fan triangulation (`corners`, mesh corners)
+/// when it is in front of the camera, not degenerate on screen and covers at
+/// least one sample of a `width`×`height` grid. `projected` comes from
+/// [`project`]. Deterministic, so a triangle can be set up again where it is
+/// drawn instead of being kept between binning and drawing.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn setup(
+    t: u32,
+    corners: [u32; 3],
+    projected: &[Projected],
+    positions: &[Vec3],
+    corner_vertex: &[u32],
+    camera: &Camera,
+    width: u32,
+    height: u32,
+) -> Option<Tri> {
+    let v = corners.map(|c| corner_vertex[c as usize] as usize);
+    let p = [projected[v[0]]?, projected[v[1]]?, projected[v[2]]?];
+    let snap = |f: f32| (f * SUBPIXEL as f32).round() as i32;
+    let mut x = p.map(|q| snap(q.0));
+    let mut y = p.map(|q| snap(q.1));
+    let mut inv_w = p.map(|q| q.2);
+    let mut corners = corners;
+    let area = edge(
+        x[0] as i64,
+        y[0] as i64,
+        x[1] as i64,
+        y[1] as i64,
+        x[2] as i64,
+        y[2] as i64,
+    );
+    if area == 0 {
+        return None;
+    }
+    if area < 0 {
+        x.swap(1, 2);
+        y.swap(1, 2);
+        inv_w.swap(1, 2);
+        corners.swap(1, 2);
+    }
+    // Pixels whose sample centre lies in the snapped bounding box.
+    let lo = |m: i32| (m as i64 - HALF + SUBPIXEL - 1).div_euclid(SUBPIXEL) as i32;
+    let hi = |m: i32| (m as i64 - HALF).div_euclid(SUBPIXEL) as i32;
+    let (xmin, xmax) = (x.iter().min()?, x.iter().max()?);
+    let (ymin, ymax) = (y.iter().min()?, y.iter().max()?);
+    let bounds = [
+        lo(*xmin).max(0),
+        lo(*ymin).max(0),
+        hi(*xmax).min(width as i32 - 1),
+        hi(*ymax).min(height as i32 - 1),
+    ];
+    if bounds[0] > bounds[2] || bounds[1] > bounds[3] {
+        return None;
+    }
+    let world = v.map(|i| positions[i]);
+    let normal = (world[1] - world[0]).cross(world[2] - world[0]);
+    let back = normal.dot(camera.eye - world[0]) < 0.0;
+    Some(Tri {
+        x,
+        y,
+        inv_w,
+        corners,
+        source: t,
+        back,
+        bounds,
+    })
+}
+
 /// Triangles per strip of `strip_rows` rows, each list in triangle order:
-/// CSR offsets (`strips + 1` entries) and triangle indices.
-pub(crate) fn bin_strips(tris: &[Tri], strip_rows: i32, strips: usize) -> (Vec<u32>, Vec<u32>) {
-    let range = |t: &Tri| {
-        let s0 = (t.bounds[1] / strip_rows) as usize;
-        let s1 = ((t.bounds[3] / strip_rows) as usize).min(strips - 1);
-        s0..=s1
-    };
+/// CSR offsets (`strips + 1` entries) and triangle indices (into the fan
+/// triangulation, not set-up data: `rows(t)` gives the inclusive pixel rows
+/// of triangle `t`, `None` when it is not drawn). `count` triangles.
+pub(crate) fn bin_strips(
+    count: usize,
+    rows: impl Fn(u32) -> Option<(i32, i32)> + Sync,
+    strip_rows: i32,
+    strips: usize,
+) -> (Vec<u32>, Vec<u32>) {
+    // First and last strip of each triangle (8 bytes per triangle, dropped
+    // before the strips are drawn); an empty range when it is not drawn.
+    let ranges: Vec<[u32; 2]> = (0..count as u32)
+        .into_par_iter()
+        .map(|t| match rows(t) {
+            Some((y0, y1)) => [
+                (y0 / strip_rows) as u32,
+                ((y1 / strip_rows) as u32).min(strips as u32 - 1),
+            ],
+            None => [1, 0],
+        })
+        .collect();
     let mut start = vec![0u32; strips + 1];
-    for t in tris {
-        for s in range(t) {
-            start[s + 1] += 1;
+    for r in &ranges {
+        for s in r[0]..=r[1] {
+            start[s as usize + 1] += 1;
         }
     }
     for s in 0..strips {
@@ -163,23 +185,21 @@ pub(crate) fn bin_strips(tris: &[Tri], strip_rows: i32, strips: usize) -> (Vec<u
     }
     let mut fill = start.clone();
     let mut items = vec![0u32; start[strips] as usize];
-    for (i, t) in tris.iter().enumerate() {
-        for s in range(t) {
-            items[fill[s] as usize] = i as u32;
-            fill[s] += 1;
+    for (i, r) in ranges.iter().enumerate() {
+        for s in r[0]..=r[1] {
+            items[fill[s as usize] as usize] = i as u32;
+            fill[s as usize] += 1;
         }
     }
     (start, items)
 }
 
-/// Rasterises the triangles `bin` (indices into `tris`, drawn in that order)
-/// into the rows `row0..row0 + rows` of a `width`-wide z-buffer: `depth`
+/// Rasterises `tris` (in that order) into the rows `row0..row0 + rows` of a `width`-wide z-buffer: `depth`
 /// holds `1 / view depth` (0 = empty, larger is nearer) and `id` the index of
-/// the nearest triangle (`u32::MAX` = empty). Equal depths keep the earlier
-/// triangle, so the result depends only on the order of `bin`.
+/// the nearest triangle in `tris` (`u32::MAX` = empty). Equal depths keep
+/// the earlier triangle, so the result depends only on the order of `tris`.
 pub(crate) fn raster_strip(
     tris: &[Tri],
-    bin: &[u32],
     row0: i32,
     rows: i32,
     width: usize,
@@ -188,8 +208,7 @@ pub(crate) fn raster_strip(
 ) {
     depth.fill(0.0);
     id.fill(u32::MAX);
-    for &ti in bin {
-        let t = &tris[ti as usize];
+    for (ti, t) in tris.iter().enumerate() {
         let y_lo = t.bounds[1].max(row0);
         let y_hi = t.bounds[3].min(row0 + rows - 1);
         if y_lo > y_hi {
@@ -212,7 +231,7 @@ pub(crate) fn raster_strip(
         let mut row_e = [w0[0] + bias[0], w0[1] + bias[1], w0[2] + bias[2]];
         let area = (w0[0] + w0[1] + w0[2]) as f32;
         let k = t.inv_w.map(|iw| iw / area);
-        let t_id = ti;
+        let t_id = ti as u32;
         for py in y_lo..=y_hi {
             let off = (py - row0) as usize * width;
             let drow = &mut depth[off..off + width];
@@ -285,7 +304,7 @@ mod tests {
         for i in 0..tris.len() {
             let mut depth = [0.0f32; 64];
             let mut id = [0u32; 64];
-            raster_strip(&tris, &[i as u32], 0, 8, 8, &mut depth, &mut id);
+            raster_strip(&tris[i..i + 1], 0, 8, 8, &mut depth, &mut id);
             for (c, &d) in count.iter_mut().zip(&id) {
                 *c += (d != u32::MAX) as u32;
             }

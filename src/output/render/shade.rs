@@ -16,10 +16,9 @@ pub(crate) struct Scene<'a> {
     pub tris: Vec<[u32; 3]>,
     /// The face of each triangle.
     pub face_of: Vec<u32>,
-    /// Unit face normals (zero for a degenerate face).
-    pub face_normals: Vec<Vec3>,
-    /// Per-corner normals for smooth shading; empty for flat shading.
-    pub corner_normals: Vec<Vec3>,
+    /// Corner normals for smooth shading; `None` for flat shading (unit
+    /// face normals, made when needed).
+    pub normals: Option<SmoothNormals>,
     /// For [`Shading::Layers`]: per face, the layers that cover it.
     pub layers: LayerIndex,
 }
@@ -72,46 +71,97 @@ impl LayerIndex {
 /// normal lies within `crease_deg` of the corner's own face normal, so
 /// smooth surfaces shade smoothly while creases (and faces whose orientation
 /// disagrees with their neighbours') stay sharp.
-pub(crate) fn corner_normals(mesh: &PolyMesh, face_normals: &[Vec3], crease_deg: f32) -> Vec<Vec3> {
-    let nv = mesh.vertex_count();
-    let fc = mesh.face_count();
-    let mut start = vec![0u32; nv + 1];
-    for &v in &mesh.corner_vertex {
-        start[v as usize + 1] += 1;
+///
+/// Stored per vertex where every corner of the vertex gets the same normal
+/// (all its faces within the crease angle of each other: the common case),
+/// and per corner only where a crease splits the vertex: 12 bytes per vertex
+/// plus 16 per split corner instead of 12 per corner. [`Self::corner`]
+/// returns exactly the value a per-corner array would hold.
+pub(crate) struct SmoothNormals {
+    /// The normal of every unsplit corner of the vertex.
+    vertex: Vec<Vec3>,
+    /// `(corner, normal)` of the split corners, sorted by corner.
+    split: Vec<(u32, Vec3)>,
+}
+
+impl SmoothNormals {
+    pub fn new(mesh: &PolyMesh, crease_deg: f32) -> Self {
+        let nv = mesh.vertex_count();
+        let fc = mesh.face_count();
+        // Corners around each vertex, in corner order (so their faces come in
+        // face order), and the face of each corner.
+        let mut start = vec![0u32; nv + 1];
+        for &v in &mesh.corner_vertex {
+            start[v as usize + 1] += 1;
+        }
+        for v in 0..nv {
+            start[v + 1] += start[v];
+        }
+        let mut fill = start.clone();
+        let mut incident = vec![0u32; mesh.corner_count()];
+        let mut corner_face = vec![0u32; mesh.corner_count()];
+        for f in 0..fc {
+            for c in mesh.face_corners(f) {
+                let v = mesh.corner_vertex[c] as usize;
+                incident[fill[v] as usize] = c as u32;
+                fill[v] += 1;
+                corner_face[c] = f as u32;
+            }
+        }
+        drop(fill);
+        let scaled: Vec<Vec3> = (0..fc)
+            .into_par_iter()
+            .map(|f| mesh.face_normal_scaled(f))
+            .collect();
+        let unit: Vec<Vec3> = scaled.par_iter().map(|n| n.normalize_or_zero()).collect();
+        let cos = crease_deg.clamp(0.0, 180.0).to_radians().cos();
+        let mut vertex = vec![Vec3::ZERO; nv];
+        let mut split: Vec<(u32, Vec3)> = vertex
+            .par_iter_mut()
+            .enumerate()
+            .fold(Vec::new, |mut split, (v, out)| {
+                let around = &incident[start[v] as usize..start[v + 1] as usize];
+                let face = |c: u32| corner_face[c as usize] as usize;
+                let mut full = Vec3::ZERO;
+                for &g in around {
+                    full += scaled[face(g)];
+                }
+                let shared = full.try_normalize();
+                *out = shared.unwrap_or(Vec3::ZERO);
+                for &c in around {
+                    let own = unit[face(c)];
+                    let mut n = Vec3::ZERO;
+                    let mut all = true;
+                    for &g in around {
+                        if unit[face(g)].dot(own) >= cos {
+                            n += scaled[face(g)];
+                        } else {
+                            all = false;
+                        }
+                    }
+                    if !(all && shared.is_some()) {
+                        split.push((c, n.try_normalize().unwrap_or(own)));
+                    }
+                }
+                split
+            })
+            .reduce(Vec::new, |mut a, mut b| {
+                a.append(&mut b);
+                a
+            });
+        split.par_sort_unstable_by_key(|e| e.0);
+        split.shrink_to_fit();
+        Self { vertex, split }
     }
-    for v in 0..nv {
-        start[v + 1] += start[v];
-    }
-    let mut fill = start.clone();
-    let mut incident = vec![0u32; mesh.corner_count()];
-    let mut corner_face = vec![0u32; mesh.corner_count()];
-    for f in 0..fc {
-        for c in mesh.face_corners(f) {
-            let v = mesh.corner_vertex[c] as usize;
-            incident[fill[v] as usize] = f as u32;
-            fill[v] += 1;
-            corner_face[c] = f as u32;
+
+    /// The normal of corner `c`.
+    #[inline]
+    pub fn corner(&self, mesh: &PolyMesh, c: usize) -> Vec3 {
+        match self.split.binary_search_by_key(&(c as u32), |e| e.0) {
+            Ok(i) => self.split[i].1,
+            Err(_) => self.vertex[mesh.corner_vertex[c] as usize],
         }
     }
-    let scaled: Vec<Vec3> = (0..fc)
-        .into_par_iter()
-        .map(|f| mesh.face_normal_scaled(f))
-        .collect();
-    let cos = crease_deg.clamp(0.0, 180.0).to_radians().cos();
-    (0..mesh.corner_count())
-        .into_par_iter()
-        .map(|c| {
-            let own = face_normals[corner_face[c] as usize];
-            let v = mesh.corner_vertex[c] as usize;
-            let mut n = Vec3::ZERO;
-            for &g in &incident[start[v] as usize..start[v + 1] as usize] {
-                if face_normals[g as usize].dot(own) >= cos {
-                    n += scaled[g as usize];
-                }
-            }
-            n.try_normalize().unwrap_or(own)
-        })
-        .collect()
 }
 
 /// Interprets 1 (grey), 2 (grey, alpha), 3 (RGB) or 4 (RGBA) channel values
@@ -145,15 +195,12 @@ impl<'a> Scene<'a> {
     /// Derives triangles, normals and the layer index. Inputs must have been
     /// checked with [`Shading::check`].
     pub fn new(mesh: &'a PolyMesh, shading: &'a Shading<'a>, options: &'a RenderOptions) -> Self {
-        let (tris, face_of) = mesh.triangulate_corners();
-        let face_normals: Vec<Vec3> = (0..mesh.face_count())
-            .into_par_iter()
-            .map(|f| mesh.face_normal(f))
-            .collect();
-        let corner_normals = match options.normals {
-            Normals::Flat => Vec::new(),
-            Normals::Smooth { crease_deg } => corner_normals(mesh, &face_normals, crease_deg),
+        // Normals first: their scratch is gone before the triangles exist.
+        let normals = match options.normals {
+            Normals::Flat => None,
+            Normals::Smooth { crease_deg } => Some(SmoothNormals::new(mesh, crease_deg)),
         };
+        let (tris, face_of) = mesh.triangulate_corners();
         Self {
             mesh,
             shading,
@@ -161,8 +208,7 @@ impl<'a> Scene<'a> {
             layers: LayerIndex::new(mesh, shading),
             tris,
             face_of,
-            face_normals,
-            corner_normals,
+            normals,
         }
     }
 
@@ -182,13 +228,12 @@ impl<'a> Scene<'a> {
         let face = self.face_of[t.source as usize] as usize;
         let c = t.corners.map(|c| c as usize);
 
-        let mut n = if self.corner_normals.is_empty() {
-            self.face_normals[face]
-        } else {
-            (self.corner_normals[c[0]] * b[0]
-                + self.corner_normals[c[1]] * b[1]
-                + self.corner_normals[c[2]] * b[2])
-                .normalize_or_zero()
+        let mut n = match &self.normals {
+            None => self.mesh.face_normal(face),
+            Some(normals) => {
+                let m = c.map(|c| normals.corner(self.mesh, c));
+                (m[0] * b[0] + m[1] * b[1] + m[2] * b[2]).normalize_or_zero()
+            }
         };
         if n == Vec3::ZERO {
             // A degenerate polygon: fall back to the triangle's own normal in
@@ -238,7 +283,7 @@ impl<'a> Scene<'a> {
                 for i in 0..3 {
                     bo[pos[i]] += b[i];
                 }
-                let layer = &layers[t.source as usize];
+                let layer = layers.get_in_face(t.source as usize, face);
                 let mut rgba = [0.0f32; 4];
                 for (base_corner, uvs) in layer.iter().enumerate() {
                     let uv = uvs[0] * bo[0] + uvs[1] * bo[1] + uvs[2] * bo[2];

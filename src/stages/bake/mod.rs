@@ -342,9 +342,11 @@ fn bake_world(
             return Err("the per-corner UVs lie on a mesh other than the loaded one; bake needs them on the original mesh".into());
         }
         let layers: Vec<[[Vec2; 3]; 3]> = match (blend, uvs) {
-            (Some(b), _) if b.0.len() == tris.len() => {
+            (Some(b), _) if b.0.fits(mesh) => {
                 method = "jump_map_blend";
-                b.0.clone()
+                // The atlas bake keeps per-triangle layers for its angles;
+                // expanded here from the compact form (the same values).
+                b.0.to_vec(mesh)
             }
             (_, Some(u)) if u.0.len() == mesh.corner_count() => {
                 method = "corner_uvs";

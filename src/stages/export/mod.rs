@@ -3,6 +3,7 @@
 //! systems never touch the file system.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
+use crate::kernels::jump_surface::Blend;
 use crate::output::render::{Layer, RenderOptions, Shading, render_views};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::stages::lapped_paste::components::*;
@@ -111,22 +112,25 @@ fn bake(
     size: u32,
 ) -> Option<crate::image::Image> {
     use crate::kernels::bake_triangles::bake_blended;
-    let triangles = mesh.corner_count().saturating_sub(2 * mesh.face_count());
-    // The blend layers are borrowed, not copied (144 bytes per vertex).
-    let layers: std::borrow::Cow<[[[glam::Vec2; 3]; 3]]> = match (blend, uvs) {
-        (Some(b), _) if b.0.len() == triangles => std::borrow::Cow::Borrowed(&b.0),
-        (_, Some(u)) if u.0.len() == mesh.corner_count() => mesh
-            .triangulate_corners()
-            .0
-            .iter()
-            .map(|t| {
-                let l = t.map(|c| u.0[c as usize]);
-                [l; 3]
-            })
-            .collect(),
+    // The compact blend layers are read in place, not expanded.
+    let single: Vec<[[glam::Vec2; 3]; 3]>;
+    let layers = match (blend.and_then(|b| b.of(mesh)), uvs) {
+        (Some(b), _) => b,
+        (_, Some(u)) if u.0.len() == mesh.corner_count() => {
+            single = mesh
+                .triangulate_corners()
+                .0
+                .iter()
+                .map(|t| {
+                    let l = t.map(|c| u.0[c as usize]);
+                    [l; 3]
+                })
+                .collect();
+            (&single).into()
+        }
         _ => return None,
     };
-    Some(bake_blended(&layers, &exemplar.image, exemplar.wrap, size))
+    Some(bake_blended(layers, &exemplar.image, exemplar.wrap, size))
 }
 
 type ExportQuery<'w, 's> = Query<
@@ -230,11 +234,7 @@ impl Stage for Export {
                 let signal = match (uvs, colours) {
                     (Some(u), _) => Some(Ok(plane::PlaneSignal::Uvs {
                         uvs: &u.0,
-                        blend: blend
-                            .map(|b| b.0.as_slice())
-                            .filter(|b| {
-                                b.len() == mesh.corner_count().saturating_sub(2 * mesh.face_count())
-                            }),
+                        blend: blend.and_then(|b| b.of(mesh)),
                         texture: ex,
                         wrap: exemplar.wrap,
                     })),
@@ -297,13 +297,11 @@ impl Stage for Export {
                 } else {
                     Vec::new()
                 };
-                let blend_ok = blend.is_some_and(|b| {
-                    b.0.len() == mesh.corner_count().saturating_sub(2 * mesh.face_count())
-                });
+                let blend_layers = blend.and_then(|b| b.of(mesh));
                 let shading = match (uvs, colours, atlas) {
                     _ if lapped_ok => Shading::Layers(&layers),
-                    _ if blend_ok => Shading::BlendedUvs {
-                        layers: blend.map(|b| b.0.as_slice()).unwrap_or(&[]),
+                    _ if blend_layers.is_some() => Shading::BlendedUvs {
+                        layers: blend_layers.unwrap_or(Blend::Full(&[])),
                         texture: &exemplar.image,
                         wrap: exemplar.wrap,
                     },
@@ -374,7 +372,7 @@ impl Stage for Export {
                 let source = match (uvs, atlas) {
                     (Some(u), _) => Some((
                         u.0.as_slice(),
-                        blend.map(|b| b.0.as_slice()),
+                        blend.and_then(|b| b.of(mesh)),
                         &exemplar.image,
                         exemplar.wrap,
                     )),

@@ -34,7 +34,7 @@ pub enum PlaneSignal<'a> {
         /// Per mesh corner.
         uvs: &'a [Vec2],
         /// Per fan triangle, per base corner, the three corners' UVs.
-        blend: Option<&'a [[[Vec2; 3]; 3]]>,
+        blend: Option<crate::kernels::jump_surface::Blend<'a>>,
         /// The exemplar.
         texture: &'a Image,
         /// Its wrap.
@@ -112,7 +112,7 @@ pub fn plane_from_surface(
                 wrap,
             } => {
                 let layers: [[Vec2; 3]; 3] = match blend {
-                    Some(l) => l[t],
+                    Some(l) => l.get(t),
                     None => [corner_tris[t].map(|c| uvs[c as usize]); 3],
                 };
                 let mut out = vec![0.0f32; texture.channels as usize];

@@ -206,9 +206,9 @@ impl Stage for JumpSurface {
             drop((topo, offsets));
             let (single, blend) = {
                 let _s = tracing::info_span!("corner_uvs").entered();
-                corner_uvs(mesh, &sides, &out.texel, (map.width(), map.height()))
+                // The side offsets move into the compact blend layers.
+                corner_uvs(mesh, sides, &out.texel, (map.width(), map.height()))
             };
-            drop(sides);
             let secs = started.elapsed().as_secs_f64();
             let n = mesh.vertex_count();
             metrics.record(ctx.index, "vertices", n);

@@ -145,7 +145,8 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                 &owned_frames
             }
         };
-        let topo = Topology::build(mesh);
+        // The metrics read only the edges and the faces of each vertex.
+        let topo = Topology::build_edges_and_vertex_faces(mesh);
         let stats = surface_texture_energy(
             mesh,
             &topo,
