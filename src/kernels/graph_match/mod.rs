@@ -748,17 +748,14 @@ fn match_vertex(
             if written[i] || o.length() >= FOOTPRINT {
                 continue;
             }
-            let (x, y) = (
-                q[0] as i64 + o.x.round() as i64,
-                q[1] as i64 + o.y.round() as i64,
-            );
-            // The colour of the texel under it; its coordinate exactly.
+            // Within half a texel the texel under it is `q` itself (on its
+            // own level); its coordinate is kept exactly.
             writes.push((
                 region.vertices[i],
                 wrap_texel(images, (qc + o) * factor),
                 levels[i] as u8,
             ));
-            out_colours.extend_from_slice(images.image(levels[i]).texel(x, y, images.wrap()));
+            out_colours.extend_from_slice(images.image(levels[i]).pixel(q[0], q[1]));
             stats.footprint_vertices += 1;
         }
     }

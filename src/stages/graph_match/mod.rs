@@ -369,7 +369,7 @@ impl Stage for GraphMatch {
             } else {
                 MatchImages::default_levels(img)
             };
-            let images = {
+            let mut images = {
                 let _span = tracing::info_span!("exemplar_levels", levels = level_count).entered();
                 MatchImages::new(img, settings.image_levels, level_count, exemplar.wrap)
             };
@@ -400,23 +400,6 @@ impl Stage for GraphMatch {
                 jump_cost: settings.jump_cost,
                 density_invariant: settings.density_invariant,
             };
-            let mut images = images;
-            if settings.candidates == Candidates::Coherent {
-                let _span = tracing::info_span!("similarity_sets", k = settings.similar).entered();
-                // The image levels vertices are matched on, over every mesh level.
-                let mut used = vec![false; images.levels()];
-                for &e in &levels {
-                    if let Ok((g, ..)) = meshes.get(e) {
-                        let topo = Topology::build(&g.0);
-                        for &m in &mean_edge_lengths(&g.0.positions, &topo) {
-                            used[images.level_for(r_scale * m)] = true;
-                        }
-                    }
-                }
-                let used: Vec<usize> = (0..used.len()).filter(|&l| used[l]).collect();
-                images.prepare_similar(&used, settings.similar as usize, seed.derive(idx, 0xC0DE));
-            }
-            let images = images;
             metrics.record(idx, "r_scale", r_scale);
             metrics.record(idx, "region", region);
             metrics.record(idx, "k_min", settings.k_min);
@@ -449,6 +432,19 @@ impl Stage for GraphMatch {
                 };
                 let topo = Topology::build(mesh);
                 let mean_edge = mean_edge_lengths(&mesh.positions, &topo);
+                if settings.candidates == Candidates::Coherent {
+                    // Similarity sets of the image levels this mesh level is
+                    // matched on (each level's depend only on the level and
+                    // the seed, so preparing them level by level changes
+                    // nothing).
+                    let _span = tracing::info_span!("similarity_sets", k = settings.similar).entered();
+                    let mut used = vec![false; images.levels()];
+                    for &m in &mean_edge {
+                        used[images.level_for(r_scale * m)] = true;
+                    }
+                    let used: Vec<usize> = (0..used.len()).filter(|&l| used[l]).collect();
+                    images.prepare_similar(&used, settings.similar as usize, seed.derive(idx, 0xC0DE));
+                }
                 let mut st = match (state.take(), parents) {
                     // Colours already there (e.g. `init_colours`: exemplar
                     // texels) stand for level 0.

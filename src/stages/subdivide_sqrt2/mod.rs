@@ -150,7 +150,9 @@ impl StageSettings for SubdivideSqrt2Settings {
 /// `input` remeshed evenly (one level of `retile`'s isotropic remesher) to
 /// `target / 2^s` vertices for the largest `s ≤ COARSEN_STEPS` whose count
 /// the input's connected pieces allow (at least 12 vertices), with `s`;
-/// `None` when not even `target / 2` is possible.
+/// `None` when not even `target / 2` is possible. When the pieces need more
+/// vertices than asked, retile names the floor, and the next try starts at
+/// the first count above it rather than one step finer.
 fn coarsened(
     input: &crate::mesh::PolyMesh,
     target: usize,
@@ -158,9 +160,10 @@ fn coarsened(
 ) -> Option<(crate::mesh::PolyMesh, u32)> {
     use crate::kernels::retile::{RetileError, RetileSettings, retile_with_progress};
     let progress = Progress::new(0, "subdivide_sqrt2 (remeshing the dense input)");
+    let mut at_least = RetileSettings::MIN_LEVEL_VERTICES as usize;
     for steps in (1..=COARSEN_STEPS).rev() {
         let n = target >> steps;
-        if n < RetileSettings::MIN_LEVEL_VERTICES as usize {
+        if (n as f64) * (1.0 + RetileSettings::COUNT_TOLERANCE) < at_least as f64 {
             continue;
         }
         let settings = RetileSettings {
@@ -173,8 +176,10 @@ fn coarsened(
                 progress.finish();
                 return Some((p.levels.swap_remove(0).mesh, steps));
             }
-            // Too many pieces for so few vertices: try a finer base.
-            Err(RetileError::TooManyComponents { .. } | RetileError::TargetUnreachable { .. }) => {}
+            // Too many pieces for so few vertices: a base above their floor.
+            Err(RetileError::TooManyComponents { floor, .. }) => at_least = floor,
+            // The topology kept it above its target: try a finer base.
+            Err(RetileError::TargetUnreachable { .. }) => {}
             Err(_) => return None,
         }
     }
