@@ -69,6 +69,8 @@ pub struct LappedPasteSettings {
     /// Largest distortion of a face joining a surface patch (f64 so that
     /// the default prints as written).
     pub max_distortion: f64,
+    /// Scale of the distortion measure, texels (0 = per face).
+    pub distortion_texels: f32,
     /// Largest growth distance, in hull radii.
     pub max_reach: f32,
     /// Growth rounds after optimisations.
@@ -103,6 +105,7 @@ impl Default for LappedPasteSettings {
             falloff: 3.0,
             hull_vertices: 16,
             max_distortion: 0.6,
+            distortion_texels: paste.distortion_texels,
             max_reach: paste.grow.max_reach,
             regrow_rounds: paste.regrow_rounds,
             coverage_threshold: paste.coverage.threshold,
@@ -159,7 +162,13 @@ impl StageSettings for LappedPasteSettings {
             name: "max_distortion",
             unit: "",
             range: ParamRange::Float(0.0, 1e6),
-            doc: "largest (|d_S|² + |d_T|²)/2 of a face joining a patch under its initial parametrisation (0.6 ≈ 47° of rotation)",
+            doc: "largest (|d_S|² + |d_T|²)/2 of a face joining a patch under its initial parametrisation (0.6 ≈ 47° of rotation), measured at the scale `distortion_texels`",
+        },
+        ParamDoc {
+            name: "distortion_texels",
+            unit: "texels",
+            range: ParamRange::Float(0.0, 1024.0),
+            doc: "scale of the distortion measure: each face's Jacobian is averaged along the growth front over this many texels of the texture patch, so roughness finer than the texture shows (scanner noise) does not stop growth while a fold or field turn at this scale does; where faces are larger it is the per-face measure. 0 = Praun et al.'s per-face rule",
         },
         ParamDoc {
             name: "max_reach",
@@ -252,6 +261,7 @@ impl LappedPasteSettings {
                 max_reach: self.max_reach,
                 ..Default::default()
             },
+            distortion_texels: self.distortion_texels,
             solve: SolveSettings::default(),
             regrow_rounds: self.regrow_rounds,
             coverage: CoverageSettings {
@@ -489,7 +499,7 @@ impl Stage for LappedPaste {
                 ));
                 return;
             };
-            let tri = match TriMesh::new(&geometry.0) {
+let tri = match TriMesh::new(&geometry.0) {
                 Ok(t) if field.t.len() == t.face_count() => t,
                 Ok(_) => {
                     failure.0 = Some(fail(
