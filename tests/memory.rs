@@ -1,10 +1,11 @@
-//! Peak memory per vertex of the jump-map surface method on a messy scan
-//! (issue 15), without timing: a regression in the data layout (a buffer
-//! kept too long, a whole file built in memory, a component cloned) shows up
-//! as bytes per vertex.
+//! Peak memory per vertex of the jump-map surface method and of lapped
+//! textures on a messy scan (issue 15), without timing: a regression in the
+//! data layout (a buffer kept too long, a whole file built in memory, a
+//! component cloned) shows up as bytes per vertex.
 //!
 //! Each run is a child process of the real binary with the shipped config
-//! `configs/02_jump_bunny_planks.toml` (formats ply, obj, preview, baked),
+//! `configs/02_jump_bunny_planks.toml` (formats ply, obj, preview, baked)
+//! or `configs/31_lapped_bunny_planks.toml` (lapped textures),
 //! read back from `metrics.json` (`peak_rss_bytes`, the process's VmHWM).
 //! The baseline is the same config on a small scan (2 k vertices): the
 //! binary, the exemplar and its jump map, the 1024² bake atlas and the
@@ -18,7 +19,11 @@ mod common;
 use std::path::Path;
 
 fn peak_and_vertices(scan: &Path, out: &Path) -> (f64, f64) {
-    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/02_jump_bunny_planks.toml");
+    peak_and_vertices_of("configs/02_jump_bunny_planks.toml", scan, out)
+}
+
+fn peak_and_vertices_of(config: &str, scan: &Path, out: &Path) -> (f64, f64) {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(config);
     let run = common::bin()
         .arg("run")
         .arg(&config)
@@ -75,5 +80,38 @@ fn jump_surface_peak_memory_per_vertex() {
     assert!(
         per_vertex <= MAX_BYTES_PER_VERTEX,
         "jump_surface holds {per_vertex:.0} bytes per vertex beyond the baseline (bound {MAX_BYTES_PER_VERTEX})"
+    );
+}
+
+/// Bytes per vertex of lapped textures beyond the baseline
+/// (`configs/31_lapped_bunny_planks.toml`: formats obj, preview, pastes,
+/// a 1024² atlas). Measured on 2 cores: 502 B/v at 92 k vertices
+/// (baseline 51 MB at 2.6 k: the atlas image, the previews, the binary).
+/// Before the memory work it was ~3 700 B/v: every paste kept every face it
+/// was grown over (4.8 per face, 11 with the per-face distortion rule) in a
+/// `Vec` per face of the coverage, in the paste records and in the world,
+/// and the result metrics copied them once more. See ARCHITECTURE.md,
+/// "Lapped textures at a million vertices".
+const LAPPED_MAX_BYTES_PER_VERTEX: f64 = 600.0;
+
+#[test]
+#[cfg(target_os = "linux")]
+fn lapped_peak_memory_per_vertex() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = "configs/31_lapped_bunny_planks.toml";
+    let run = |n: usize, name: &str| {
+        let (scan, _) = common::messy::write_messy_scan(dir.path(), n, 7);
+        peak_and_vertices_of(config, &scan, &dir.path().join(name))
+    };
+    let ((base, base_v), (peak, v)) = (run(2_000, "small"), run(100_000, "large"));
+    let per_vertex = (peak - base) / (v - base_v);
+    eprintln!(
+        "lapped: {:.1} MB at {base_v} vertices, {:.1} MB at {v}: {per_vertex:.0} B/v",
+        base / 1e6,
+        peak / 1e6
+    );
+    assert!(
+        per_vertex <= LAPPED_MAX_BYTES_PER_VERTEX,
+        "lapped textures hold {per_vertex:.0} B/v beyond the baseline (bound {LAPPED_MAX_BYTES_PER_VERTEX})"
     );
 }

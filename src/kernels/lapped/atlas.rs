@@ -19,7 +19,7 @@ use crate::kernels::atlas::raster::{barycentric, signed_area2};
 pub use crate::kernels::atlas::{
     AtlasSettings, Charts, pack_charts, rasterise_faces, skyline_pack,
 };
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// A texture atlas of a lapped texture.
@@ -53,6 +53,24 @@ pub fn composite_atlas(
     size: u32,
     padding_px: u32,
 ) -> Image {
+    composite_atlas_with(
+        corner_uvs,
+        &|f, out| out.extend(coverage.layers(f).map(|l| (l.texture, l.uv))),
+        textures,
+        size,
+        padding_px,
+    )
+}
+
+/// [`composite_atlas`] of the layers `layers(f, out)` appends to `out` for
+/// face `f` (texture patch, corner texture coordinates; in paste order).
+pub fn composite_atlas_with(
+    corner_uvs: &[[Vec2; 3]],
+    layers: &(dyn Fn(usize, &mut Vec<(u32, [Vec2; 3])>) + Sync),
+    textures: &[TexturePatch],
+    size: u32,
+    padding_px: u32,
+) -> Image {
     let _span = tracing::debug_span!("composite_atlas", size).entered();
     let s = size as usize;
     let id = rasterise_faces(corner_uvs, size);
@@ -75,6 +93,7 @@ pub fn composite_atlas(
         .enumerate()
         .for_each(|(y, row)| {
             let mut rgba = [0.0f32; 4];
+            let mut held = Vec::new();
             for x in 0..s {
                 let f = id[y * s + x];
                 if f == u32::MAX {
@@ -86,14 +105,13 @@ pub fn composite_atlas(
                 let sum = (b[0] + b[1] + b[2]).max(1e-12);
                 let b = b.map(|v| v / sum);
                 let mut colour = base;
-                for layer in &coverage.layers[f as usize] {
-                    let uv = layer.uv[0] * b[0] + layer.uv[1] * b[1] + layer.uv[2] * b[2];
-                    textures[layer.texture as usize].image.sample_uv(
-                        uv.x,
-                        uv.y,
-                        Wrap::Clamp,
-                        &mut rgba,
-                    );
+                held.clear();
+                layers(f as usize, &mut held);
+                for (texture, uv) in &held {
+                    let uv = uv[0] * b[0] + uv[1] * b[1] + uv[2] * b[2];
+                    textures[*texture as usize]
+                        .image
+                        .sample_uv(uv.x, uv.y, Wrap::Clamp, &mut rgba);
                     let a = rgba[3].clamp(0.0, 1.0);
                     for k in 0..3 {
                         colour[k] += (rgba[k] - colour[k]) * a;
@@ -116,13 +134,32 @@ pub fn build_atlas(
     textures: &[TexturePatch],
     settings: &AtlasSettings,
 ) -> Result<Atlas, String> {
+    build_atlas_with(
+        &mesh.positions,
+        &mesh.tris,
+        &|f, out| out.extend(coverage.layers(f).map(|l| (l.texture, l.uv))),
+        textures,
+        settings,
+    )
+}
+
+/// [`build_atlas`] of the triangles `tris` over `positions`, compositing
+/// the layers `layers(f, out)` appends for face `f` (see
+/// [`composite_atlas_with`]).
+pub fn build_atlas_with(
+    positions: &[Vec3],
+    tris: &[[u32; 3]],
+    layers: &(dyn Fn(usize, &mut Vec<(u32, [Vec2; 3])>) + Sync),
+    textures: &[TexturePatch],
+    settings: &AtlasSettings,
+) -> Result<Atlas, String> {
     let _span = tracing::info_span!("build_atlas").entered();
-    let uv = crate::kernels::atlas::build_uv_atlas(&mesh.positions, &mesh.tris, settings)
+    let uv = crate::kernels::atlas::build_uv_atlas(positions, tris, settings)
         .map_err(|e| e.to_string())?;
     let (charts, corner_uvs, texels_per_unit) = (uv.charts, uv.corner_uvs, uv.texels_per_unit);
-    let image = composite_atlas(
+    let image = composite_atlas_with(
         &corner_uvs,
-        coverage,
+        layers,
         textures,
         settings.size,
         settings.padding_px,

@@ -28,19 +28,99 @@ pub struct PasteRecord<'a> {
     pub uvs: &'a [Vec2],
 }
 
+/// Per face, the pastes holding it, in paste order: an index into paste
+/// records (8 bytes a layer, 4 a face) rather than a copy of their
+/// coordinates (32 bytes a layer), built by counting.
+#[derive(Clone, Debug)]
+pub struct PasteIndex<'a> {
+    /// The records, in paste order.
+    pastes: Vec<PasteRecord<'a>>,
+    /// CSR offsets of each face's layers (`face_count + 1`).
+    start: Vec<u32>,
+    /// Per layer: the paste and the face's position in its list.
+    layer: Vec<(u32, u32)>,
+}
+
+impl<'a> PasteIndex<'a> {
+    /// Indexes `pastes` (in paste order) over `face_count` faces.
+    ///
+    /// # Errors
+    /// A message naming the first record with a uv count that is not three
+    /// per face or a face id out of range.
+    pub fn new(face_count: usize, pastes: &[PasteRecord<'a>]) -> Result<Self, String> {
+        let fc = face_count;
+        let mut start = vec![0u32; fc + 1];
+        for (k, p) in pastes.iter().enumerate() {
+            if p.uvs.len() != 3 * p.faces.len() {
+                return Err(format!(
+                    "paste {k} has {} texture coordinates for {} faces; 3 per face expected",
+                    p.uvs.len(),
+                    p.faces.len()
+                ));
+            }
+            for &f in p.faces {
+                if f as usize >= fc {
+                    return Err(format!(
+                        "paste {k} holds face {f}, but the mesh has {fc} faces"
+                    ));
+                }
+                start[f as usize + 1] += 1;
+            }
+        }
+        for f in 0..fc {
+            start[f + 1] += start[f];
+        }
+        let mut fill = start.clone();
+        let mut layer = vec![(0u32, 0u32); start[fc] as usize];
+        for (k, p) in pastes.iter().enumerate() {
+            for (i, &f) in p.faces.iter().enumerate() {
+                let slot = &mut fill[f as usize];
+                layer[*slot as usize] = (k as u32, i as u32);
+                *slot += 1;
+            }
+        }
+        Ok(Self {
+            pastes: pastes.to_vec(),
+            start,
+            layer,
+        })
+    }
+
+    /// Number of faces.
+    pub fn face_count(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// The records.
+    pub fn pastes(&self) -> &[PasteRecord<'a>] {
+        &self.pastes
+    }
+
+    /// The layers of face `f` in paste order: (paste, texture patch, corner
+    /// texture coordinates).
+    #[inline]
+    pub fn layers(
+        &self,
+        f: usize,
+    ) -> impl DoubleEndedIterator<Item = (u32, u32, [Vec2; 3])> + ExactSizeIterator + '_ {
+        self.layer[self.start[f] as usize..self.start[f + 1] as usize]
+            .iter()
+            .map(|&(k, i)| {
+                let p = &self.pastes[k as usize];
+                let i = 3 * i as usize;
+                (k, p.texture, [p.uvs[i], p.uvs[i + 1], p.uvs[i + 2]])
+            })
+    }
+}
+
 /// Per-face layer lists of a lapped texture, ready to evaluate.
 #[derive(Clone, Debug)]
 pub struct LappedComposite<'a> {
-    /// Per mesh corner, its face.
-    corner_face: Vec<u32>,
-    /// Per face, its first corner.
-    face_start: Vec<u32>,
-    /// CSR offsets of each face's layers (`face_count + 1`).
-    layer_start: Vec<u32>,
-    /// Layers (texture patch, corner uvs), per face in paste order.
-    layers: Vec<(u32, [Vec2; 3])>,
-    /// Paste index of each layer.
-    paste_of: Vec<u32>,
+    /// Per face, its first corner (the mesh's; a corner's face is found by
+    /// binary search, not stored per corner).
+    face_start: &'a [u32],
+    /// The pastes of each face.
+    index: PasteIndex<'a>,
     /// RGBA texture patches (straight alpha).
     textures: &'a [Image],
     /// RGB colour under the first paste.
@@ -63,8 +143,8 @@ impl<'a> LappedComposite<'a> {
     /// face, a texture index out of range, a texture that is not RGBA, or a
     /// background of the wrong length.
     pub fn new(
-        mesh: &PolyMesh,
-        pastes: &[PasteRecord],
+        mesh: &'a PolyMesh,
+        pastes: &[PasteRecord<'a>],
         textures: &'a [Image],
         background: &[f32],
     ) -> Result<Self, String> {
@@ -85,15 +165,8 @@ impl<'a> LappedComposite<'a> {
                 textures[t].channels
             ));
         }
-        let mut counts = vec![0u32; fc + 1];
+        // Face ids and coordinate counts are checked by the index.
         for (k, p) in pastes.iter().enumerate() {
-            if p.uvs.len() != 3 * p.faces.len() {
-                return Err(format!(
-                    "paste {k} has {} texture coordinates for {} faces; 3 per face expected",
-                    p.uvs.len(),
-                    p.faces.len()
-                ));
-            }
             if p.texture as usize >= textures.len() {
                 return Err(format!(
                     "paste {k} uses texture patch {}, but there are {}",
@@ -101,48 +174,15 @@ impl<'a> LappedComposite<'a> {
                     textures.len()
                 ));
             }
-            for &f in p.faces {
-                if f as usize >= fc {
-                    return Err(format!(
-                        "paste {k} holds face {f}, but the mesh has {fc} faces"
-                    ));
-                }
-                counts[f as usize + 1] += 1;
-            }
         }
-        for f in 0..fc {
-            counts[f + 1] += counts[f];
-        }
-        let mut fill = counts.clone();
-        let mut layers = vec![(0u32, [Vec2::ZERO; 3]); counts[fc] as usize];
-        let mut paste_of = vec![0u32; layers.len()];
-        for (k, p) in pastes.iter().enumerate() {
-            for (i, &f) in p.faces.iter().enumerate() {
-                let slot = &mut fill[f as usize];
-                layers[*slot as usize] = (
-                    p.texture,
-                    [p.uvs[3 * i], p.uvs[3 * i + 1], p.uvs[3 * i + 2]],
-                );
-                paste_of[*slot as usize] = k as u32;
-                *slot += 1;
-            }
-        }
-        let mut corner_face = vec![0u32; mesh.corner_count()];
-        for f in 0..fc {
-            for c in mesh.face_corners(f) {
-                corner_face[c] = f as u32;
-            }
-        }
+        let index = PasteIndex::new(fc, pastes)?;
         let rgb = match channels {
             1 | 2 => [background[0]; 3],
             _ => [background[0], background[1], background[2]],
         };
         Ok(Self {
-            corner_face,
-            face_start: mesh.face_start.clone(),
-            layer_start: counts,
-            layers,
-            paste_of,
+            face_start: &mesh.face_start,
+            index,
             textures,
             background: rgb,
             channels,
@@ -155,10 +195,10 @@ impl<'a> LappedComposite<'a> {
         self.channels
     }
 
-    /// The layers of face `f`, in paste order.
-    #[inline]
-    pub fn face_layers(&self, f: usize) -> &[(u32, [Vec2; 3])] {
-        &self.layers[self.layer_start[f] as usize..self.layer_start[f + 1] as usize]
+    /// The layers of face `f`, in paste order: texture patch and corner
+    /// texture coordinates.
+    pub fn face_layers(&self, f: usize) -> Vec<(u32, [Vec2; 3])> {
+        self.index.layers(f).map(|(_, t, uv)| (t, uv)).collect()
     }
 
     /// The composite at barycentric point `b` of face `f` (weights of its
@@ -168,9 +208,9 @@ impl<'a> LappedComposite<'a> {
     pub fn eval_face(&self, f: usize, b: [f32; 3], out: &mut [f32]) {
         let mut c = self.background;
         let mut px = [0.0f32; 4];
-        for (tex, uv) in self.face_layers(f) {
+        for (_, tex, uv) in self.index.layers(f) {
             let p = uv[0] * b[0] + uv[1] * b[1] + uv[2] * b[2];
-            self.textures[*tex as usize].sample_uv(p.x, p.y, Wrap::Clamp, &mut px);
+            self.textures[tex as usize].sample_uv(p.x, p.y, Wrap::Clamp, &mut px);
             let a = px[3].clamp(0.0, 1.0);
             for i in 0..3 {
                 c[i] += (px[i] - c[i]) * a;
@@ -193,7 +233,10 @@ impl<'a> LappedComposite<'a> {
     /// corners with barycentric weights `w` (the calling convention of
     /// `SurfaceSignal::Corners`).
     pub fn eval_corners(&self, corners: [u32; 3], w: [f32; 3], out: &mut [f32]) {
-        let f = self.corner_face[corners[0] as usize] as usize;
+        let f = self
+            .face_start
+            .partition_point(|&s| s <= corners[0])
+            .saturating_sub(1);
         let start = self.face_start[f];
         let mut b = [0.0f32; 3];
         for k in 0..3 {
@@ -208,21 +251,17 @@ impl<'a> LappedComposite<'a> {
     /// Vertices without a layer get `s` from `fallback` projected.
     pub fn frames(&self, mesh: &PolyMesh, fallback: Vec3) -> Vec<TangentFrame> {
         let normals = mesh.vertex_normals();
-        // Per vertex: (paste index, face, layer) of the latest top layer
-        // among its faces.
-        let mut best: Vec<Option<(u32, usize, usize)>> = vec![None; mesh.vertex_count()];
+        // Per vertex: (paste index, face) of the latest top layer among
+        // its faces.
+        let mut best: Vec<Option<(u32, u32)>> = vec![None; mesh.vertex_count()];
         for f in 0..mesh.face_count() {
-            let Some(top) = (self.layer_start[f + 1] as usize).checked_sub(1) else {
+            let Some((paste, _, _)) = self.index.layers(f).next_back() else {
                 continue;
             };
-            if top < self.layer_start[f] as usize {
-                continue;
-            }
-            let paste = self.paste_of[top];
             for &v in mesh.face(f) {
                 let slot = &mut best[v as usize];
-                if slot.is_none_or(|(p, _, _)| paste > p) {
-                    *slot = Some((paste, f, top));
+                if slot.is_none_or(|(p, _)| paste > p) {
+                    *slot = Some((paste, f as u32));
                 }
             }
         }
@@ -230,7 +269,7 @@ impl<'a> LappedComposite<'a> {
             .map(|v| {
                 let n = normals[v];
                 let dir = match best[v] {
-                    Some((_, f, l)) => self.image_x_direction(mesh, f, l),
+                    Some((_, f)) => self.image_x_direction(mesh, f as usize),
                     None => fallback,
                 };
                 let dir = if dir.cross(n).length_squared() > 1e-12 {
@@ -243,8 +282,9 @@ impl<'a> LappedComposite<'a> {
             .collect()
     }
 
-    /// The world direction in which layer `l`'s image x grows on face `f`.
-    fn image_x_direction(&self, mesh: &PolyMesh, f: usize, l: usize) -> Vec3 {
+    /// The world direction in which the top layer's image x grows on face
+    /// `f`.
+    fn image_x_direction(&self, mesh: &PolyMesh, f: usize) -> Vec3 {
         let vs = mesh.face(f);
         let x = [0, 1, 2].map(|i| mesh.positions[vs[i] as usize]);
         let n = (x[1] - x[0]).cross(x[2] - x[0]);
@@ -252,7 +292,9 @@ impl<'a> LappedComposite<'a> {
         if twice_area_sq <= f32::MIN_POSITIVE {
             return Vec3::ZERO;
         }
-        let (_, uv) = self.layers[l];
+        let Some((_, _, uv)) = self.index.layers(f).next_back() else {
+            return Vec3::ZERO;
+        };
         // ∇λ_i = n × (x_{i+2} − x_{i+1}) / |n|², ∇u = Σ u_i ∇λ_i.
         (0..3)
             .map(|i| n.cross(x[(i + 2) % 3] - x[(i + 1) % 3]) * uv[i].x)
@@ -269,7 +311,7 @@ impl<'a> LappedComposite<'a> {
         let mut out = Vec::new();
         let mut px = vec![0.0f32; ch];
         for f in 0..mesh.face_count() {
-            if self.face_layers(f).is_empty() {
+            if self.index.layers(f).len() == 0 {
                 continue;
             }
             let k = ((mesh.face_area(f) * per_area).max(0.0).sqrt().round() as u16).clamp(1, 8);

@@ -348,8 +348,8 @@ impl<'a> Grower<'a> {
     /// Distance from face `f` to its neighbour `g` in patch units.
     #[inline]
     fn step(&self, t: Vec3, f: u32, g: u32) -> f32 {
-        let c = &self.mesh.centroids;
-        c[f as usize].distance(c[g as usize]) / t.length().max(f32::MIN_POSITIVE)
+        let m = self.mesh;
+        m.centroid(f as usize).distance(m.centroid(g as usize)) / t.length().max(f32::MIN_POSITIVE)
     }
 
     /// The field vector of face `g` joining the patch.
@@ -509,7 +509,7 @@ impl<'a> Grower<'a> {
     ) -> ([Vec2; 2], bool) {
         let own = face_jacobian(self.mesh, g as usize, t, st);
         let radius = self.settings.distortion_radius;
-        let c = &self.mesh.centroids;
+        let m = self.mesh;
         let mut sum = [Vec2::ZERO; 2];
         let mut count = 0.0f32;
         for &f in &self.mesh.neighbours[g as usize] {
@@ -521,7 +521,7 @@ impl<'a> Grower<'a> {
             let Some(prev) = self.smooth.get(lf) else {
                 continue;
             };
-            let step = c[f as usize].distance(c[g as usize])
+            let step = m.centroid(f as usize).distance(m.centroid(g as usize))
                 / patch.face_t[lf].length().max(f32::MIN_POSITIVE);
             let w = (step / radius).min(1.0);
             let blended = match own {

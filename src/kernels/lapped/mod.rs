@@ -40,7 +40,7 @@ pub mod tangent_field;
 // For the quality metrics of `result_metrics`.
 pub mod composite;
 
-use crate::mesh::{PolyMesh, Topology};
+use crate::mesh::PolyMesh;
 use glam::Vec3;
 
 /// "No face" in [`TriMesh::neighbours`].
@@ -82,8 +82,6 @@ pub struct TriMesh {
     pub normals: Vec<Vec3>,
     /// Face areas.
     pub areas: Vec<f32>,
-    /// Face centroids.
-    pub centroids: Vec<Vec3>,
     /// Face across each edge.
     pub neighbours: Vec<[u32; 3]>,
     /// CSR offsets into `vertex_face_list`.
@@ -108,7 +106,6 @@ impl TriMesh {
                 corners: mesh.face_corners(face).len(),
             });
         }
-        let topo = Topology::build(mesh);
         let fc = mesh.face_count();
         let tris: Vec<[u32; 3]> = (0..fc)
             .map(|f| {
@@ -116,41 +113,21 @@ impl TriMesh {
                 [v[0], v[1], v[2]]
             })
             .collect();
-        let neighbours: Vec<[u32; 3]> = (0..fc)
-            .map(|f| {
-                let mut across = [NO_FACE; 3];
-                for (i, c) in mesh.face_corners(f).enumerate() {
-                    let faces = topo.edge_faces(topo.corner_edge[c]);
-                    if faces.len() == 2 {
-                        let other = if faces[0] as usize == f {
-                            faces[1]
-                        } else {
-                            faces[0]
-                        };
-                        if other as usize != f {
-                            across[i] = other;
-                        }
-                    }
-                }
-                across
-            })
-            .collect();
-        let p = &mesh.positions;
+        // Faces around each vertex, then the face across each edge from
+        // them: no full `Topology` (~140 bytes per vertex, and a sort of
+        // 16 bytes per corner) is built for what is read here.
+        let (vertex_face_start, vertex_face_list) = vertex_faces(&tris, mesh.vertex_count());
+        let neighbours = face_neighbours(&tris, &vertex_face_start, &vertex_face_list);
         let normals: Vec<Vec3> = (0..fc).map(|f| mesh.face_normal(f)).collect();
         let areas: Vec<f32> = (0..fc).map(|f| mesh.face_area(f)).collect();
-        let centroids: Vec<Vec3> = tris
-            .iter()
-            .map(|t| (p[t[0] as usize] + p[t[1] as usize] + p[t[2] as usize]) / 3.0)
-            .collect();
         Ok(Self {
             positions: mesh.positions.clone(),
             tris,
             normals,
             areas,
-            centroids,
             neighbours,
-            vertex_face_start: topo.vertex_face_start,
-            vertex_face_list: topo.vertex_face_list,
+            vertex_face_start,
+            vertex_face_list,
         })
     }
 
@@ -172,6 +149,15 @@ impl TriMesh {
     #[inline]
     pub fn corners(&self, f: usize) -> [Vec3; 3] {
         self.tris[f].map(|v| self.positions[v as usize])
+    }
+
+    /// The centroid of face `f` (computed, not stored: 24 bytes per face
+    /// saved).
+    #[inline]
+    pub fn centroid(&self, f: usize) -> Vec3 {
+        let p = &self.positions;
+        let t = self.tris[f];
+        (p[t[0] as usize] + p[t[1] as usize] + p[t[2] as usize]) / 3.0
     }
 
     /// The point with barycentric coordinates `b` on face `f`.
@@ -215,6 +201,76 @@ impl TriMesh {
             None => v - ng * ng.dot(v),
         }
     }
+}
+
+/// Faces around each vertex as CSR (offsets, list): in increasing order, a
+/// face once however often the vertex occurs in it (as
+/// `Topology::vertex_faces`).
+fn vertex_faces(tris: &[[u32; 3]], vertex_count: usize) -> (Vec<u32>, Vec<u32>) {
+    // The corners that are the first of their vertex in their face.
+    let firsts = |t: &[u32; 3]| {
+        [
+            (t[0], true),
+            (t[1], t[1] != t[0]),
+            (t[2], t[2] != t[0] && t[2] != t[1]),
+        ]
+    };
+    let mut start = vec![0u32; vertex_count + 1];
+    for (v, first) in tris.iter().flat_map(firsts) {
+        start[v as usize + 1] += u32::from(first);
+    }
+    for v in 0..vertex_count {
+        start[v + 1] += start[v];
+    }
+    let mut next = start.clone();
+    let mut list = vec![0u32; start[vertex_count] as usize];
+    for (f, t) in tris.iter().enumerate() {
+        for (v, first) in firsts(t) {
+            if first {
+                list[next[v as usize] as usize] = f as u32;
+                next[v as usize] += 1;
+            }
+        }
+    }
+    (start, list)
+}
+
+/// Per face, the face across each of its edges: across the edge `{a, b}`
+/// of face `f` when exactly two sides of all faces lie on that edge and the
+/// other one is not `f`'s, else [`NO_FACE`] (a boundary, a non-manifold
+/// edge, or a face folded onto itself). The faces with a side on `{a, b}`
+/// are all among `a`'s faces (`vertex_face_*`, a face listed once per
+/// vertex).
+fn face_neighbours(
+    tris: &[[u32; 3]],
+    vertex_face_start: &[u32],
+    vertex_face_list: &[u32],
+) -> Vec<[u32; 3]> {
+    use rayon::prelude::*;
+    tris.par_iter()
+        .enumerate()
+        .map(|(f, t)| {
+            [0, 1, 2].map(|i| {
+                let (a, b) = (t[i], t[(i + 1) % 3]);
+                let around = &vertex_face_list[vertex_face_start[a as usize] as usize
+                    ..vertex_face_start[a as usize + 1] as usize];
+                let (mut sides, mut other) = (0, NO_FACE);
+                for &g in around {
+                    let u = tris[g as usize];
+                    for j in 0..3 {
+                        let (x, y) = (u[j], u[(j + 1) % 3]);
+                        if (x == a && y == b) || (x == b && y == a) {
+                            sides += 1;
+                            if g as usize != f {
+                                other = g;
+                            }
+                        }
+                    }
+                }
+                if sides == 2 { other } else { NO_FACE }
+            })
+        })
+        .collect()
 }
 
 /// The per-face tangent field of §3.2 as the kernels read it.
@@ -265,6 +321,7 @@ pub(crate) mod test_meshes {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh::Topology;
 
     #[test]
     fn grid_adjacency_and_gradients() {
@@ -281,6 +338,70 @@ mod tests {
         // Transport on a flat mesh is the identity.
         let v = Vec3::new(0.3, 0.7, 0.0);
         assert!((m.transport(v, 0, 1) - v).length() < 1e-6);
+    }
+
+    /// The neighbours as the full topology gives them (the former
+    /// construction): the face across each side's edge when the edge has
+    /// exactly two sides and the other is another face.
+    fn neighbours_from_topology(mesh: &PolyMesh) -> Vec<[u32; 3]> {
+        let topo = Topology::build(mesh);
+        (0..mesh.face_count())
+            .map(|f| {
+                let mut across = [NO_FACE; 3];
+                for (i, c) in mesh.face_corners(f).enumerate() {
+                    let faces = topo.edge_faces(topo.corner_edge[c]);
+                    if faces.len() == 2 {
+                        let other = if faces[0] as usize == f {
+                            faces[1]
+                        } else {
+                            faces[0]
+                        };
+                        if other as usize != f {
+                            across[i] = other;
+                        }
+                    }
+                }
+                across
+            })
+            .collect()
+    }
+
+    #[test]
+    fn neighbours_equal_the_full_topology_s() {
+        // A grid with a fin (a third face on an edge), a face folded back
+        // onto its neighbour's edge, a face with a repeated vertex and an
+        // isolated triangle.
+        let grid = test_meshes::grid(6, 1.0);
+        let mut p = grid.positions.clone();
+        let mut tris: Vec<[u32; 3]> = (0..grid.face_count())
+            .map(|f| {
+                let v = grid.face(f);
+                [v[0], v[1], v[2]]
+            })
+            .collect();
+        p.push(Vec3::new(0.5, 0.5, 1.0));
+        let apex = (p.len() - 1) as u32;
+        tris.push([0, 1, apex]);
+        tris.push([7, 8, 14]);
+        tris.push([20, 20, 21]);
+        p.extend([
+            Vec3::splat(9.0),
+            Vec3::new(10.0, 9.0, 9.0),
+            Vec3::new(9.0, 10.0, 9.0),
+        ]);
+        let n = p.len() as u32;
+        tris.push([n - 3, n - 2, n - 1]);
+        for mesh in [
+            PolyMesh::from_triangles(p, &tris),
+            test_meshes::sphere(2),
+            grid,
+        ] {
+            let m = TriMesh::new(&mesh).unwrap();
+            assert_eq!(m.neighbours, neighbours_from_topology(&mesh));
+            let topo = Topology::build(&mesh);
+            assert_eq!(m.vertex_face_start, topo.vertex_face_start);
+            assert_eq!(m.vertex_face_list, topo.vertex_face_list);
+        }
     }
 
     #[test]

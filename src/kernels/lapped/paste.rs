@@ -79,11 +79,16 @@ impl Default for PasteSettings {
 
 /// One recorded paste operation (§3.5, §4 "runtime pasting"): the texture
 /// patch, the surface patch faces and their corners' texture coordinates.
+/// Only the faces the paste can still show at the end are listed: a face
+/// where the paste is exactly transparent, or hidden under later opaque
+/// pastes, at every coverage sample is dropped during the loop
+/// ([`Coverage::add_paste`]).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Paste {
     /// Index of the texture patch.
     pub texture: u32,
-    /// Mesh faces, seed first.
+    /// Mesh faces, in the order the surface patch grew (seed first, when
+    /// it is still shown).
     pub faces: Vec<u32>,
     /// Per face, its corners' texture coordinates (`[0, 1]` over the texture
     /// patch image, `v = 0` at the top row), in the mesh's corner order.
@@ -95,10 +100,15 @@ pub struct Paste {
 pub struct PasteReport {
     /// Number of pastes.
     pub pastes: usize,
-    /// Mean number of pastes holding a face.
+    /// Mean number of pastes that held a face (hidden ones included).
     pub mean_pastes_per_face: f64,
-    /// Mean number of faces per paste.
+    /// Mean number of faces per paste, as grown.
     pub mean_faces_per_paste: f64,
+    /// Mean number of pastes still holding a face at the end (the layers
+    /// that can be seen).
+    pub mean_held_per_face: f64,
+    /// Most layers held at once during the loop, per face.
+    pub max_held_per_face: f64,
     /// Faces still not covered (given up, or the paste budget ran out).
     pub uncovered_faces: Vec<u32>,
     /// Faces added by growing again after an optimisation.
@@ -260,7 +270,10 @@ pub fn paste_until_covered(
         ..settings.grow
     };
     let mut grower = Grower::new(mesh, field, grow);
-    let mut pastes: Vec<Paste> = Vec::new();
+    // Per paste its texture patch; the faces and coordinates live in the
+    // coverage's layer lists until the end.
+    let mut pastes: Vec<u32> = Vec::new();
+    let mut grown_faces = 0usize;
     let mut report = PasteReport::default();
     let mut covered_count = fc - open_count;
     progress.inc(covered_count as u64);
@@ -289,7 +302,7 @@ pub fn paste_until_covered(
         };
         let face = face as u32;
         seeds[face as usize] += 1;
-        let bary = match coverage.uncovered_point[face as usize] {
+        let bary = match coverage.uncovered_point(face as usize) {
             Some(b) => b,
             None => {
                 let (mut r1, mut r2) = (rng.random::<f32>(), rng.random::<f32>());
@@ -336,16 +349,14 @@ pub fn paste_until_covered(
             textures,
             &settings.coverage,
         );
-        pastes.push(Paste {
-            texture,
-            faces: patch.faces,
-            uvs,
-        });
+        drop(uvs);
+        pastes.push(texture);
+        grown_faces += patch.faces.len();
         // Faces leave the open set when covered (or given up); only the
         // pasted faces and the seed can change.
         let mut settled = 0;
         let boost = boost_of(early);
-        for &f in pastes[index as usize].faces.iter().chain([&face]) {
+        for &f in patch.faces.iter().chain([&face]) {
             let f = f as usize;
             if open[f] && (coverage.covered[f] || seeds[f] >= settings.max_seeds_per_face) {
                 open[f] = false;
@@ -357,15 +368,29 @@ pub fn paste_until_covered(
         covered_count += settled;
         progress.inc(settled as u64);
     }
+    drop(grower);
+    drop(tree);
     report.pastes = pastes.len();
     report.mean_pastes_per_face = coverage.mean_layers();
     report.mean_faces_per_paste = if pastes.is_empty() {
         0.0
     } else {
-        pastes.iter().map(|p| p.faces.len()).sum::<usize>() as f64 / pastes.len() as f64
+        grown_faces as f64 / pastes.len() as f64
     };
+    report.mean_held_per_face = coverage.held_layers() as f64 / fc.max(1) as f64;
+    report.max_held_per_face = coverage.pool_size() as f64 / fc.max(1) as f64;
     report.uncovered_faces = (0..fc as u32)
         .filter(|&f| !coverage.covered[f as usize])
+        .collect();
+    let pastes = coverage
+        .paste_lists(pastes.len())
+        .into_iter()
+        .zip(pastes)
+        .map(|((faces, uvs), texture)| Paste {
+            texture,
+            faces,
+            uvs,
+        })
         .collect();
     LappedTexture {
         pastes,

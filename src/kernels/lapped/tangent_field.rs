@@ -80,8 +80,8 @@ pub struct FieldConstraint {
 /// The face whose centroid is nearest to `p` (lowest index on ties).
 pub fn nearest_face(mesh: &TriMesh, p: Vec3) -> u32 {
     let mut best = (f32::INFINITY, 0u32);
-    for (f, c) in mesh.centroids.iter().enumerate() {
-        let d = c.distance_squared(p);
+    for f in 0..mesh.face_count() {
+        let d = mesh.centroid(f).distance_squared(p);
         if d < best.0 {
             best = (d, f as u32);
         }
@@ -362,12 +362,14 @@ mod tests {
         // Far away from all constraints, the background takes over.
         let far = (0..m.face_count())
             .max_by(|&a, &b| {
-                let da = m.centroids[a]
-                    .distance(m.centroids[10])
-                    .min(m.centroids[a].distance(m.centroids[300]));
-                let db = m.centroids[b]
-                    .distance(m.centroids[10])
-                    .min(m.centroids[b].distance(m.centroids[300]));
+                let da = m
+                    .centroid(a)
+                    .distance(m.centroid(10))
+                    .min(m.centroid(a).distance(m.centroid(300)));
+                let db = m
+                    .centroid(b)
+                    .distance(m.centroid(10))
+                    .min(m.centroid(b).distance(m.centroid(300)));
                 da.total_cmp(&db)
             })
             .unwrap();

@@ -17,7 +17,8 @@ use crate::image::Image;
 use crate::image::sample::Wrap;
 use crate::kernels::lapped::FaceField as FieldView;
 use crate::kernels::lapped::TriMesh;
-use crate::kernels::lapped::atlas::{AtlasSettings, build_atlas};
+use crate::kernels::lapped::atlas::{AtlasSettings, composite_atlas_with};
+use crate::kernels::lapped::composite::{PasteIndex, PasteRecord};
 use crate::kernels::lapped::coverage::{CoverageSettings, drawn_faces};
 use crate::kernels::lapped::grow::GrowSettings;
 use crate::kernels::lapped::mask::{
@@ -25,6 +26,7 @@ use crate::kernels::lapped::mask::{
 };
 use crate::kernels::lapped::param::SolveSettings;
 use crate::kernels::lapped::paste::{LappedTexture, PasteSettings, paste_until_covered};
+use crate::mesh::PolyMesh;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::tangent_field::FaceField;
@@ -33,7 +35,7 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use components::*;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -436,6 +438,8 @@ fn record_metrics(
     metrics.record(index, "mean_pastes_per_face", r.mean_pastes_per_face);
     metrics.record(index, "mean_draws_per_face", draws_per_face);
     metrics.record(index, "mean_faces_per_paste", r.mean_faces_per_paste);
+    metrics.record(index, "mean_held_per_face", r.mean_held_per_face);
+    metrics.record(index, "max_held_per_face", r.max_held_per_face);
     metrics.record(index, "uncovered_faces", r.uncovered_faces.len());
     metrics.record(
         index,
@@ -455,6 +459,55 @@ fn record_metrics(
             .map(|t| t.hull.vertices.len())
             .collect::<Vec<_>>(),
     );
+}
+
+/// The texture atlas's charts and coordinates, before the pastes exist.
+struct AtlasLayout {
+    charts: usize,
+    corner_uvs: Vec<[Vec2; 3]>,
+    texels_per_unit: f32,
+    fill: f32,
+}
+
+/// Lays out the atlas of `mesh` (triangles only; the paste loop reports
+/// any other face) with the shared atlas kernel.
+fn atlas_layout(mesh: &PolyMesh, settings: &AtlasSettings) -> Result<AtlasLayout, String> {
+    let tris: Vec<[u32; 3]> = (0..mesh.face_count())
+        .map(|f| match mesh.face(f) {
+            &[a, b, c] => Ok([a, b, c]),
+            _ => Err(format!("face {f} is not a triangle")),
+        })
+        .collect::<Result<_, _>>()?;
+    let uv = crate::kernels::atlas::build_uv_atlas(&mesh.positions, &tris, settings)
+        .map_err(|e| e.to_string())?;
+    Ok(AtlasLayout {
+        charts: uv.charts.count,
+        corner_uvs: uv.corner_uvs,
+        texels_per_unit: uv.texels_per_unit,
+        fill: uv.fill,
+    })
+}
+
+/// Returns the heap pages freed so far to the system (glibc's
+/// `malloc_trim`). The paste loop's per-face arrays (coverage, seed tree,
+/// growth stamps: ~80 bytes per vertex, each below the size glibc maps on
+/// its own) are freed in the middle of the heap, where glibc keeps their
+/// pages resident; the atlas kernel that follows allocates blocks too large
+/// to reuse those holes, so without this the process peaked ~200 MB higher
+/// at 901 k vertices. The same after the atlas layout, whose kernel leaves
+/// ~300 MB of such holes at 901 k. Nothing to do elsewhere.
+fn release_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        unsafe extern "C" {
+            fn malloc_trim(pad: usize) -> i32;
+        }
+        // SAFETY: `malloc_trim` only releases free pages of the allocator's
+        // own heaps; it is thread-safe and takes no pointer.
+        unsafe {
+            malloc_trim(0);
+        }
+    }
 }
 
 /// The `lapped_paste` stage.
@@ -499,6 +552,16 @@ impl Stage for LappedPaste {
                 ));
                 return;
             };
+            // The atlas layout depends on the mesh alone: it is made first,
+            // while nothing else of this stage is held (the shared atlas
+            // kernel needs ~300 bytes per vertex while it runs).
+            let atlas_settings = AtlasSettings {
+                size: settings.atlas_size,
+                normal_cone_deg: settings.atlas_normal_cone,
+                padding_px: settings.atlas_padding,
+            };
+            let layout = (settings.atlas_size > 0).then(|| atlas_layout(&geometry.0, &atlas_settings));
+            release_freed_memory();
 let tri = match TriMesh::new(&geometry.0) {
                 Ok(t) if field.t.len() == t.face_count() => t,
                 Ok(_) => {
@@ -577,44 +640,94 @@ let tri = match TriMesh::new(&geometry.0) {
             let mean_scale =
                 view.t.iter().map(|t| t.length() as f64).sum::<f64>() / view.t.len().max(1) as f64;
             spacing.0 = (mean_scale as f32 / unit_px).max(f32::MIN_POSITIVE);
+            drop(per_patch);
 
-            if settings.atlas_size > 0 {
-                let atlas_settings = AtlasSettings {
-                    size: settings.atlas_size,
-                    normal_cone_deg: settings.atlas_normal_cone,
-                    padding_px: settings.atlas_padding,
-                };
-                match build_atlas(&tri, &out.coverage, &textures, &atlas_settings) {
-                    Ok(atlas) => {
-                        metrics.record(ctx.index, "atlas_charts", atlas.charts.count);
-                        metrics.record(ctx.index, "atlas_fill", atlas.fill);
-                        metrics.record(ctx.index, "atlas_texels_per_unit", atlas.texels_per_unit);
-                        commands.entity(active.0).insert(AtlasTexture {
-                            uvs: atlas.corner_uvs.iter().flatten().copied().collect(),
-                            image: atlas.image,
-                        });
+            // Only the faces runtime pasting draws are kept (§4): the
+            // hidden ones were ~3/4 of all layers on a scan. The coverage
+            // and the adjacency go before the atlas is composited.
+            let LappedTexture {
+                pastes, coverage, ..
+            } = out;
+            drop(coverage);
+            drop(tri);
+            let kept: Vec<(u32, Vec<u32>, Vec<Vec2>)> = pastes
+                .into_iter()
+                .zip(&drawn)
+                .map(|(paste, drawn)| {
+                    let n = drawn.iter().filter(|&&d| d).count();
+                    let mut faces = Vec::with_capacity(n);
+                    let mut uvs = Vec::with_capacity(3 * n);
+                    for ((&f, uv), &d) in paste.faces.iter().zip(&paste.uvs).zip(drawn) {
+                        if d {
+                            faces.push(f);
+                            uvs.extend_from_slice(uv);
+                        }
                     }
-                    Err(reason) => metrics.record(
-                        ctx.index,
-                        "atlas",
-                        format!("skipped: {reason}"),
-                    ),
+                    (paste.texture, faces, uvs)
+                })
+                .collect();
+            drop(drawn);
+            release_freed_memory();
+
+            match layout {
+                Some(Ok(layout)) => {
+                    let records: Vec<PasteRecord> = kept
+                        .iter()
+                        .map(|(texture, faces, uvs)| PasteRecord {
+                            texture: *texture,
+                            faces,
+                            uvs,
+                        })
+                        .collect();
+                    match PasteIndex::new(layout.corner_uvs.len(), &records) {
+                        Ok(index) => {
+                            let image = composite_atlas_with(
+                                &layout.corner_uvs,
+                                &|f, out| out.extend(index.layers(f).map(|(_, t, uv)| (t, uv))),
+                                &textures,
+                                atlas_settings.size,
+                                atlas_settings.padding_px,
+                            );
+                            metrics.record(ctx.index, "atlas_charts", layout.charts);
+                            metrics.record(ctx.index, "atlas_fill", layout.fill);
+                            metrics.record(
+                                ctx.index,
+                                "atlas_texels_per_unit",
+                                layout.texels_per_unit,
+                            );
+                            commands.entity(active.0).insert(AtlasTexture {
+                                uvs: layout.corner_uvs.into_flattened(),
+                                image,
+                            });
+                        }
+                        Err(reason) => metrics.record(
+                            ctx.index,
+                            "atlas",
+                            format!("skipped: {reason}"),
+                        ),
+                    }
                 }
+                Some(Err(reason)) => {
+                    metrics.record(ctx.index, "atlas", format!("skipped: {reason}"))
+                }
+                None => {}
             }
 
+            release_freed_memory();
             for (entity, of) in &old {
                 if of.0 == active.0 {
                     commands.entity(entity).despawn();
                 }
             }
-            for (i, (paste, drawn)) in out.pastes.into_iter().zip(drawn).enumerate() {
+            for (i, (texture, faces, uvs)) in kept.into_iter().enumerate() {
+                let n = faces.len();
                 commands.spawn((
                     PasteOf(active.0),
                     PasteOrder(i as u32),
-                    TexturePatchIndex(paste.texture),
-                    PatchFaces(paste.faces),
-                    PatchUvs(paste.uvs.into_iter().flatten().collect()),
-                    PatchDrawn(drawn),
+                    TexturePatchIndex(texture),
+                    PatchFaces(faces),
+                    PatchUvs(uvs),
+                    PatchDrawn(vec![true; n]),
                 ));
             }
             commands.insert_resource(TexturePatchOrigins(
