@@ -1011,6 +1011,9 @@ fn culled_faces_leave_the_composite_unchanged() {
     assert!(draws >= 1.0);
 }
 
+/// A paste's texture patch and the faces it draws with their coordinates.
+type Shown = (u32, Vec<(u32, [Vec2; 3])>);
+
 /// The paste loop drops layers that can no longer be seen as it goes
 /// (`Coverage::add_paste`); that changes nothing it decides: the same
 /// pastes, the same report, and exactly the same drawn faces with the same
@@ -1032,7 +1035,7 @@ fn dropping_hidden_layers_changes_no_decision() {
             let out = paste_until_covered(&m, field, &textures, &settings, &Progress::hidden());
             let sizes: Vec<usize> = out.pastes.iter().map(|p| p.faces.len()).collect();
             let drawn = drawn_faces(&out.coverage, &sizes, &textures, &settings.coverage);
-            let shown: Vec<(u32, Vec<(u32, [Vec2; 3])>)> = out
+            let shown: Vec<Shown> = out
                 .pastes
                 .iter()
                 .zip(&drawn)

@@ -44,6 +44,10 @@ pub fn segment_charts(mesh: &TriMesh, settings: &AtlasSettings) -> Charts {
     crate::kernels::atlas::segment_charts(&mesh.positions, &mesh.tris, settings)
 }
 
+/// Appends the layers of face `f` to `out`, in paste order: texture patch
+/// and corner texture coordinates.
+pub type FaceLayersFn<'a> = dyn Fn(usize, &mut Vec<(u32, [Vec2; 3])>) + Sync + 'a;
+
 /// Composites every face's pastes into the atlas (step 3 of the module
 /// docs): RGB, `size × size`, gutters dilated by `padding_px` texels.
 pub fn composite_atlas(
@@ -66,7 +70,7 @@ pub fn composite_atlas(
 /// face `f` (texture patch, corner texture coordinates; in paste order).
 pub fn composite_atlas_with(
     corner_uvs: &[[Vec2; 3]],
-    layers: &(dyn Fn(usize, &mut Vec<(u32, [Vec2; 3])>) + Sync),
+    layers: &FaceLayersFn<'_>,
     textures: &[TexturePatch],
     size: u32,
     padding_px: u32,
@@ -149,7 +153,7 @@ pub fn build_atlas(
 pub fn build_atlas_with(
     positions: &[Vec3],
     tris: &[[u32; 3]],
-    layers: &(dyn Fn(usize, &mut Vec<(u32, [Vec2; 3])>) + Sync),
+    layers: &FaceLayersFn<'_>,
     textures: &[TexturePatch],
     settings: &AtlasSettings,
 ) -> Result<Atlas, String> {

@@ -242,7 +242,7 @@ impl Coverage {
     #[inline]
     pub fn uncovered_point(&self, f: usize) -> Option<[f32; 3]> {
         let [u, v] = self.worst[f];
-        (!u.is_nan()).then(|| [1.0 - u - v, u, v])
+        (!u.is_nan()).then_some([1.0 - u - v, u, v])
     }
 
     /// Appends `layer` to face `f`'s list.
