@@ -30,6 +30,8 @@ pub struct MessyReport {
     pub slivers: usize,
     pub isolated_triangles: usize,
     pub duplicated_vertices: usize,
+    /// Surface area of all faces (fan-triangulated), world units².
+    pub area: f64,
 }
 
 /// A tiny deterministic generator (splitmix64).
@@ -242,6 +244,23 @@ pub fn messy_scan(vertices: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<Vec<u32>>, 
     }
     report.vertices = p.len();
     report.faces = f.len();
+    let sub = |a: [f32; 3], b: [f32; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    report.area = f
+        .iter()
+        .flat_map(|face| (1..face.len() - 1).map(move |i| (face[0], face[i], face[i + 1])))
+        .map(|(a, b, c)| {
+            let (u, v) = (
+                sub(p[a as usize], p[b as usize]),
+                sub(p[a as usize], p[c as usize]),
+            );
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            0.5 * f64::from(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        })
+        .sum();
     (p, f, report)
 }
 
