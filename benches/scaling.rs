@@ -9,6 +9,14 @@
 //!
 //!     cargo bench --bench scaling
 //!
+//! The per-vertex methods synthesise at the texture's density, which the
+//! config fixes: on a bigger scan of the same object they synthesise the
+//! same number of vertices and map the result back. With
+//! `SURFSYNTH_SCALING_DENSE=1` the synthesis follows the scan instead
+//! (`[input] texture_scale` of one exemplar pixel per vertex
+//! spacing of the scan, so `retile` and `subdivide_sqrt2` derive the scan's
+//! vertex count), which measures the synthesis itself at 10 k to 1 M.
+//!
 //! Not a criterion bench: one run per size is the measurement (each takes
 //! seconds to minutes), and peak memory needs a process of its own.
 
@@ -54,6 +62,7 @@ fn main() {
             .filter_map(|s| s.trim().parse().ok())
             .collect();
     }
+    let dense = std::env::var("SURFSYNTH_SCALING_DENSE").is_ok();
     let methods: Option<Vec<String>> = std::env::var("SURFSYNTH_SCALING_METHODS")
         .ok()
         .map(|l| l.split(',').map(|s| s.trim().to_string()).collect());
@@ -75,9 +84,20 @@ fn main() {
                 continue;
             }
             let out = dir.path().join(format!("out_{n}_{method}"));
-            let run = Command::new(&bin)
-                .arg("run")
-                .arg(root.join("configs").join(config))
+            let mut cmd = Command::new(&bin);
+            cmd.arg("run").arg(root.join("configs").join(config));
+            // Dense: one exemplar pixel per vertex spacing on the scan, so
+            // the per-vertex methods synthesise as many vertices as it has.
+            if dense && matches!(method, "wei_levoy" | "coherent" | "bangay_morkel") {
+                let texels_per_unit = (report.vertices as f64 / report.area).sqrt();
+                cmd.args([
+                    "--set",
+                    "input.texture_scale_unit=\"pixels_per_unit\"",
+                    "--set",
+                    &format!("input.texture_scale={texels_per_unit}"),
+                ]);
+            }
+            let run = cmd
                 .arg("--set")
                 .arg(format!("input.mesh={}", mesh.display()))
                 .arg("--out")

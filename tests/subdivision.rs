@@ -784,82 +784,6 @@ fn adaptive_transition_uses_triangles_against_kept_faces() {
 
 // ------------------------------------------------------------ thin walls
 
-/// A plate of `n × n` cells of side 1 and thickness `t`, with a square
-/// hole through every interior cell of odd row and column: genus = the
-/// number of holes. Quads, outward.
-fn perforated_plate(n: usize, t: f32) -> (PolyMesh, usize) {
-    let hole = |i: usize, j: usize| i % 2 == 1 && j % 2 == 1 && i + 1 < n && j + 1 < n;
-    let solid = |i: isize, j: isize| {
-        i >= 0 && j >= 0 && (i as usize) < n && (j as usize) < n && !hole(i as usize, j as usize)
-    };
-    let id = |i: usize, j: usize, top: bool| ((i * (n + 1) + j) * 2 + top as usize) as u32;
-    let mut p = Vec::new();
-    for i in 0..=n {
-        for j in 0..=n {
-            p.push(Vec3::new(i as f32, j as f32, 0.0));
-            p.push(Vec3::new(i as f32, j as f32, t));
-        }
-    }
-    let mut faces: Vec<Vec<u32>> = Vec::new();
-    let mut holes = 0;
-    for i in 0..n {
-        for j in 0..n {
-            if !solid(i as isize, j as isize) {
-                holes += 1;
-                continue;
-            }
-            faces.push(vec![
-                id(i, j, true),
-                id(i + 1, j, true),
-                id(i + 1, j + 1, true),
-                id(i, j + 1, true),
-            ]);
-            faces.push(vec![
-                id(i, j, false),
-                id(i, j + 1, false),
-                id(i + 1, j + 1, false),
-                id(i + 1, j, false),
-            ]);
-            let (ii, jj) = (i as isize, j as isize);
-            // Side walls where the neighbour is not solid, facing it.
-            if !solid(ii - 1, jj) {
-                faces.push(vec![
-                    id(i, j, false),
-                    id(i, j, true),
-                    id(i, j + 1, true),
-                    id(i, j + 1, false),
-                ]);
-            }
-            if !solid(ii + 1, jj) {
-                faces.push(vec![
-                    id(i + 1, j, false),
-                    id(i + 1, j + 1, false),
-                    id(i + 1, j + 1, true),
-                    id(i + 1, j, true),
-                ]);
-            }
-            if !solid(ii, jj - 1) {
-                faces.push(vec![
-                    id(i, j, false),
-                    id(i + 1, j, false),
-                    id(i + 1, j, true),
-                    id(i, j, true),
-                ]);
-            }
-            if !solid(ii, jj + 1) {
-                faces.push(vec![
-                    id(i, j + 1, false),
-                    id(i, j + 1, true),
-                    id(i + 1, j + 1, true),
-                    id(i + 1, j + 1, false),
-                ]);
-            }
-        }
-    }
-    let refs: Vec<&[u32]> = faces.iter().map(Vec::as_slice).collect();
-    (PolyMesh::from_polygons(p, refs), holes)
-}
-
 /// Distance from `q` to triangle `abc`.
 fn point_triangle_distance(q: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
     let n = (b - a).cross(c - a);
@@ -914,7 +838,7 @@ fn subdivide_stage(mesh: &PolyMesh, extra: &str) -> PolyMesh {
 /// corners by 0.13 cells, more than the wall is thick).
 #[test]
 fn thin_walls_keep_their_shape_through_four_steps() {
-    let (plate, holes) = perforated_plate(11, 0.1);
+    let (plate, holes) = common::messy::perforated_plate(11, 0.1);
     assert!(holes > 20, "genus {holes}");
     let diagonal = {
         let (lo, hi) = plate.bounding_box().unwrap();

@@ -283,6 +283,32 @@ impl FlattenScratch {
     }
 }
 
+/// Scratches of [`flatten_stencil`] shared by the chunks of a parallel loop:
+/// a chunk takes one (or makes one when all are in use) and gives it back,
+/// so there are at most as many as threads and each keeps its mesh-sized
+/// buffers from chunk to chunk (a scratch per chunk would clear a
+/// mesh-sized buffer per chunk: quadratic in the mesh). Dropped with the pool.
+#[derive(Debug, Default)]
+pub struct ScratchPool(std::sync::Mutex<Vec<FlattenScratch>>);
+
+impl ScratchPool {
+    /// An empty pool.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Runs `f` with a scratch of the pool.
+    pub fn with<R>(&self, f: impl FnOnce(&mut FlattenScratch) -> R) -> R {
+        let taken = self.0.lock().map(|mut p| p.pop()).unwrap_or_default();
+        let mut scratch = taken.unwrap_or_default();
+        let r = f(&mut scratch);
+        if let Ok(mut p) = self.0.lock() {
+            p.push(scratch);
+        }
+        r
+    }
+}
+
 /// Tolerance on barycentric weights, so template points on shared edges and
 /// vertices are found.
 const INSIDE_EPS: f32 = 1e-5;

@@ -30,6 +30,8 @@ pub struct MessyReport {
     pub slivers: usize,
     pub isolated_triangles: usize,
     pub duplicated_vertices: usize,
+    /// Surface area of all faces (fan-triangulated), world units².
+    pub area: f64,
 }
 
 /// A tiny deterministic generator (splitmix64).
@@ -242,6 +244,23 @@ pub fn messy_scan(vertices: usize, seed: u64) -> (Vec<[f32; 3]>, Vec<Vec<u32>>, 
     }
     report.vertices = p.len();
     report.faces = f.len();
+    let sub = |a: [f32; 3], b: [f32; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    report.area = f
+        .iter()
+        .flat_map(|face| (1..face.len() - 1).map(move |i| (face[0], face[i], face[i + 1])))
+        .map(|(a, b, c)| {
+            let (u, v) = (
+                sub(p[a as usize], p[b as usize]),
+                sub(p[a as usize], p[c as usize]),
+            );
+            let n = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            0.5 * f64::from(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        })
+        .sum();
     (p, f, report)
 }
 
@@ -264,4 +283,80 @@ pub fn write_messy_scan(dir: &Path, vertices: usize, seed: u64) -> (PathBuf, Mes
     let path = dir.join(format!("messy_{vertices}_{seed}.off"));
     std::fs::write(&path, text).expect("the scan is written");
     (path, report)
+}
+
+/// A plate of `n × n` cells of side 1 and thickness `t`, with a square
+/// hole through every interior cell of odd row and column: genus = the
+/// number of holes. Quads, outward.
+pub fn perforated_plate(n: usize, t: f32) -> (surfsynth::mesh::PolyMesh, usize) {
+    let hole = |i: usize, j: usize| i % 2 == 1 && j % 2 == 1 && i + 1 < n && j + 1 < n;
+    let solid = |i: isize, j: isize| {
+        i >= 0 && j >= 0 && (i as usize) < n && (j as usize) < n && !hole(i as usize, j as usize)
+    };
+    let id = |i: usize, j: usize, top: bool| ((i * (n + 1) + j) * 2 + top as usize) as u32;
+    let mut p = Vec::new();
+    for i in 0..=n {
+        for j in 0..=n {
+            p.push(glam::Vec3::new(i as f32, j as f32, 0.0));
+            p.push(glam::Vec3::new(i as f32, j as f32, t));
+        }
+    }
+    let mut faces: Vec<Vec<u32>> = Vec::new();
+    let mut holes = 0;
+    for i in 0..n {
+        for j in 0..n {
+            if !solid(i as isize, j as isize) {
+                holes += 1;
+                continue;
+            }
+            faces.push(vec![
+                id(i, j, true),
+                id(i + 1, j, true),
+                id(i + 1, j + 1, true),
+                id(i, j + 1, true),
+            ]);
+            faces.push(vec![
+                id(i, j, false),
+                id(i, j + 1, false),
+                id(i + 1, j + 1, false),
+                id(i + 1, j, false),
+            ]);
+            let (ii, jj) = (i as isize, j as isize);
+            // Side walls where the neighbour is not solid, facing it.
+            if !solid(ii - 1, jj) {
+                faces.push(vec![
+                    id(i, j, false),
+                    id(i, j, true),
+                    id(i, j + 1, true),
+                    id(i, j + 1, false),
+                ]);
+            }
+            if !solid(ii + 1, jj) {
+                faces.push(vec![
+                    id(i + 1, j, false),
+                    id(i + 1, j + 1, false),
+                    id(i + 1, j + 1, true),
+                    id(i + 1, j, true),
+                ]);
+            }
+            if !solid(ii, jj - 1) {
+                faces.push(vec![
+                    id(i, j, false),
+                    id(i + 1, j, false),
+                    id(i + 1, j, true),
+                    id(i, j, true),
+                ]);
+            }
+            if !solid(ii, jj + 1) {
+                faces.push(vec![
+                    id(i, j + 1, false),
+                    id(i, j + 1, true),
+                    id(i + 1, j + 1, true),
+                    id(i + 1, j + 1, false),
+                ]);
+            }
+        }
+    }
+    let refs: Vec<&[u32]> = faces.iter().map(Vec::as_slice).collect();
+    (surfsynth::mesh::PolyMesh::from_polygons(p, refs), holes)
 }

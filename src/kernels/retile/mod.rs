@@ -45,9 +45,21 @@
 //! split (see [`InputReport`]), vertices in no face are left out.
 //! Non-manifold edges, non-orientable components, non-finite positions,
 //! meshes without faces (or area) and settings out of range are
-//! [`RetileError`]s naming what and where, as is a level whose count cannot
-//! come within 5% of its target (a thin tube needs at least three vertices
-//! around, whatever the target).
+//! [`RetileError`]s naming what and where, as is a target below three
+//! vertices per connected piece (checked before any remeshing).
+//!
+//! # Feasible counts
+//!
+//! Each level aims at its share of the target per connected piece, by area;
+//! a piece whose share is below [`remesh::SMALL_PIECE`] vertices keeps the
+//! few its topology needs instead, and the level's target becomes the large
+//! pieces' shares plus what the small ones hold
+//! ([`RetiledLevel::target_vertices`]), so a scan's chips do not make the
+//! main surface coarser. Every level lands within 5% of that target, except
+//! where the surface's thin parts need more vertices than the target leaves
+//! them (a thin tube needs three vertices around whatever the target; a
+//! perforated plate needs its hole walls): the level is then as coarse as
+//! the surface allows, kept with a warning, not refused.
 //!
 //! Deterministic: the same input and settings (including
 //! [`RetileSettings::seed`]) give the same output at any rayon thread count.
@@ -67,7 +79,7 @@ pub use project::{
 use crate::mesh::PolyMesh;
 use crate::progress::Progress;
 use glam::Vec3;
-use remesh::{LevelPlan, remesh_level, snap_to_surface};
+use remesh::{LevelPlan, Pieces, remesh_level, snap_to_surface};
 
 /// How fine level 0 should be.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -229,7 +241,8 @@ pub struct RetiledLevel {
     /// For each vertex: its barycentric coordinates in `source_face`, in the
     /// corner order of that triangle; they sum to 1.
     pub source_bary: Vec<Vec3>,
-    /// The vertex count this level aimed at.
+    /// The vertex count this level aimed at: the asked count, with each
+    /// small piece's share replaced by the vertices it holds.
     pub target_vertices: usize,
     /// The target edge length the remesher ended with (model units).
     pub edge_length: f32,
@@ -294,17 +307,6 @@ pub enum RetileError {
          is not orientable, so its triangles cannot all face one way"
     )]
     NonOrientable { face: u32 },
-    /// The topology needs more vertices than a level asked for.
-    #[error(
-        "retile: level {level} has {reached} vertices but should have {target} (±5%); \
-         the surface's topology needs more vertices than that — ask for more vertices \
-         at level 0"
-    )]
-    TargetUnreachable {
-        level: u32,
-        target: usize,
-        reached: usize,
-    },
 }
 
 /// Retiles `input` into a pyramid of `settings.levels` even triangle meshes
@@ -316,11 +318,11 @@ pub enum RetileError {
 /// two CPU-seconds.
 ///
 /// # Errors
-/// See [`RetileError`]: bad settings, unusable input, or a finest level
-/// whose vertex count cannot come within 5% of its target. Coarser levels
-/// that the topology keeps above their target are kept (a warning is
-/// logged); the pyramid ends early, with fewer levels than asked, at a level
-/// that would not shrink below half the finer one.
+/// See [`RetileError`]: bad settings, unusable input, or a target below
+/// three vertices per connected piece. Levels that the surface's thin parts
+/// keep above their target are kept (a warning is logged; see "Feasible
+/// counts" in the module docs); the pyramid ends early, with fewer levels
+/// than asked, at a level that would not shrink below half the finer one.
 pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyramid, RetileError> {
     retile_with_progress(input, settings, &Progress::hidden())
 }
@@ -348,9 +350,8 @@ pub fn retile_with_progress(
     }
     let v0 = settings.level0_vertices(area)?;
     // Every connected piece keeps a few vertices whatever the target (a
-    // triangle at least): a level asking for fewer than that cannot land
-    // within 5 %. Checked before any remeshing; coarser levels below the
-    // floor are not attempted (the pyramid ends early).
+    // triangle at least): a finest level asking for fewer than that leaves
+    // nothing for the surface. Checked before any remeshing.
     let floor = MIN_VERTICES_PER_COMPONENT * prep.report.components;
     if (v0 as f64) * (1.0 + RetileSettings::COUNT_TOLERANCE) < floor as f64 {
         return Err(RetileError::TooManyComponents {
@@ -366,19 +367,23 @@ pub fn retile_with_progress(
             .sum(),
     );
 
+    let pieces = Pieces::of(&prep.mesh);
+    let mut counts = Vec::new();
     let mut mesh = prep.mesh.clone();
     remesh::attach_to_input(&mut mesh, &proj);
     let mut len = equilateral_edge_length(area, v0);
     let mut levels = Vec::with_capacity(settings.levels as usize);
     for level in 0..settings.levels {
         let target = level_target(v0, level);
-        if level > 0 && (target as f64) * (1.0 + RetileSettings::COUNT_TOLERANCE) < floor as f64 {
+        // Coarser levels coarsen the large pieces; once every piece is
+        // small at this level's density there is nothing left to coarsen.
+        if level > 0 && pieces.split(target, &vec![0; pieces.area_share.len()]).1 == 0.0 {
             tracing::warn!(
                 level,
                 target,
                 components = prep.report.components,
-                "retile: {} connected pieces need at least {floor} vertices, more than this level's target; the pyramid ends at {level} levels",
-                prep.report.components
+                "retile: every connected piece is below {} vertices at this level's density; the pyramid ends at {level} levels",
+                remesh::SMALL_PIECE
             );
             break;
         }
@@ -390,7 +395,16 @@ pub fn retile_with_progress(
             iterations: settings.iterations,
             seed: splitmix(settings.seed ^ splitmix(level as u64 + 1)),
         };
-        len = remesh_level(&mut mesh, &proj, &plan, progress);
+        let (l, target) = remesh_level(&mut mesh, &proj, &pieces, &plan, progress);
+        len = l;
+        if target > plan.target_vertices {
+            tracing::info!(
+                level,
+                asked = plan.target_vertices,
+                target,
+                "retile: small pieces of the input keep more vertices than their share of the level; the rest keeps the density asked for"
+            );
+        }
         mesh.compact();
         snap_to_surface(&mut mesh, &proj);
         let max_change = (repair::MAX_COUNT_CHANGE * target as f64) as usize;
@@ -406,34 +420,33 @@ pub fn retile_with_progress(
         let reached = mesh.live_vertices;
         let off = (reached as f64 - target as f64).abs()
             > RetileSettings::COUNT_TOLERANCE * target as f64;
-        if off && level == 0 {
-            return Err(RetileError::TargetUnreachable {
-                level,
-                target,
-                reached,
-            });
-        }
-        // A coarser level the topology keeps above its target (thin parts,
-        // many components, high genus need a minimum of vertices each) is
-        // kept as it is: a level between its neighbours is still a pyramid
-        // level. One that no longer shrinks ends the pyramid early.
-        let previous = levels.last().map(|l: &RetiledLevel| l.mesh.vertex_count());
+        // A level the surface keeps above its target (thin walls and
+        // handles need a minimum of vertices: no collapse there keeps the
+        // topology and the triangles facing the way the input does) is kept
+        // as it is, as dense as the surface allows: a level between its
+        // neighbours is still a pyramid level. One that no longer shrinks
+        // ends the pyramid early.
         if off {
             tracing::warn!(
                 level,
                 target,
                 reached,
-                "retile: the surface's topology keeps this level above its target vertex count"
+                "retile: the surface's thin parts keep this level above its target vertex count (the fewest vertices that keep its shape and topology)"
             );
         }
-        if let Some(p) = previous
-            && 2 * reached > p
+        // The large pieces (by this level's shares) must shrink to at most
+        // half of what they had on the finer level; small ones keep theirs.
+        let previous_free = (level > 0).then(|| pieces.split(plan.target_vertices, &counts).0);
+        pieces.counts(&mesh, &mut counts);
+        let free = pieces.split(plan.target_vertices, &counts).0;
+        if let Some(p) = previous_free
+            && 2 * free > p
         {
             tracing::warn!(
                 level,
-                reached,
+                free,
                 previous = p,
-                "retile: level does not shrink below half the finer level; the pyramid ends here"
+                "retile: the level's large pieces do not shrink below half the finer level; the pyramid ends here"
             );
             break;
         }

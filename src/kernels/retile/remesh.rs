@@ -18,6 +18,14 @@
 //!    a triangle over is not taken;
 //! 5. rescale `L` by `sqrt(V / V_target)` so the count converges to the target.
 //!
+//! The count in step 5 is that of the pieces that can follow the target
+//! ([`Pieces`]): a connected piece whose share of the target by area is
+//! below [`SMALL_PIECE`] vertices (a chip, a stray triangle of a scan) keeps
+//! whatever few vertices its topology needs, and the rest of the surface
+//! keeps the density asked for instead of being made coarser to pay for them.
+//! The level's count then aims at the large pieces' shares plus what the
+//! small ones hold.
+//!
 //! Afterwards the count is matched exactly by splitting the longest or
 //! collapsing the shortest edges, and a few more flip and relaxation rounds
 //! smooth the result. "Turned over" means the triangle normal has a
@@ -88,19 +96,117 @@ impl Scratch {
     }
 }
 
-/// Remeshes `mesh` in place onto `proj`; returns the final target edge length.
-/// `progress` advances by the target vertex count per iteration and once
-/// more for the final count matching and smoothing.
+/// A connected piece with a smaller share of a level's target than this
+/// (vertices, by area) does not steer the edge length: it keeps the few
+/// vertices its topology needs (a closed chip at least 4, a lone triangle 3).
+pub(crate) const SMALL_PIECE: f64 = 16.0;
+
+/// The input's connected pieces: which piece each input triangle belongs
+/// to and each piece's share of the total area.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Pieces {
+    /// Piece of each input triangle (the faces of the projector).
+    pub tri_piece: Vec<u32>,
+    /// Area of each piece over the total area.
+    pub area_share: Vec<f64>,
+}
+
+impl Pieces {
+    /// The pieces of a prepared input mesh (triangle `f` = half-edges `3f..3f+3`).
+    pub(crate) fn of(mesh: &TriMesh) -> Self {
+        let nv = mesh.pos.len();
+        let mut piece = vec![NONE; nv];
+        let mut stack = Vec::new();
+        let mut ring = Vec::new();
+        let mut count = 0u32;
+        for s in 0..nv as u32 {
+            if piece[s as usize] != NONE || mesh.out[s as usize] == NONE {
+                continue;
+            }
+            piece[s as usize] = count;
+            stack.push(s);
+            while let Some(v) = stack.pop() {
+                mesh.ring(v, &mut ring);
+                for &w in &ring {
+                    if piece[w as usize] == NONE {
+                        piece[w as usize] = count;
+                        stack.push(w);
+                    }
+                }
+            }
+            count += 1;
+        }
+        let faces = mesh.halfedge_slots() / 3;
+        let mut tri_piece = vec![0u32; faces];
+        let mut area = vec![0.0f64; count as usize];
+        for (f, tp) in tri_piece.iter_mut().enumerate() {
+            let h = 3 * f as u32;
+            if !mesh.alive_halfedge(h) {
+                continue;
+            }
+            let c = piece[mesh.vert[h as usize] as usize];
+            *tp = c;
+            area[c as usize] += 0.5 * f64::from(mesh.face_normal_scaled(h).length());
+        }
+        let total: f64 = area.iter().sum();
+        let area_share = area
+            .iter()
+            .map(|a| if total > 0.0 { a / total } else { 0.0 })
+            .collect();
+        Self {
+            tri_piece,
+            area_share,
+        }
+    }
+
+    /// Per piece, the live vertices of `mesh` lying on it (by their source face).
+    pub(crate) fn counts(&self, mesh: &TriMesh, out: &mut Vec<usize>) {
+        out.clear();
+        out.resize(self.area_share.len(), 0);
+        for v in 0..mesh.pos.len() {
+            if mesh.out[v] != NONE
+                && let Some(&c) = self.tri_piece.get(mesh.src_face[v] as usize)
+            {
+                out[c as usize] += 1;
+            }
+        }
+    }
+
+    /// For a level aiming at `target` vertices: `(vertices on the pieces
+    /// that follow the target, their share of it, vertices held by small
+    /// pieces)`, given per-piece `counts`.
+    pub(crate) fn split(&self, target: usize, counts: &[usize]) -> (usize, f64, usize) {
+        let (mut free, mut share, mut held) = (0, 0.0, 0);
+        for (&a, &n) in self.area_share.iter().zip(counts) {
+            let s = a * target as f64;
+            if s < SMALL_PIECE {
+                held += n;
+            } else {
+                free += n;
+                share += s;
+            }
+        }
+        (free, share, held)
+    }
+}
+
+/// Remeshes `mesh` in place onto `proj`; returns the final target edge
+/// length and the vertex count the level aimed at in the end: the plan's
+/// target, with each small piece's share replaced by what it holds (see
+/// [`Pieces`]). `progress` advances by the target vertex count per
+/// iteration and once more for the final count matching and smoothing.
 pub(crate) fn remesh_level(
     mesh: &mut TriMesh,
     proj: &SurfaceProjector,
+    pieces: &Pieces,
     plan: &LevelPlan,
     progress: &Progress,
-) -> f32 {
+) -> (f32, usize) {
     let mut rng = Pcg64Mcg::seed_from_u64(plan.seed);
     let mut scratch = Scratch::default();
     let mut len = plan.edge_length;
-    let target = plan.target_vertices.max(1);
+    let mut counts = Vec::new();
+    let mut target = plan.target_vertices.max(1);
     for _ in 0..plan.iterations {
         split_long_edges(mesh, 4.0 / 3.0 * len, &mut rng);
         collapse_short_edges(
@@ -114,9 +220,18 @@ pub(crate) fn remesh_level(
         mesh.compact();
         equalize_valences(mesh, proj);
         relax(mesh, proj, SMOOTHING_STEPS);
-        let ratio = (mesh.live_vertices as f32 / target as f32).sqrt();
+        pieces.counts(mesh, &mut counts);
+        let (free, share, held) = pieces.split(plan.target_vertices, &counts);
+        let ratio = if share > 0.0 {
+            (free as f64 / share).sqrt() as f32
+        } else {
+            (mesh.live_vertices as f32 / plan.target_vertices.max(1) as f32).sqrt()
+        };
+        if share > 0.0 {
+            target = (share.round() as usize + held).max(1);
+        }
         len *= ratio.clamp(0.5, 2.0);
-        progress.inc(target as u64);
+        progress.inc(plan.target_vertices as u64);
     }
     match_vertex_count(mesh, proj, target, len, &mut rng, &mut scratch);
     mesh.compact();
@@ -126,8 +241,8 @@ pub(crate) fn remesh_level(
     }
     equalize_valences(mesh, proj);
     relax(mesh, proj, SMOOTHING_STEPS);
-    progress.inc(target as u64);
-    len
+    progress.inc(plan.target_vertices as u64);
+    (len, target)
 }
 
 /// Ties every vertex of a freshly prepared `mesh` (whose faces are those of
@@ -702,7 +817,8 @@ mod tests {
             iterations: 8,
             seed: 1,
         };
-        remesh_level(&mut mesh, &proj, &plan, &Progress::hidden());
+        let pieces = Pieces::of(&prep.mesh);
+        remesh_level(&mut mesh, &proj, &pieces, &plan, &Progress::hidden());
         mesh.check().unwrap();
         mesh.compact();
         mesh.check().unwrap();

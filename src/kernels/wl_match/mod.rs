@@ -50,8 +50,8 @@ use self::parents::TriangleBvh;
 pub use self::search::SearchKind;
 use self::search::{Match, build_search};
 use super::flatten::{
-    FlattenScratch, PatchSeed, StencilPoint, Template, TriangleAdjacency, flatten_stencil,
-    resample_stencil, template_spacing,
+    FlattenScratch, PatchSeed, ScratchPool, StencilPoint, Template, TriangleAdjacency,
+    flatten_stencil, resample_stencil, template_spacing,
 };
 use super::frames::TangentFrame;
 use crate::image::{Image, pyramid::gaussian_pyramid, sample::Wrap};
@@ -404,64 +404,60 @@ pub fn wei_levoy_synthesis_with_progress(
             };
             let tp = template.points();
             let stencil_span = tracing::info_span!("wl_stencils", level = l).entered();
-            let mut stencils = vec![StencilPoint::UNCOVERED; nv * tp];
-            // One scratch per fixed chunk of vertices: its buffers are as
-            // long as the mesh, so it must not be made per vertex (rayon's
-            // `map_init` may call its init that often).
-            let uncovered: usize = stencils
-                .par_chunks_mut(tp * FLATTEN_CHUNK)
-                .enumerate()
-                .map(|(c, chunk)| {
-                    let mut scratch = FlattenScratch::new();
-                    let mut uncovered = 0;
-                    for (i, st) in chunk.chunks_exact_mut(tp).enumerate() {
-                        let v = c * FLATTEN_CHUNK + i;
-                        let r = flatten_stencil(
-                            &geo.adjacency,
-                            &level.mesh.positions,
-                            PatchSeed::Vertex(v as u32),
-                            &level.frames[v],
-                            template,
-                            st,
-                            &mut scratch,
-                        );
-                        uncovered += tp - r.covered;
-                    }
-                    uncovered
-                })
-                .sum();
-            drop(stencil_span);
-            let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
-            report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
+            // The stencils are flattened here to find which vertices each
+            // vertex reads, and again when its query is built: storing them
+            // would cost `points × 24` bytes per vertex (1.2 KB for 7 × 7).
+            let pool = ScratchPool::new();
+            let stencil_of = |v: usize, st: &mut [StencilPoint], scratch: &mut FlattenScratch| {
+                flatten_stencil(
+                    &geo.adjacency,
+                    &level.mesh.positions,
+                    PatchSeed::Vertex(v as u32),
+                    &level.frames[v],
+                    template,
+                    st,
+                    scratch,
+                )
+            };
             // Which vertices each vertex reads (covered stencil vertices),
             // as one flat list with offsets, built per fixed chunk.
-            let chunks: Vec<(Vec<u32>, Vec<u32>)> = stencils
-                .par_chunks(tp * FLATTEN_CHUNK)
-                .map(|chunk| {
-                    let mut flat = Vec::with_capacity(chunk.len());
-                    let mut counts = Vec::with_capacity(chunk.len() / tp.max(1));
-                    let mut one: Vec<u32> = Vec::with_capacity(3 * tp);
-                    for st in chunk.chunks_exact(tp) {
-                        one.clear();
-                        for s in st.iter().filter(|s| s.is_covered()) {
-                            for k in 0..3 {
-                                if s.weights[k] != 0.0 {
-                                    one.push(s.vertices[k]);
+            let chunks: Vec<(Vec<u32>, Vec<u32>, usize)> = (0..nv)
+                .collect::<Vec<usize>>()
+                .par_chunks(FLATTEN_CHUNK)
+                .map(|vs| {
+                    pool.with(|scratch| {
+                        let mut st = vec![StencilPoint::UNCOVERED; tp];
+                        let mut flat = Vec::with_capacity(vs.len() * tp);
+                        let mut counts = Vec::with_capacity(vs.len());
+                        let mut one: Vec<u32> = Vec::with_capacity(3 * tp);
+                        let mut uncovered = 0;
+                        for &v in vs {
+                            uncovered += tp - stencil_of(v, &mut st, scratch).covered;
+                            one.clear();
+                            for s in st.iter().filter(|s| s.is_covered()) {
+                                for k in 0..3 {
+                                    if s.weights[k] != 0.0 {
+                                        one.push(s.vertices[k]);
+                                    }
                                 }
                             }
+                            one.sort_unstable();
+                            one.dedup();
+                            flat.extend_from_slice(&one);
+                            counts.push(one.len() as u32);
                         }
-                        one.sort_unstable();
-                        one.dedup();
-                        flat.extend_from_slice(&one);
-                        counts.push(one.len() as u32);
-                    }
-                    (flat, counts)
+                        (flat, counts, uncovered)
+                    })
                 })
                 .collect();
+            drop(stencil_span);
+            let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
+            let uncovered: usize = chunks.iter().map(|c| c.2).sum();
+            report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
             let mut offsets = Vec::with_capacity(nv + 1);
             offsets.push(0usize);
             let mut reads = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum());
-            for (flat, counts) in chunks {
+            for (flat, counts, _) in chunks {
                 reads.extend_from_slice(&flat);
                 for c in counts {
                     offsets.push(offsets[offsets.len() - 1] + c as usize);
@@ -488,18 +484,22 @@ pub fn wei_levoy_synthesis_with_progress(
                     .par_chunks(PASS2_CHUNK)
                     .flat_map_iter(|vs| {
                         let mut q = vec![0.0f32; vs.len() * dim];
-                        for (&v, row) in vs.iter().zip(q.chunks_exact_mut(dim)) {
-                            let v = v as usize;
-                            resample_stencil(
-                                &stencils[v * tp..(v + 1) * tp],
-                                &colours,
-                                ch,
-                                &geo.default,
-                                &mut row[..fine_dim],
-                            );
-                            row[fine_dim..]
-                                .copy_from_slice(&coarse[v * coarse_dim..(v + 1) * coarse_dim]);
-                        }
+                        let mut st = vec![StencilPoint::UNCOVERED; tp];
+                        pool.with(|scratch| {
+                            for (&v, row) in vs.iter().zip(q.chunks_exact_mut(dim)) {
+                                let v = v as usize;
+                                stencil_of(v, &mut st, scratch);
+                                resample_stencil(
+                                    &st,
+                                    &colours,
+                                    ch,
+                                    &geo.default,
+                                    &mut row[..fine_dim],
+                                );
+                                row[fine_dim..]
+                                    .copy_from_slice(&coarse[v * coarse_dim..(v + 1) * coarse_dim]);
+                            }
+                        });
                         let mut out = vec![NO_MATCH; vs.len()];
                         search.search(&q, &mut out);
                         vs.iter().copied().zip(out).collect::<Vec<_>>()
@@ -627,30 +627,32 @@ fn coarse_queries(
     if dim == 0 {
         return (out, 0);
     }
-    // One scratch per fixed chunk of vertices (see pass 2).
+    // Scratches shared by the chunks (see `ScratchPool`).
+    let pool = ScratchPool::new();
     let misses: usize = out
         .par_chunks_mut(dim * FLATTEN_CHUNK)
         .enumerate()
         .map(|(c, rows)| {
-            let mut scratch = FlattenScratch::new();
-            let mut stencil = Vec::<StencilPoint>::new();
-            let mut misses = 0;
-            for (i, row) in rows.chunks_exact_mut(dim).enumerate() {
-                misses += coarse_row(
-                    levels,
-                    geometry,
-                    results,
-                    l,
-                    parts,
-                    ch,
-                    reach,
-                    c * FLATTEN_CHUNK + i,
-                    row,
-                    &mut scratch,
-                    &mut stencil,
-                );
-            }
-            misses
+            pool.with(|scratch| {
+                let mut stencil = Vec::<StencilPoint>::new();
+                let mut misses = 0;
+                for (i, row) in rows.chunks_exact_mut(dim).enumerate() {
+                    misses += coarse_row(
+                        levels,
+                        geometry,
+                        results,
+                        l,
+                        parts,
+                        ch,
+                        reach,
+                        c * FLATTEN_CHUNK + i,
+                        row,
+                        scratch,
+                        &mut stencil,
+                    );
+                }
+                misses
+            })
         })
         .sum();
     (out, misses)

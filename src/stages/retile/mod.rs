@@ -193,9 +193,11 @@ impl Stage for Retile {
             // The input is no longer a pyramid level: the retiled levels are.
             commands.entity(source_entity).remove::<MeshLevel>();
             let mut counts = Vec::new();
+            let mut targets = Vec::new();
             let mut cvs = Vec::new();
             for (l, level) in pyramid.levels.into_iter().enumerate() {
                 counts.push(level.mesh.vertex_count());
+                targets.push(level.target_vertices);
                 cvs.push(edge_length_cv(&level.mesh));
                 if l == 0 {
                     spacing.0 = level.mesh.average_edge_length().max(f32::MIN_POSITIVE);
@@ -215,6 +217,7 @@ impl Stage for Retile {
                 }
             }
             metrics.record(ctx.index, "level_vertices", &counts);
+            metrics.record(ctx.index, "level_targets", &targets);
             metrics.record(ctx.index, "level_edge_length_cv", &cvs);
         })
         .into_configs()

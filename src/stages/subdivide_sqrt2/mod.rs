@@ -173,13 +173,19 @@ fn coarsened(
         };
         match retile_with_progress(input, &settings, &progress) {
             Ok(mut p) => {
+                let level = p.levels.swap_remove(0);
+                // The surface's thin parts kept it above its target: try a
+                // finer base.
+                if (level.mesh.vertex_count() as f64)
+                    > (1.0 + RetileSettings::COUNT_TOLERANCE) * level.target_vertices as f64
+                {
+                    continue;
+                }
                 progress.finish();
-                return Some((p.levels.swap_remove(0).mesh, steps));
+                return Some((level.mesh, steps));
             }
             // Too many pieces for so few vertices: a base above their floor.
             Err(RetileError::TooManyComponents { floor, .. }) => at_least = floor,
-            // The topology kept it above its target: try a finer base.
-            Err(RetileError::TargetUnreachable { .. }) => {}
             Err(_) => return None,
         }
     }
