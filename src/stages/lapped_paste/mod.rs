@@ -489,24 +489,19 @@ fn atlas_layout(mesh: &PolyMesh, settings: &AtlasSettings) -> Result<AtlasLayout
 }
 
 /// Returns the heap pages freed so far to the system (glibc's
-/// `malloc_trim`). The paste loop's per-face arrays (coverage, seed tree,
-/// growth stamps: ~80 bytes per vertex, each below the size glibc maps on
-/// its own) are freed in the middle of the heap, where glibc keeps their
-/// pages resident; the atlas kernel that follows allocates blocks too large
-/// to reuse those holes, so without this the process peaked ~200 MB higher
-/// at 901 k vertices. The same after the atlas layout, whose kernel leaves
-/// ~300 MB of such holes at 901 k. Nothing to do elsewhere.
+/// `malloc_trim`). Measured before `main` fixed glibc's mmap threshold: the
+/// paste loop's per-face arrays were freed in the middle of the heap, where
+/// glibc kept their pages resident, and the atlas kernel allocates blocks
+/// too large to reuse those holes, so the process peaked ~200 MB higher at
+/// 901 k vertices. With the fixed threshold large buffers go back by
+/// themselves; this still returns the loop's many small allocations
+/// (per-paste lists, coverage-test scratch) and the atlas kernel's.
 fn release_freed_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    {
-        unsafe extern "C" {
-            fn malloc_trim(pad: usize) -> i32;
-        }
-        // SAFETY: `malloc_trim` only releases free pages of the allocator's
-        // own heaps; it is thread-safe and takes no pointer.
-        unsafe {
-            malloc_trim(0);
-        }
+    // SAFETY: `malloc_trim` only releases free pages of the allocator's own
+    // heaps; it is thread-safe and takes no pointer.
+    unsafe {
+        libc::malloc_trim(0);
     }
 }
 
