@@ -60,6 +60,10 @@ pub struct TexelSamples {
     /// When true the colour channel is `direct` alone (vertex colours);
     /// the contributions then serve the other channels.
     pub colour_direct_only: bool,
+    /// The last face's blend layers ([`BlendUvSource`] makes them from the
+    /// compact form; neighbouring texels mostly share a face). Kept by
+    /// `clear`.
+    pub layers: Option<(u32, [[Vec2; 3]; 3])>,
 }
 
 impl TexelSamples {
@@ -441,7 +445,14 @@ impl ContributionSource for BlendUvSource<'_> {
         if f >= self.layers.len() || (!self.angles.is_empty() && f >= self.angles.len()) {
             return;
         }
-        let layers = self.layers.get(f);
+        let layers = match out.layers {
+            Some((g, l)) if g == face => l,
+            _ => {
+                let l = self.layers.get(f);
+                out.layers = Some((face, l));
+                l
+            }
+        };
         let angles = self.angles.get(f).copied().unwrap_or([0.0; 3]);
         let same = layers[0] == layers[1] && layers[1] == layers[2];
         for (base, uvs) in layers.iter().enumerate() {
