@@ -103,7 +103,23 @@ struct SweepArgs {
     quiet: bool,
 }
 
+/// glibc's malloc raises its mmap threshold after every large free (up to
+/// 32 MiB), after which large buffers come from the heap arenas and their
+/// pages stay resident once freed: a 92 k-vertex Wei–Levoy run peaked at
+/// 159 MB resident for a 70 MB live heap. A fixed threshold of 128 KiB
+/// keeps large buffers in their own mappings, returned to the system when
+/// freed (127 MB resident for that run); results do not change.
+fn tune_allocator() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt only sets a malloc parameter; called first thing in
+    // main, before any other thread exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 128 * 1024);
+    }
+}
+
 fn main() -> ExitCode {
+    tune_allocator();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Sweep(args) => return sweep(args),

@@ -64,6 +64,9 @@ use crate::progress::Progress;
 /// Neighbours compared per vertex at most (the nearest of its rings).
 pub const MAX_NEIGHBOURS: usize = 24;
 
+/// Vertices per parallel chunk of the neighbourhood search.
+const NEIGHBOURHOOD_CHUNK: usize = 512;
+
 /// The nearest neighbours whose shifted coordinates (and similar pixels) are
 /// candidates; farther ones only take part in the comparison.
 pub const CANDIDATE_SOURCES: usize = 8;
@@ -179,46 +182,62 @@ fn neighbourhoods(
     scale: f32,
 ) -> Neighbourhoods {
     let n = positions.len();
-    let lists: Vec<Vec<(u32, Vec2)>> = (0..n as u32)
-        .into_par_iter()
-        .map_init(Vec::new, |found: &mut Vec<u32>, v| {
-            found.clear();
-            found.push(v);
-            let mut frontier = 0;
-            for _ in 0..ring {
-                let end = found.len();
-                for i in frontier..end {
-                    for &w in topology.neighbours(found[i]) {
-                        if !found.contains(&w) {
-                            found.push(w);
+    // Per fixed chunk of vertices, flat lists with reused buffers (no
+    // allocation per vertex); concatenated in vertex order.
+    let chunks: Vec<(Vec<u32>, Vec<Vec2>, Vec<u32>)> = (0..n as u32)
+        .collect::<Vec<u32>>()
+        .par_chunks(NEIGHBOURHOOD_CHUNK)
+        .map(|vs| {
+            let mut found: Vec<u32> = Vec::new();
+            let mut near: Vec<(f32, u32)> = Vec::new();
+            let mut vertex = Vec::with_capacity(vs.len() * MAX_NEIGHBOURS);
+            let mut offset = Vec::with_capacity(vs.len() * MAX_NEIGHBOURS);
+            let mut counts = Vec::with_capacity(vs.len());
+            for &v in vs {
+                found.clear();
+                found.push(v);
+                let mut frontier = 0;
+                for _ in 0..ring {
+                    let end = found.len();
+                    for i in frontier..end {
+                        for &w in topology.neighbours(found[i]) {
+                            if !found.contains(&w) {
+                                found.push(w);
+                            }
                         }
                     }
+                    frontier = end;
                 }
-                frontier = end;
+                let x = positions[v as usize];
+                near.clear();
+                near.extend(
+                    found[1..]
+                        .iter()
+                        .map(|&w| ((positions[w as usize] - x).length_squared(), w)),
+                );
+                near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                near.truncate(MAX_NEIGHBOURS);
+                let f = frames[v as usize];
+                for &(_, w) in &near {
+                    vertex.push(w);
+                    offset.push(f.texel_offset(positions[w as usize] - x, scale));
+                }
+                counts.push(near.len() as u32);
             }
-            let x = positions[v as usize];
-            let mut near: Vec<(f32, u32)> = found[1..]
-                .iter()
-                .map(|&w| ((positions[w as usize] - x).length_squared(), w))
-                .collect();
-            near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            near.truncate(MAX_NEIGHBOURS);
-            let f = frames[v as usize];
-            near.into_iter()
-                .map(|(_, w)| (w, f.texel_offset(positions[w as usize] - x, scale)))
-                .collect()
+            (vertex, offset, counts)
         })
         .collect();
+    let total: usize = chunks.iter().map(|c| c.0.len()).sum();
     let mut start = Vec::with_capacity(n + 1);
     start.push(0u32);
-    let mut vertex = Vec::new();
-    let mut offset = Vec::new();
-    for list in lists {
-        for (w, d) in list {
-            vertex.push(w);
-            offset.push(d);
+    let mut vertex = Vec::with_capacity(total);
+    let mut offset = Vec::with_capacity(total);
+    for (vs, os, counts) in chunks {
+        vertex.extend_from_slice(&vs);
+        offset.extend_from_slice(&os);
+        for c in counts {
+            start.push(start[start.len() - 1] + c);
         }
-        start.push(vertex.len() as u32);
     }
     Neighbourhoods {
         start,
