@@ -83,6 +83,40 @@ fn jump_surface_peak_memory_per_vertex() {
     );
 }
 
+/// The same for `configs/40_bake_bunny.toml` (jump_surface baked into a
+/// 2048² atlas of the scan, exported as GLB, OBJ and previews; the atlas
+/// images are in the baseline). Measured on 2 cores: 465 B/v at 137 k
+/// vertices (baseline 137 MB at 2.6 k; 537 B/v before the fixed mmap
+/// threshold); at 901 k the raw peak was 755 MB (838 B/v) before the
+/// bake's memory work and is 553 MB (613 B/v) now, about 270
+/// of them the baked asset held twice (the `BakedAsset` resource and the
+/// export job's copy) and the world's arrays. Earlier layouts of the bake
+/// held ~230 MB more at 901 k (small-chart hosts in maps of vectors, blend
+/// layers expanded per triangle, a map over every corner for the GLB).
+const MAX_BAKE_BYTES_PER_VERTEX: f64 = 560.0;
+
+#[test]
+#[cfg(target_os = "linux")]
+fn jump_surface_bake_peak_memory_per_vertex() {
+    let config = "configs/40_bake_bunny.toml";
+    let dir = tempfile::tempdir().unwrap();
+    let (small, _) = common::messy::write_messy_scan(dir.path(), 2_000, 7);
+    let (large, _) = common::messy::write_messy_scan(dir.path(), 150_000, 7);
+    let run = |scan: &Path, name: &str| peak_and_vertices_of(config, scan, &dir.path().join(name));
+    run(&small, "warm");
+    let ((base, base_v), (peak, v)) = (run(&small, "small"), run(&large, "large"));
+    let per_vertex = (peak - base) / (v - base_v);
+    eprintln!(
+        "bake: baseline {:.1} MB at {base_v} vertices, peak {:.1} MB at {v} vertices: {per_vertex:.0} B/v",
+        base / 1e6,
+        peak / 1e6
+    );
+    assert!(
+        per_vertex <= MAX_BAKE_BYTES_PER_VERTEX,
+        "jump_surface + bake holds {per_vertex:.0} bytes per vertex beyond the baseline (bound {MAX_BAKE_BYTES_PER_VERTEX})"
+    );
+}
+
 /// Bytes per vertex of lapped textures beyond the baseline
 /// (`configs/31_lapped_bunny_planks.toml`: formats obj, preview, pastes,
 /// a 1024² atlas). Measured on 2 cores: 502 B/v at 92 k vertices
@@ -91,7 +125,7 @@ fn jump_surface_peak_memory_per_vertex() {
 /// was grown over (4.8 per face, 11 with the per-face distortion rule) in a
 /// `Vec` per face of the coverage, in the paste records and in the world,
 /// and the result metrics copied them once more. See ARCHITECTURE.md,
-/// "Lapped textures at a million vertices".
+/// "Lapped textures on dense scans".
 const LAPPED_MAX_BYTES_PER_VERTEX: f64 = 600.0;
 
 #[test]
@@ -115,3 +149,4 @@ fn lapped_peak_memory_per_vertex() {
         "lapped textures hold {per_vertex:.0} B/v beyond the baseline (bound {LAPPED_MAX_BYTES_PER_VERTEX})"
     );
 }
+

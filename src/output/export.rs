@@ -65,8 +65,7 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
             "glb" => {
                 if let Some(asset) = &job.baked_asset {
                     let path = dir.join(format!("{}.glb", job.stem));
-                    let bytes = super::gltf::encode_glb(asset)?;
-                    super::write_bytes_atomic(&path, &bytes)?;
+                    super::gltf::write_glb(&path, asset)?;
                     files.push(path);
                 }
             }

@@ -26,6 +26,7 @@
 use super::raster::barycentric;
 use crate::image::{Image, pixel_rgb, sample::Wrap};
 use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
+use crate::kernels::jump_surface::Blend;
 use crate::kernels::retile::SurfaceProjector;
 use crate::progress::Progress;
 use glam::{Vec2, Vec3};
@@ -59,6 +60,10 @@ pub struct TexelSamples {
     /// When true the colour channel is `direct` alone (vertex colours);
     /// the contributions then serve the other channels.
     pub colour_direct_only: bool,
+    /// The last face's blend layers ([`BlendUvSource`] makes them from the
+    /// compact form; neighbouring texels mostly share a face). Kept by
+    /// `clear`.
+    pub layers: Option<(u32, [[Vec2; 3]; 3])>,
 }
 
 impl TexelSamples {
@@ -389,11 +394,13 @@ fn fill_background(data: &mut [f32], channels: usize, filled: &[bool], value: Op
 
 /// Per-corner UVs on the original mesh, optionally blended 3 ways.
 pub struct BlendUvSource<'a> {
-    /// Per triangle, for each base vertex `b`, the corners' exemplar UVs.
-    /// Without a blend the three layers are equal.
-    pub layers: &'a [[[Vec2; 3]; 3]],
+    /// Per triangle, for each base vertex `b`, the corners' exemplar UVs
+    /// (the compact form makes them on request). Without a blend the three
+    /// layers are equal.
+    pub layers: Blend<'a>,
     /// Per triangle and layer, the synthesis frame's angle to the atlas
-    /// frame (see [`BlendUvSource::angles`]).
+    /// frame (see [`BlendUvSource::new`]); empty when no normal map is
+    /// baked (only normal maps turn with the frame: the angles are then 0).
     pub angles: Vec<[f32; 3]>,
 }
 
@@ -404,27 +411,49 @@ impl<'a> BlendUvSource<'a> {
         positions: &[Vec3],
         tris: &[[u32; 3]],
         frames: &AtlasFrames,
-        layers: &'a [[[Vec2; 3]; 3]],
+        layers: impl Into<Blend<'a>>,
     ) -> Self {
+        let layers = layers.into();
         let angles = tris
             .par_iter()
-            .zip(layers)
             .enumerate()
-            .map(|(f, (t, l))| {
+            .take(layers.len())
+            .map(|(f, t)| {
                 let p = t.map(|v| positions[v as usize]);
-                l.map(|uv| frames.angle_to(f, gradient(p, uv.map(|q| q.x))))
+                layers
+                    .get(f)
+                    .map(|uv| frames.angle_to(f, gradient(p, uv.map(|q| q.x))))
             })
             .collect();
         Self { layers, angles }
+    }
+
+    /// The source without angles, for a bake of colour, roughness or height
+    /// only (none of them turns with the synthesis frame): no frames and no
+    /// per-triangle array beside the layers.
+    pub fn without_angles(layers: impl Into<Blend<'a>>) -> Self {
+        Self {
+            layers: layers.into(),
+            angles: Vec::new(),
+        }
     }
 }
 
 impl ContributionSource for BlendUvSource<'_> {
     fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
         let f = face as usize;
-        let (Some(layers), Some(angles)) = (self.layers.get(f), self.angles.get(f)) else {
+        if f >= self.layers.len() || (!self.angles.is_empty() && f >= self.angles.len()) {
             return;
+        }
+        let layers = match out.layers {
+            Some((g, l)) if g == face => l,
+            _ => {
+                let l = self.layers.get(f);
+                out.layers = Some((face, l));
+                l
+            }
         };
+        let angles = self.angles.get(f).copied().unwrap_or([0.0; 3]);
         let same = layers[0] == layers[1] && layers[1] == layers[2];
         for (base, uvs) in layers.iter().enumerate() {
             let uv = uvs[0] * b[0] + uvs[1] * b[1] + uvs[2] * b[2];

@@ -18,7 +18,7 @@
 //! Every grown chart is rescaled to its surface area, so texel density
 //! stays uniform across charts.
 
-use super::raster::{TriangleHash, signed_area2};
+use super::raster::{FrozenTriangleGrid, TriangleHash, signed_area2};
 use super::segment::{NO_FACE, Scratch, edge_components};
 use super::{Charts, singular_values};
 use glam::{Vec2, Vec3};
@@ -35,12 +35,51 @@ pub const SMALL_CHART_FACES: usize = 64;
 const MAX_CLOSING_STRETCH: f32 = 4.0;
 
 /// A chart that small charts may move into: its vertices' flat positions
-/// and a spatial hash of its faces.
+/// and a spatial hash of its faces. What it held when first needed is kept
+/// in sorted arrays (faces by index into the charts' corner coordinates,
+/// which do not change while the host exists): every chart of a scan may
+/// become a host, and maps of vectors held ~130 bytes per face, the
+/// largest part of the atlas' peak memory.
 struct Host {
-    position: HashMap<u32, Vec2>,
-    hash: TriangleHash,
+    /// Per vertex of its faces when it became a host, its position, sorted
+    /// by vertex (the first face holding the vertex gives it).
+    base_position: Vec<(u32, Vec2)>,
+    /// Positions of vertices that moved faces added since.
+    added_position: HashMap<u32, Vec2>,
+    /// Its faces when it became a host (corner coordinates in
+    /// `Charts::corner_st`).
+    grid: FrozenTriangleGrid,
+    /// Faces moved into it since.
+    added: TriangleHash,
     /// Texels per world unit of the host, as laid out (area ratio, √).
     density: f32,
+}
+
+impl Host {
+    /// The flat position of vertex `v`, if the host holds it.
+    fn position(&self, v: u32) -> Option<Vec2> {
+        match self.base_position.binary_search_by_key(&v, |e| e.0) {
+            Ok(i) => Some(self.base_position[i].1),
+            Err(_) => self.added_position.get(&v).copied(),
+        }
+    }
+
+    /// Records `q` for `v` unless the host already places `v`.
+    fn place(&mut self, v: u32, q: Vec2) {
+        if self
+            .base_position
+            .binary_search_by_key(&v, |e| e.0)
+            .is_err()
+        {
+            self.added_position.entry(v).or_insert(q);
+        }
+    }
+
+    /// Whether `t` overlaps a face of the host (`corner_st`: the charts'
+    /// corner coordinates).
+    fn overlaps(&mut self, t: &[Vec2; 3], corner_st: &[[Vec2; 3]]) -> bool {
+        self.grid.overlaps(t, corner_st) || self.added.overlaps(t)
+    }
 }
 
 /// Passes over the small charts: a chart that grew in one pass may move
@@ -100,7 +139,7 @@ pub fn absorb_small_charts(
                     positions,
                     tris,
                     nb,
-                    &charts.chart_of_face,
+                    (&charts.chart_of_face, &charts.corner_st),
                     h,
                     &small,
                     &member,
@@ -129,10 +168,10 @@ pub fn absorb_small_charts(
                 charts.chart_of_face[f as usize] = h;
                 charts.corner_st[f as usize] = *st;
                 for (&v, &q) in tris[f as usize].iter().zip(st) {
-                    host.position.entry(v).or_insert(q);
+                    host.place(v, q);
                 }
                 if face_area(f) > 0.0 {
-                    host.hash.insert(*st);
+                    host.added.insert(*st);
                 }
                 faces_of[h as usize].push(f);
             }
@@ -232,15 +271,19 @@ fn host_of(
     face_area: impl Fn(u32) -> f32,
 ) -> Host {
     let (mut a3, mut a2) = (0.0f64, 0.0f64);
-    let mut position = HashMap::with_capacity(faces.len());
+    let mut position: Vec<(u32, Vec2)> = Vec::with_capacity(3 * faces.len());
     for &f in faces {
         let st = &corner_st[f as usize];
         for (&v, &q) in tris[f as usize].iter().zip(st) {
-            position.entry(v).or_insert(q);
+            position.push((v, q));
         }
         a3 += face_area(f) as f64;
         a2 += 0.5 * signed_area2(st).abs() as f64;
     }
+    // Stable: the first face holding a vertex gives its position.
+    position.sort_by_key(|e| e.0);
+    position.dedup_by_key(|e| e.0);
+    position.shrink_to_fit();
     let density = if a3 > 0.0 && a2 > 0.0 {
         (a2 / a3).sqrt() as f32
     } else {
@@ -248,14 +291,18 @@ fn host_of(
     };
     // Cells about one mean edge long, as in the flatten-or-split check.
     let cell = density * (2.0 * a3 as f32 / faces.len().max(1) as f32).sqrt();
-    let mut hash = TriangleHash::new(cell);
     // Degenerate faces cover no texel and are never tested.
-    for &f in faces.iter().filter(|&&f| face_area(f) > 0.0) {
-        hash.insert(corner_st[f as usize]);
-    }
+    let grid = FrozenTriangleGrid::new(
+        cell,
+        corner_st,
+        faces.iter().copied().filter(|&f| face_area(f) > 0.0),
+    );
+    let added = TriangleHash::new(grid.cell());
     Host {
-        position,
-        hash,
+        base_position: position,
+        added_position: HashMap::new(),
+        grid,
+        added,
         density,
     }
 }
@@ -269,7 +316,7 @@ fn unfold_into(
     positions: &[Vec3],
     tris: &[[u32; 3]],
     nb: &[[u32; 3]],
-    chart_of_face: &[u32],
+    (chart_of_face, corner_st): (&[u32], &[[Vec2; 3]]),
     h: u32,
     small: &[u32],
     member: &[bool],
@@ -289,14 +336,14 @@ fn unfold_into(
             queue.push_back((f, k));
         }
     }
-    let mut fresh = TriangleHash::new(host.hash.cell());
+    let mut fresh = TriangleHash::new(host.grid.cell());
     while let Some((f, k)) = queue.pop_front() {
         let Some((q, new_corner)) = lay_face(
             positions,
             tris[f as usize],
             k,
-            [&host.position, &placed],
-            (&mut host.hash, host.density),
+            &placed,
+            (host, corner_st),
             &mut fresh,
         ) else {
             continue;
@@ -329,19 +376,19 @@ type LaidFace = ([Vec2; 3], Option<(u32, Vec2)>);
 /// Lays the face `t` out on its edge `k` (corners `k`, `k + 1`, placed per
 /// the host's or the freshly placed positions `placed`): its corners and,
 /// when its third corner was not placed yet, that vertex and where it went.
-/// `None` when it flips, overlaps a face of the host (its hash and density)
-/// or of `fresh` (the faces laid out so far, which it joins), or closes onto
-/// placed corners too distorted.
+/// `None` when it flips, overlaps a face of the host (with the charts'
+/// corner coordinates its grid indexes) or of `fresh` (the faces laid out
+/// so far, which it joins), or closes onto placed corners too distorted.
 fn lay_face(
     positions: &[Vec3],
     t: [u32; 3],
     k: usize,
-    placed: [&HashMap<u32, Vec2>; 2],
-    host: (&mut TriangleHash, f32),
+    placed: &HashMap<u32, Vec2>,
+    (host, corner_st): (&mut Host, &[[Vec2; 3]]),
     fresh: &mut TriangleHash,
 ) -> Option<LaidFace> {
-    let at = |v: u32| placed[0].get(&v).or_else(|| placed[1].get(&v)).copied();
-    let (hash, density) = host;
+    let at = |v: u32| host.position(v).or_else(|| placed.get(&v).copied());
+    let density = host.density;
     let p = t.map(|v| positions[v as usize]);
     let (a, b) = (at(t[k])?, at(t[(k + 1) % 3])?);
     let j = (k + 2) % 3;
@@ -378,7 +425,7 @@ fn lay_face(
                 return None;
             }
         }
-        if hash.overlaps(&q) || fresh.overlaps(&q) {
+        if host.overlaps(&q, corner_st) || fresh.overlaps(&q) {
             return None;
         }
         fresh.insert(q);

@@ -274,26 +274,31 @@ fn profile_pack(prints: &[[Footprint; 4]], cols: usize, rows: u32) -> Option<Vec
 pub fn pack_charts(charts: &Charts, size: u32, padding_px: u32) -> Option<(Vec<[Vec2; 3]>, f32)> {
     let _span = tracing::debug_span!("pack_charts", charts = charts.count).entered();
     let n = charts.count;
-    let mut points: Vec<Vec<DVec2>> = vec![Vec::new(); n];
     let mut faces_of: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for (f, st) in charts.corner_st.iter().enumerate() {
-        let c = charts.chart_of_face[f] as usize;
-        points[c].extend(st.iter().map(|p| p.as_dvec2()));
-        faces_of[c].push(f as u32);
+    for f in 0..charts.corner_st.len() {
+        faces_of[charts.chart_of_face[f] as usize].push(f as u32);
     }
-    // Turn every chart flat and move it to the origin.
+    // Turn every chart flat and move it to the origin. One chart's corners
+    // at a time (all of them at once, in f64, were 48 bytes per face).
     let mut placed: Vec<(DVec2, DVec2, DVec2)> = Vec::with_capacity(n); // (rot, min, size)
-    for pts in &points {
-        let rot = flat_min_area_rotation(pts);
+    let mut pts: Vec<DVec2> = Vec::new();
+    for faces in &faces_of {
+        pts.clear();
+        pts.extend(
+            faces
+                .iter()
+                .flat_map(|&f| charts.corner_st[f as usize].map(|p| p.as_dvec2())),
+        );
+        let rot = flat_min_area_rotation(&pts);
         let (mut lo, mut hi) = (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY));
-        for p in pts {
+        for p in &pts {
             let q = DVec2::new(rot.x * p.x - rot.y * p.y, rot.y * p.x + rot.x * p.y);
             lo = lo.min(q);
             hi = hi.max(q);
         }
         placed.push((rot, lo, (hi - lo).max(DVec2::ZERO)));
     }
-    drop(points);
+    drop(pts);
     let mut order: Vec<usize> = (0..n).collect();
     order.sort_by(|&a, &b| {
         placed[b]

@@ -135,6 +135,122 @@ impl TriangleHash {
     }
 }
 
+/// The cells `(x0, y0, x1, y1)` (inclusive) of side `cell` that the
+/// bounding box of `t` touches.
+#[inline]
+fn cells_of(cell: f32, t: &[Vec2; 3]) -> (i32, i32, i32, i32) {
+    let lo = t[0].min(t[1]).min(t[2]) / cell;
+    let hi = t[0].max(t[1]).max(t[2]) / cell;
+    (
+        lo.x.floor() as i32,
+        lo.y.floor() as i32,
+        hi.x.floor() as i32,
+        hi.y.floor() as i32,
+    )
+}
+
+/// Whether a cell range spans too many cells to be listed (a degenerate,
+/// huge triangle): [`TriangleHash`] refuses such a query and never lists
+/// such a triangle.
+#[inline]
+fn too_many_cells((x0, y0, x1, y1): (i32, i32, i32, i32)) -> bool {
+    (x1 as i64 - x0 as i64) * (y1 as i64 - y0 as i64) > 4096
+}
+
+/// A [`TriangleHash`] built once over triangles held elsewhere (by index
+/// into a caller's slice, e.g. a chart's corner coordinates): the same
+/// cells and the same answers, in sorted arrays (about 30 bytes per
+/// triangle instead of ~110 for a map of vectors and a copy of the
+/// corners), so a whole mesh's worth of them fits beside the mesh.
+pub struct FrozenTriangleGrid {
+    cell: f32,
+    /// Occupied cells `(y, x)`, sorted.
+    keys: Vec<(i32, i32)>,
+    /// CSR offsets into `items` per key.
+    start: Vec<u32>,
+    /// Triangle indices (into the caller's slice), per cell.
+    items: Vec<u32>,
+}
+
+impl FrozenTriangleGrid {
+    /// The grid of cells of side `cell` (as [`TriangleHash::new`]) over the
+    /// triangles `ids` of `tris`.
+    pub fn new(cell: f32, tris: &[[Vec2; 3]], ids: impl Iterator<Item = u32>) -> Self {
+        let cell = if cell.is_finite() {
+            cell.max(1e-12)
+        } else {
+            1.0
+        };
+        let mut pairs: Vec<((i32, i32), u32)> = Vec::new();
+        for i in ids {
+            let r = cells_of(cell, &tris[i as usize]);
+            if too_many_cells(r) {
+                continue;
+            }
+            for y in r.1..=r.3 {
+                for x in r.0..=r.2 {
+                    pairs.push(((y, x), i));
+                }
+            }
+        }
+        pairs.sort_unstable();
+        let mut keys = Vec::new();
+        let mut start = Vec::new();
+        let mut items = Vec::with_capacity(pairs.len());
+        for (k, i) in pairs {
+            if keys.last() != Some(&k) {
+                keys.push(k);
+                start.push(items.len() as u32);
+            }
+            items.push(i);
+        }
+        start.push(items.len() as u32);
+        keys.shrink_to_fit();
+        start.shrink_to_fit();
+        Self {
+            cell,
+            keys,
+            start,
+            items,
+        }
+    }
+
+    /// The side of a cell.
+    pub fn cell(&self) -> f32 {
+        self.cell
+    }
+
+    /// Whether `t` overlaps one of the grid's triangles (`tris` the slice
+    /// the grid was built over), as [`TriangleHash::overlaps`] answers.
+    pub fn overlaps(&self, t: &[Vec2; 3], tris: &[[Vec2; 3]]) -> bool {
+        let q = cells_of(self.cell, t);
+        if too_many_cells(q) {
+            return true;
+        }
+        for y in q.1..=q.3 {
+            // The keys of row y from column q.0 on.
+            let mut k = self.keys.partition_point(|&key| key < (y, q.0));
+            while k < self.keys.len() && self.keys[k].0 == y && self.keys[k].1 <= q.2 {
+                let x = self.keys[k].1;
+                for &i in &self.items[self.start[k] as usize..self.start[k + 1] as usize] {
+                    let other = &tris[i as usize];
+                    // Test each triangle once: in the first cell its range
+                    // shares with the query's.
+                    let r = cells_of(self.cell, other);
+                    if (x, y) != (r.0.max(q.0), r.1.max(q.1)) {
+                        continue;
+                    }
+                    if triangles_overlap(t, other) {
+                        return true;
+                    }
+                }
+                k += 1;
+            }
+        }
+        false
+    }
+}
+
 /// Whether the triangles (those with `skip[i]` false) are all
 /// counter-clockwise and pairwise disjoint.
 pub fn flat_and_disjoint(tris: &[[Vec2; 3]], skip: &[bool], cell: f32) -> bool {

@@ -23,6 +23,7 @@ use crate::kernels::atlas::bake::{
 use crate::kernels::atlas::{
     AtlasSettings, build_uv_atlas_with_progress, distortion, rasterise_faces,
 };
+use crate::kernels::jump_surface::Blend;
 use crate::kernels::retile::SurfaceProjector;
 use crate::mesh::PolyMesh;
 use crate::pipeline::{Datum, Stage, StageCtx};
@@ -238,8 +239,9 @@ fn bake_world(
 ) -> Result<(BakedAsset, MetricList), String> {
     let (exemplar, patches) = (inputs.exemplar, inputs.patches);
     let _span = tracing::info_span!("bake", size = settings.size).entered();
-    let (corner_tris, _) = mesh.triangulate_corners();
-    let tris: Vec<[u32; 3]> = corner_tris
+    let tris: Vec<[u32; 3]> = mesh
+        .triangulate_corners()
+        .0
         .iter()
         .map(|t| t.map(|c| mesh.corner_vertex[c as usize]))
         .collect();
@@ -249,10 +251,20 @@ fn bake_world(
         padding_px: settings.padding,
     };
     let progress = Progress::new(0, Bake::KIND);
-    let atlas = build_uv_atlas_with_progress(&mesh.positions, &tris, &atlas_settings, &progress)
-        .map_err(|e| e.to_string())?;
+    let mut atlas =
+        build_uv_atlas_with_progress(&mesh.positions, &tris, &atlas_settings, &progress)
+            .map_err(|e| e.to_string())?;
+    // Memory (issue 15): each per-triangle array goes as soon as nothing
+    // reads it; the metrics of the layout are measured first.
+    atlas.charts.corner_st = Vec::new();
+    let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
+    atlas.charts.chart_of_face = Vec::new();
     let texel_face = rasterise_faces(&atlas.corner_uvs, settings.size);
-    let frames = AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
+    // Atlas frames (24 bytes per triangle) serve the angles of normal maps
+    // and the vertex-colour and lapped sources; a blend baking no normal
+    // map reads none.
+    let has_normal_map = inputs.channels.is_some_and(|ch| ch.normal.is_some());
+    let frames = || AtlasFrames::new(&mesh.positions, &tris, &atlas.corner_uvs);
     let target = BakeTarget {
         corner_uvs: &atlas.corner_uvs,
         texel_face: &texel_face,
@@ -305,6 +317,7 @@ fn bake_world(
                 .collect();
             records.push((texture.0, list));
         }
+        let frames = frames();
         let src = LappedSource::new(&mesh.positions, &tris, &frames, &records, patches);
         method = "lapped_pastes";
         // Patch pixel (x, y) is exemplar pixel origin + (x, y): maps follow
@@ -341,23 +354,31 @@ fn bake_world(
         if !on_source {
             return Err("the per-corner UVs lie on a mesh other than the loaded one; bake needs them on the original mesh".into());
         }
-        let layers: Vec<[[Vec2; 3]; 3]> = match (blend, uvs) {
+        // Single-base UVs as three equal layers; the compact blend layers
+        // are read in place (72 bytes per triangle expanded).
+        let single: Vec<[[Vec2; 3]; 3]>;
+        let layers: Blend = match (blend, uvs) {
             (Some(b), _) if b.0.fits(mesh) => {
                 method = "jump_map_blend";
-                // The atlas bake keeps per-triangle layers for its angles;
-                // expanded here from the compact form (the same values).
-                b.0.to_vec(mesh)
+                Blend::Compact { layers: &b.0, mesh }
             }
             (_, Some(u)) if u.0.len() == mesh.corner_count() => {
                 method = "corner_uvs";
-                corner_tris
+                single = mesh
+                    .triangulate_corners()
+                    .0
                     .iter()
                     .map(|t| [t.map(|c| u.0[c as usize]); 3])
-                    .collect()
+                    .collect();
+                (&single).into()
             }
             _ => return Err("the result's UVs do not match the mesh's corners".into()),
         };
-        let src = BlendUvSource::new(&mesh.positions, &tris, &frames, &layers);
+        let src = if has_normal_map {
+            BlendUvSource::new(&mesh.positions, &tris, &frames(), layers)
+        } else {
+            BlendUvSource::without_angles(layers)
+        };
         bake_channels_with_progress(
             &target,
             &src as &dyn ContributionSource,
@@ -385,6 +406,7 @@ fn bake_world(
         let frame_s: Option<Vec<Vec3>> = result_frames
             .filter(|f| f.0.len() == result.0.vertex_count())
             .map(|f| f.0.iter().map(|fr| fr.s).collect());
+        let frames = frames();
         let src = VertexColourSource {
             positions: &mesh.positions,
             tris: &tris,
@@ -413,7 +435,7 @@ fn bake_world(
         return Err("the result has nothing to bake: no vertex colours, per-corner UVs or lapped pastes; put `bake` after a synthesis stage".into());
     };
     progress.finish();
-    let d = distortion(&mesh.positions, &tris, &atlas.charts, &atlas.corner_uvs);
+    drop(texel_face);
     let record = vec![
         ("bake_method", to_json(&method)),
         ("atlas_charts", to_json(&atlas.charts.count)),
@@ -427,10 +449,17 @@ fn bake_world(
     if !maps_note.is_empty() {
         record.push(("baked_maps_note", to_json(&maps_note)));
     }
-    let tri_mesh = PolyMesh::from_triangles(mesh.positions.clone(), &tris);
+    // A triangle mesh is its own fan triangulation.
+    let tri_mesh = if mesh.is_triangle_mesh() {
+        drop(tris);
+        mesh.clone()
+    } else {
+        PolyMesh::from_triangles(mesh.positions.clone(), &tris)
+    };
     let asset = BakedAsset {
         mesh: tri_mesh,
-        uvs: atlas.corner_uvs.iter().flatten().copied().collect(),
+        // In place: the per-triangle array becomes the per-corner one.
+        uvs: atlas.corner_uvs.into_flattened(),
         colour,
         maps: roles
             .iter()
