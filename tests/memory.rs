@@ -149,4 +149,3 @@ fn lapped_peak_memory_per_vertex() {
         "lapped textures hold {per_vertex:.0} B/v beyond the baseline (bound {LAPPED_MAX_BYTES_PER_VERTEX})"
     );
 }
-
