@@ -334,8 +334,13 @@ pub struct ExportJob {
     /// Lapped-texture pastes for runtime pasting (format `pastes`).
     pub pastes: Option<PasteExport>,
     /// The `bake` stage's atlas of the original mesh (formats `glb`,
-    /// `baked_obj`).
+    /// `baked_obj`), filled from the world's [`BakedAsset`] by
+    /// [`crate::stages::export::finish_export_job`] when
+    /// `take_baked_asset` is set (not copied by the export system: at a
+    /// million vertices it is ~130 MB the run would hold twice).
     pub baked_asset: Option<BakedAsset>,
+    /// The export asked for the baked asset.
+    pub take_baked_asset: bool,
     /// The result mapped back onto the original input mesh (`map_back`):
     /// the input mesh, its vertex colours and its preview renders, written as
     /// `<stem>_original.ply` and `original_preview_*.png`.

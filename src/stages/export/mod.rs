@@ -436,10 +436,8 @@ impl Stage for Export {
                 images,
                 baked,
                 pastes: paste_export,
-                baked_asset: baked_asset
-                    .as_deref()
-                    .filter(|_| wants_asset)
-                    .cloned(),
+                baked_asset: None,
+                take_baked_asset: wants_asset,
                 original,
                 plane: plane_image,
             };
@@ -468,6 +466,15 @@ pub enum Transfer {
 /// coordinates (the previews show the state at export time, the files would
 /// not): put `export` last.
 pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), PipelineError> {
+    if world.resource::<ExportJob>().take_baked_asset {
+        let asset = match transfer {
+            Transfer::Copy => world.get_resource::<BakedAsset>().cloned(),
+            Transfer::Move => world.remove_resource::<BakedAsset>(),
+        };
+        let mut job = world.resource_mut::<ExportJob>();
+        job.baked_asset = asset;
+        job.take_baked_asset = false;
+    }
     let Some(source) = world.resource::<ExportJob>().source else {
         return Ok(());
     };
