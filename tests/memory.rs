@@ -18,10 +18,6 @@ mod common;
 
 use std::path::Path;
 
-fn peak_and_vertices(scan: &Path, out: &Path) -> (f64, f64) {
-    peak_and_vertices_of("configs/02_jump_bunny_planks.toml", scan, out)
-}
-
 fn peak_and_vertices_of(config: &str, scan: &Path, out: &Path) -> (f64, f64) {
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(config);
     let run = common::bin()
@@ -52,6 +48,27 @@ fn peak_and_vertices_of(config: &str, scan: &Path, out: &Path) -> (f64, f64) {
     (peak, vertices)
 }
 
+/// Bytes per vertex of `config` beyond its baseline: runs on messy scans
+/// (seed 7) of 2 k and `large` vertices, after a warm-up run on the small
+/// one when `warm` (it fills the jump-map cache), and prints both peaks.
+fn bytes_per_vertex(label: &str, config: &str, large: usize, warm: bool) -> f64 {
+    let dir = tempfile::tempdir().unwrap();
+    let (small, _) = common::messy::write_messy_scan(dir.path(), 2_000, 7);
+    let (large, _) = common::messy::write_messy_scan(dir.path(), large, 7);
+    let run = |scan: &Path, name: &str| peak_and_vertices_of(config, scan, &dir.path().join(name));
+    if warm {
+        run(&small, "warm");
+    }
+    let ((base, base_v), (peak, v)) = (run(&small, "small"), run(&large, "large"));
+    let per_vertex = (peak - base) / (v - base_v);
+    eprintln!(
+        "{label}: baseline {:.1} MB at {base_v} vertices, peak {:.1} MB at {v} vertices: {per_vertex:.0} B/v",
+        base / 1e6,
+        peak / 1e6
+    );
+    per_vertex
+}
+
 /// Bytes per vertex beyond the baseline. Measured on 2 cores: 322 B/v at
 /// 137 k vertices (baseline 43 MB at 2.6 k); at 901 k the raw peak is
 /// 351 MB, 389 B/v (see ARCHITECTURE.md, "Memory at a million vertices").
@@ -65,17 +82,11 @@ const MAX_BYTES_PER_VERTEX: f64 = 380.0;
 #[test]
 #[cfg(target_os = "linux")]
 fn jump_surface_peak_memory_per_vertex() {
-    let dir = tempfile::tempdir().unwrap();
-    let (small, _) = common::messy::write_messy_scan(dir.path(), 2_000, 7);
-    let (large, _) = common::messy::write_messy_scan(dir.path(), 150_000, 7);
-    peak_and_vertices(&small, &dir.path().join("warm"));
-    let (base, base_v) = peak_and_vertices(&small, &dir.path().join("small"));
-    let (peak, v) = peak_and_vertices(&large, &dir.path().join("large"));
-    let per_vertex = (peak - base) / (v - base_v);
-    eprintln!(
-        "jump_surface: baseline {:.1} MB at {base_v} vertices, peak {:.1} MB at {v} vertices: {per_vertex:.0} B/v",
-        base / 1e6,
-        peak / 1e6
+    let per_vertex = bytes_per_vertex(
+        "jump_surface",
+        "configs/02_jump_bunny_planks.toml",
+        150_000,
+        true,
     );
     assert!(
         per_vertex <= MAX_BYTES_PER_VERTEX,
@@ -88,9 +99,9 @@ fn jump_surface_peak_memory_per_vertex() {
 /// images are in the baseline). Measured on 2 cores: 465 B/v at 137 k
 /// vertices (baseline 137 MB at 2.6 k; 537 B/v before the fixed mmap
 /// threshold); at 901 k the raw peak was 755 MB (838 B/v) before the
-/// bake's memory work and is 553 MB (613 B/v) now, about 270
-/// of them the baked asset held twice (the `BakedAsset` resource and the
-/// export job's copy) and the world's arrays. Earlier layouts of the bake
+/// bake's memory work and is 493 MB (547 B/v) now (the baked asset is
+/// moved into the export job after the result metrics, not copied), most
+/// of it the world's arrays under the atlas stage. Earlier layouts of the bake
 /// held ~230 MB more at 901 k (small-chart hosts in maps of vectors, blend
 /// layers expanded per triangle, a map over every corner for the GLB).
 const MAX_BAKE_BYTES_PER_VERTEX: f64 = 560.0;
@@ -98,19 +109,7 @@ const MAX_BAKE_BYTES_PER_VERTEX: f64 = 560.0;
 #[test]
 #[cfg(target_os = "linux")]
 fn jump_surface_bake_peak_memory_per_vertex() {
-    let config = "configs/40_bake_bunny.toml";
-    let dir = tempfile::tempdir().unwrap();
-    let (small, _) = common::messy::write_messy_scan(dir.path(), 2_000, 7);
-    let (large, _) = common::messy::write_messy_scan(dir.path(), 150_000, 7);
-    let run = |scan: &Path, name: &str| peak_and_vertices_of(config, scan, &dir.path().join(name));
-    run(&small, "warm");
-    let ((base, base_v), (peak, v)) = (run(&small, "small"), run(&large, "large"));
-    let per_vertex = (peak - base) / (v - base_v);
-    eprintln!(
-        "bake: baseline {:.1} MB at {base_v} vertices, peak {:.1} MB at {v} vertices: {per_vertex:.0} B/v",
-        base / 1e6,
-        peak / 1e6
-    );
+    let per_vertex = bytes_per_vertex("bake", "configs/40_bake_bunny.toml", 150_000, true);
     assert!(
         per_vertex <= MAX_BAKE_BYTES_PER_VERTEX,
         "jump_surface + bake holds {per_vertex:.0} bytes per vertex beyond the baseline (bound {MAX_BAKE_BYTES_PER_VERTEX})"
@@ -131,18 +130,11 @@ const LAPPED_MAX_BYTES_PER_VERTEX: f64 = 600.0;
 #[test]
 #[cfg(target_os = "linux")]
 fn lapped_peak_memory_per_vertex() {
-    let dir = tempfile::tempdir().unwrap();
-    let config = "configs/31_lapped_bunny_planks.toml";
-    let run = |n: usize, name: &str| {
-        let (scan, _) = common::messy::write_messy_scan(dir.path(), n, 7);
-        peak_and_vertices_of(config, &scan, &dir.path().join(name))
-    };
-    let ((base, base_v), (peak, v)) = (run(2_000, "small"), run(100_000, "large"));
-    let per_vertex = (peak - base) / (v - base_v);
-    eprintln!(
-        "lapped: {:.1} MB at {base_v} vertices, {:.1} MB at {v}: {per_vertex:.0} B/v",
-        base / 1e6,
-        peak / 1e6
+    let per_vertex = bytes_per_vertex(
+        "lapped",
+        "configs/31_lapped_bunny_planks.toml",
+        100_000,
+        false,
     );
     assert!(
         per_vertex <= LAPPED_MAX_BYTES_PER_VERTEX,

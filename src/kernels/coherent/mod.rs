@@ -184,16 +184,17 @@ fn neighbourhoods(
     let n = positions.len();
     // Per fixed chunk of vertices, flat lists with reused buffers (no
     // allocation per vertex); concatenated in vertex order.
-    let chunks: Vec<(Vec<u32>, Vec<Vec2>, Vec<u32>)> = (0..n as u32)
-        .collect::<Vec<u32>>()
-        .par_chunks(NEIGHBOURHOOD_CHUNK)
-        .map(|vs| {
+    let chunks: Vec<(Vec<u32>, Vec<Vec2>, Vec<u32>)> = (0..n.div_ceil(NEIGHBOURHOOD_CHUNK))
+        .into_par_iter()
+        .map(|c| {
+            let vs =
+                (c * NEIGHBOURHOOD_CHUNK) as u32..((c + 1) * NEIGHBOURHOOD_CHUNK).min(n) as u32;
             let mut found: Vec<u32> = Vec::new();
             let mut near: Vec<(f32, u32)> = Vec::new();
             let mut vertex = Vec::with_capacity(vs.len() * MAX_NEIGHBOURS);
             let mut offset = Vec::with_capacity(vs.len() * MAX_NEIGHBOURS);
             let mut counts = Vec::with_capacity(vs.len());
-            for &v in vs {
+            for v in vs {
                 found.clear();
                 found.push(v);
                 let mut frontier = 0;

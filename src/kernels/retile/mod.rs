@@ -377,7 +377,7 @@ pub fn retile_with_progress(
         let target = level_target(v0, level);
         // Coarser levels coarsen the large pieces; once every piece is
         // small at this level's density there is nothing left to coarsen.
-        if level > 0 && pieces.split(target, &vec![0; pieces.area_share.len()]).1 == 0.0 {
+        if level > 0 && pieces.large_share(target) == 0.0 {
             tracing::warn!(
                 level,
                 target,

@@ -421,29 +421,36 @@ fn number_boundary_loops(mesh: &mut TriMesh) -> usize {
 
 /// Connected components of the live part of the mesh.
 pub(crate) fn count_components(mesh: &TriMesh) -> usize {
+    component_labels(mesh).1 as usize
+}
+
+/// Per vertex, its connected component of the live part of the mesh
+/// (`NONE` for dead vertices), numbered in order of their lowest vertex;
+/// and the number of components.
+pub(crate) fn component_labels(mesh: &TriMesh) -> (Vec<u32>, u32) {
     let nv = mesh.pos.len();
-    let mut comp = vec![false; nv];
+    let mut label = vec![NONE; nv];
     let mut stack = Vec::new();
     let mut ring = Vec::new();
-    let mut count = 0;
+    let mut count = 0u32;
     for s in 0..nv as u32 {
-        if comp[s as usize] || mesh.out[s as usize] == NONE {
+        if label[s as usize] != NONE || mesh.out[s as usize] == NONE {
             continue;
         }
-        count += 1;
-        comp[s as usize] = true;
+        label[s as usize] = count;
         stack.push(s);
         while let Some(v) = stack.pop() {
             mesh.ring(v, &mut ring);
             for &w in &ring {
-                if !comp[w as usize] {
-                    comp[w as usize] = true;
+                if label[w as usize] == NONE {
+                    label[w as usize] = count;
                     stack.push(w);
                 }
             }
         }
+        count += 1;
     }
-    count
+    (label, count)
 }
 
 #[cfg(test)]

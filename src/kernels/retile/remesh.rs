@@ -114,28 +114,7 @@ pub(crate) struct Pieces {
 impl Pieces {
     /// The pieces of a prepared input mesh (triangle `f` = half-edges `3f..3f+3`).
     pub(crate) fn of(mesh: &TriMesh) -> Self {
-        let nv = mesh.pos.len();
-        let mut piece = vec![NONE; nv];
-        let mut stack = Vec::new();
-        let mut ring = Vec::new();
-        let mut count = 0u32;
-        for s in 0..nv as u32 {
-            if piece[s as usize] != NONE || mesh.out[s as usize] == NONE {
-                continue;
-            }
-            piece[s as usize] = count;
-            stack.push(s);
-            while let Some(v) = stack.pop() {
-                mesh.ring(v, &mut ring);
-                for &w in &ring {
-                    if piece[w as usize] == NONE {
-                        piece[w as usize] = count;
-                        stack.push(w);
-                    }
-                }
-            }
-            count += 1;
-        }
+        let (piece, count) = super::prepare::component_labels(mesh);
         let faces = mesh.halfedge_slots() / 3;
         let mut tri_piece = vec![0u32; faces];
         let mut area = vec![0.0f64; count as usize];
@@ -170,6 +149,16 @@ impl Pieces {
                 out[c as usize] += 1;
             }
         }
+    }
+
+    /// The share of a level aiming at `target` vertices that falls on the
+    /// pieces that follow the target (0 when every piece is small).
+    pub(crate) fn large_share(&self, target: usize) -> f64 {
+        self.area_share
+            .iter()
+            .map(|a| a * target as f64)
+            .filter(|&s| s >= SMALL_PIECE)
+            .sum()
     }
 
     /// For a level aiming at `target` vertices: `(vertices on the pieces

@@ -421,17 +421,17 @@ pub fn wei_levoy_synthesis_with_progress(
             };
             // Which vertices each vertex reads (covered stencil vertices),
             // as one flat list with offsets, built per fixed chunk.
-            let chunks: Vec<(Vec<u32>, Vec<u32>, usize)> = (0..nv)
-                .collect::<Vec<usize>>()
-                .par_chunks(FLATTEN_CHUNK)
-                .map(|vs| {
+            let chunks: Vec<(Vec<u32>, Vec<u32>, usize)> = (0..nv.div_ceil(FLATTEN_CHUNK))
+                .into_par_iter()
+                .map(|c| {
+                    let vs = c * FLATTEN_CHUNK..((c + 1) * FLATTEN_CHUNK).min(nv);
                     pool.with(|scratch| {
                         let mut st = vec![StencilPoint::UNCOVERED; tp];
                         let mut flat = Vec::with_capacity(vs.len() * tp);
                         let mut counts = Vec::with_capacity(vs.len());
                         let mut one: Vec<u32> = Vec::with_capacity(3 * tp);
                         let mut uncovered = 0;
-                        for &v in vs {
+                        for v in vs {
                             uncovered += tp - stencil_of(v, &mut st, scratch).covered;
                             one.clear();
                             for s in st.iter().filter(|s| s.is_covered()) {
