@@ -242,6 +242,9 @@ pub struct SurfaceProjector {
     tri_bvh: Bvh,
     segments: Vec<Segment>,
     seg_bvh: Bvh,
+    /// Per triangle, the triangle across each edge (corner `i` to `i + 1`;
+    /// [`NONE`] on the boundary). Empty unless built from a [`TriMesh`].
+    neighbours: Vec<[u32; 3]>,
 }
 
 impl SurfaceProjector {
@@ -272,7 +275,13 @@ impl SurfaceProjector {
                 });
             }
         }
-        Self::build(mesh.pos.clone(), triangles, segments)
+        let mut out = Self::build(mesh.pos.clone(), triangles, segments);
+        out.neighbours = mesh
+            .twin
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]].map(|h| if h == NONE { NONE } else { h / 3 }))
+            .collect();
+        out
     }
 
     fn build(positions: Vec<Vec3>, triangles: Vec<[u32; 3]>, segments: Vec<Segment>) -> Self {
@@ -298,6 +307,7 @@ impl SurfaceProjector {
             tri_bvh,
             segments,
             seg_bvh: Bvh::default(),
+            neighbours: Vec::new(),
         };
         let seg_boxes: Vec<(Vec3, Vec3)> = out
             .segments
@@ -375,6 +385,45 @@ impl SurfaceProjector {
             let (point, bary) = self.tri_closest(face, p);
             SurfacePoint { point, face, bary }
         })
+    }
+
+    /// The closest point to `p` on the surface around triangle `hint`:
+    /// starting there, steps to whichever neighbouring triangle (across an
+    /// edge) is closer to `p`, until none is. For a point near `hint`, as
+    /// the centroid of a small triangle whose corner projects onto `hint`,
+    /// this costs a few triangle tests however big the surface is, where a
+    /// search from the root of the tree pays its depth and cache misses. It
+    /// can stop at a local minimum of the distance, i.e. it answers "the
+    /// surface here" rather than the globally closest sheet, which is what a
+    /// local orientation test wants. Without adjacency (a projector not
+    /// built from a [`TriMesh`]) or a valid hint, it is [`Self::project_near`].
+    pub fn project_local(&self, p: Vec3, hint: u32) -> Option<SurfacePoint> {
+        /// A walk longer than this is far from its hint: search the tree.
+        const MAX_STEPS: usize = 64;
+        if self.neighbours.is_empty() || hint as usize >= self.triangles.len() {
+            return self.project_near(p, hint);
+        }
+        let mut face = hint;
+        let (mut point, mut bary) = self.tri_closest(face, p);
+        let mut d2 = (point - p).length_squared();
+        for _ in 0..MAX_STEPS {
+            let mut step = None;
+            for &g in &self.neighbours[face as usize] {
+                if g == NONE {
+                    continue;
+                }
+                let (q, b) = self.tri_closest(g, p);
+                let e = (q - p).length_squared();
+                if e < d2 {
+                    (d2, step) = (e, Some((g, q, b)));
+                }
+            }
+            match step {
+                Some((g, q, b)) => (face, point, bary) = (g, q, b),
+                None => return Some(SurfacePoint { point, face, bary }),
+            }
+        }
+        self.project_near(p, face)
     }
 
     /// The closest point to `p` among the triangles facing the same way as

@@ -5,7 +5,9 @@
 //! Each iteration, for the current target edge length `L`:
 //! 1. split every edge longer than `4/3·L` at its midpoint (seeded random
 //!    order, repeated until none is left);
-//! 2. collapse every edge shorter than `4/5·L`, shortest first, unless the
+//! 2. collapse every edge shorter than `4/5·L`, the shortest first (by
+//!    length class, eighths of `4/5·L`, and in the mesh's spatial order
+//!    within a class, see [`TriMesh::sort_spatially`]), unless the
 //!    collapse would change the topology (link condition, valences, boundary
 //!    rules in [`collapse_ok`]), create an edge longer than `4/3·L`, or turn a
 //!    triangle over;
@@ -32,9 +34,16 @@
 //! non-positive dot product with its previous normal or with the
 //! reference-surface normal at any of its corners, or — for triangles whose
 //! corners see normals more than about 45° apart, i.e. that straddle a crease
-//! of the input — at the projection of its centroid. The per-corner and
-//! centroid tests keep triangles across a sharp ridge from standing edge-on
-//! to one side of it.
+//! of the input — at the closest point of the input around its centroid
+//! (found by walking the input's triangles from a corner's source triangle,
+//! [`SurfaceProjector::project_local`], so the test costs the same on any
+//! size of input). The per-corner and centroid tests keep triangles across
+//! a sharp ridge from standing edge-on to one side of it.
+//!
+//! After each iteration's compaction the level's vertices and faces are
+//! renumbered along a Morton curve ([`TriMesh::sort_spatially`]): the
+//! sequential passes then walk the mesh in space order, and their cost per
+//! vertex stays flat once the mesh no longer fits in the cache.
 //!
 //! Everything that changes connectivity is sequential; normals and projections
 //! are computed in parallel into per-vertex arrays and applied in vertex
@@ -58,6 +67,9 @@ const FINAL_ROUNDS: usize = 2;
 /// apart) mark a triangle straddling a crease of the input, which is then also
 /// checked at its centroid.
 const CREASE_COS: f32 = 0.7;
+/// Length classes (equal fractions of the collapse threshold) in which
+/// short edges are collapsed, shortest class first.
+const COLLAPSE_CLASSES: u32 = 8;
 /// Upper bound on split or collapse sweeps per iteration.
 const MAX_SWEEPS: usize = 16;
 
@@ -198,15 +210,9 @@ pub(crate) fn remesh_level(
     let mut target = plan.target_vertices.max(1);
     for _ in 0..plan.iterations {
         split_long_edges(mesh, 4.0 / 3.0 * len, &mut rng);
-        collapse_short_edges(
-            mesh,
-            proj,
-            0.8 * len,
-            4.0 / 3.0 * len,
-            &mut rng,
-            &mut scratch,
-        );
+        collapse_short_edges(mesh, proj, 0.8 * len, 4.0 / 3.0 * len, &mut scratch);
         mesh.compact();
+        mesh.sort_spatially();
         equalize_valences(mesh, proj);
         relax(mesh, proj, SMOOTHING_STEPS);
         pieces.counts(mesh, &mut counts);
@@ -224,6 +230,7 @@ pub(crate) fn remesh_level(
     }
     match_vertex_count(mesh, proj, target, len, &mut rng, &mut scratch);
     mesh.compact();
+    mesh.sort_spatially();
     equalize_valences(mesh, proj);
     for _ in 0..FINAL_ROUNDS {
         relax(mesh, proj, SMOOTHING_STEPS);
@@ -289,18 +296,25 @@ fn collapse_short_edges(
     proj: &SurfaceProjector,
     lo: f32,
     hi: f32,
-    rng: &mut Pcg64Mcg,
     scratch: &mut Scratch,
 ) {
     let lo2 = lo * lo;
     for _ in 0..MAX_SWEEPS {
-        let mut cands: Vec<(f32, u32, u32, u32)> = edges_where(mesh, |l2| l2 < lo2)
+        // Shortest length class first, and within a class in the mesh's
+        // spatial order (edges_where follows the face order, which
+        // `sort_spatially` made spatial): a strict shortest-first order
+        // visits the mesh at random, and on a mesh bigger than the cache
+        // every collapse test then misses it.
+        let mut cands: Vec<(u32, u32, u32)> = edges_where(mesh, |l2| l2 < lo2)
             .into_iter()
-            .map(|(a, b, l2)| (l2, rng.random::<u32>(), a, b))
+            .map(|(a, b, l2)| {
+                let class = (COLLAPSE_CLASSES as f32 * (l2 / lo2).sqrt()) as u32;
+                (class.min(COLLAPSE_CLASSES - 1), a, b)
+            })
             .collect();
-        cands.sort_unstable_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        cands.sort_by_key(|c| c.0);
         let mut done = 0;
-        for &(_, _, a, b) in &cands {
+        for &(_, a, b) in &cands {
             let Some(h) = mesh.find_edge(a, b) else {
                 continue;
             };
@@ -466,7 +480,8 @@ fn agrees(n: Vec3, r: Vec3) -> bool {
 /// Whether the new triangle `corners` with normal `n` faces the way the
 /// reference surface does: at each corner (reference normals `refs`), and,
 /// when the corners' normals differ by more than a crease angle, also at the
-/// projection of its centroid (searched near input face `hint`).
+/// closest point of the input around its centroid (walked to from input
+/// face `hint`).
 fn triangle_faces_surface(
     proj: &SurfaceProjector,
     n: Vec3,
@@ -482,7 +497,7 @@ fn triangle_faces_surface(
         || refs[0].dot(refs[2]) < CREASE_COS;
     !creased
         || proj
-            .project_near((corners[0] + corners[1] + corners[2]) / 3.0, hint)
+            .project_local((corners[0] + corners[1] + corners[2]) / 3.0, hint)
             .is_none_or(|sp| agrees(n, proj.face_normal(sp.face)))
 }
 

@@ -500,6 +500,68 @@ impl TriMesh {
         self.live_vertices = w;
     }
 
+    /// Renumbers the vertices of a compacted mesh along a Morton (Z-order)
+    /// curve through its bounding box, and its faces by their first vertex
+    /// in that order, so that vertices and faces near in space are near in
+    /// memory. Splits append their vertices in a shuffled order, so without
+    /// this a remeshed level's vertices lie in random spatial order and
+    /// every sweep over them misses the cache on a big mesh. Ties keep the
+    /// old order, so the result is deterministic.
+    pub fn sort_spatially(&mut self) {
+        let nv = self.pos.len();
+        debug_assert_eq!(
+            nv, self.live_vertices,
+            "sort_spatially needs a compacted mesh"
+        );
+        let mut keys: Vec<(u64, u32)> = morton_codes(&self.pos).zip(0..).collect();
+        keys.sort_unstable();
+        let mut vmap = vec![0u32; nv];
+        for (new, &(_, old)) in keys.iter().enumerate() {
+            vmap[old as usize] = new as u32;
+        }
+        let nf = self.vert.len() / 3;
+        let mut faces: Vec<(u32, u32)> = (0..nf as u32)
+            .map(|f| {
+                let c = &self.vert[3 * f as usize..3 * f as usize + 3];
+                (c.iter().map(|&v| vmap[v as usize]).min().unwrap_or(0), f)
+            })
+            .collect();
+        faces.sort_unstable();
+        let mut fmap = vec![0u32; nf];
+        for (new, &(_, old)) in faces.iter().enumerate() {
+            fmap[old as usize] = new as u32;
+        }
+        let hmap = |h: u32| {
+            if h == NONE {
+                NONE
+            } else {
+                3 * fmap[(h / 3) as usize] + h % 3
+            }
+        };
+        let mut vert = vec![NONE; self.vert.len()];
+        let mut twin = vec![NONE; self.twin.len()];
+        for h in 0..self.vert.len() as u32 {
+            let g = hmap(h) as usize;
+            vert[g] = vmap[self.vert[h as usize] as usize];
+            twin[g] = hmap(self.twin[h as usize]);
+        }
+        self.vert = vert;
+        self.twin = twin;
+        fn permute<T: Copy>(v: &mut Vec<T>, keys: &[(u64, u32)]) {
+            *v = keys.iter().map(|&(_, old)| v[old as usize]).collect();
+        }
+        permute(&mut self.pos, &keys);
+        permute(&mut self.on_boundary, &keys);
+        permute(&mut self.loop_id, &keys);
+        permute(&mut self.src_face, &keys);
+        permute(&mut self.src_bary, &keys);
+        permute(&mut self.ref_normal, &keys);
+        self.out = keys
+            .iter()
+            .map(|&(_, old)| hmap(self.out[old as usize]))
+            .collect();
+    }
+
     /// Live faces as vertex triples (after [`TriMesh::compact`], all faces).
     pub fn triangles(&self) -> Vec<[u32; 3]> {
         self.vert
@@ -576,6 +638,31 @@ impl TriMesh {
     }
 }
 
+/// Morton (Z-order) codes of points, 21 bits per axis over their bounding box.
+fn morton_codes(pos: &[Vec3]) -> impl Iterator<Item = u64> + '_ {
+    const CELLS: u32 = 1 << 21;
+    let (lo, hi) = pos.iter().fold(
+        (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+        |(lo, hi), &p| (lo.min(p), hi.max(p)),
+    );
+    let scale = CELLS as f32 / (hi - lo).max_element().max(f32::MIN_POSITIVE);
+    pos.iter().map(move |&p| {
+        let q = ((p - lo) * scale).min(Vec3::splat((CELLS - 1) as f32));
+        spread3(q.x as u64) | (spread3(q.y as u64) << 1) | (spread3(q.z as u64) << 2)
+    })
+}
+
+/// The low 21 bits of `x` spread out to every third bit (for Morton codes).
+fn spread3(x: u64) -> u64 {
+    let mut x = x & 0x1f_ffff;
+    x = (x | (x << 32)) & 0x1f_0000_0000_ffff;
+    x = (x | (x << 16)) & 0x1f_0000_ff00_00ff;
+    x = (x | (x << 8)) & 0x100f_00f0_0f00_f00f;
+    x = (x | (x << 4)) & 0x10c3_0c30_c30c_30c3;
+    x = (x | (x << 2)) & 0x1249_2492_4924_9249;
+    x
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -635,5 +722,39 @@ mod tests {
         m.compact();
         m.check().unwrap();
         assert_eq!(m.live_vertices, m.pos.len());
+    }
+
+    #[test]
+    fn spatial_sort_keeps_the_surface_and_orders_vertices_along_z() {
+        let mut m = hexagon();
+        for (a, b) in [(0, 1), (2, 3), (0, 4)] {
+            let h = m.find_edge(a, b).unwrap();
+            m.split(h);
+        }
+        m.compact();
+        let tri_positions = |m: &TriMesh| {
+            let mut t: Vec<[[u32; 3]; 3]> = m
+                .triangles()
+                .iter()
+                .map(|t| {
+                    // Each triangle by its corners' positions, rotated to a
+                    // canonical first corner (orientation kept).
+                    let c = t.map(|v| m.pos[v as usize].to_array().map(f32::to_bits));
+                    let i = (0..3).min_by_key(|&i| c[i]).unwrap();
+                    [c[i], c[(i + 1) % 3], c[(i + 2) % 3]]
+                })
+                .collect();
+            t.sort_unstable();
+            t
+        };
+        let before = tri_positions(&m);
+        let boundary: usize = m.on_boundary.iter().filter(|&&b| b).count();
+        m.sort_spatially();
+        m.check().unwrap();
+        assert_eq!(tri_positions(&m), before);
+        assert_eq!(m.on_boundary.iter().filter(|&&b| b).count(), boundary);
+        let codes: Vec<u64> = morton_codes(&m.pos).collect();
+        assert!(codes.is_sorted());
+        assert_eq!(spread3(0b101), 0b100_0001); // bit 2 goes to bit 6
     }
 }
