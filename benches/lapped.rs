@@ -90,6 +90,7 @@ fn bench_paste_loop(c: &mut Criterion) {
                     let field = FaceField {
                         t: &input.field,
                         isotropic: false,
+                        scale: 1.0,
                     };
                     let out = paste_until_covered(
                         &input.mesh,
@@ -112,6 +113,7 @@ fn bench_outputs(c: &mut Criterion) {
     let field = FaceField {
         t: &input.field,
         isotropic: false,
+        scale: 1.0,
     };
     let settings = PasteSettings {
         seed: 1,

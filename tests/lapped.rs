@@ -80,6 +80,7 @@ fn flat_grid_with_constant_field_is_the_exact_similarity() {
     let field = FaceField {
         t: &t,
         isotropic: false,
+        scale: 1.0,
     };
     let mut grower = Grower::new(&m, field, GrowSettings::default());
     let seed = 2 * (9 * 19 + 9);
@@ -122,7 +123,11 @@ fn grown_patches_are_discs_inside_the_hull() {
         let m = TriMesh::new(&mesh).unwrap();
         let t = global_up_field(&m, Vec3::Y, 0.2 * diagonal(&mesh));
         for isotropic in [false, true] {
-            let field = FaceField { t: &t, isotropic };
+            let field = FaceField {
+                t: &t,
+                isotropic,
+                scale: 1.0,
+            };
             let mut grower = Grower::new(&m, field, GrowSettings::default());
             for k in 0..12u32 {
                 let seed = (k * 7919) % m.face_count() as u32;
@@ -159,7 +164,11 @@ fn every_face_of_the_shared_closed_meshes_is_covered() {
         let m = TriMesh::new(&mesh).unwrap();
         let t = global_up_field(&m, Vec3::Y, 0.15 * diagonal(&mesh));
         for isotropic in [false, true] {
-            let field = FaceField { t: &t, isotropic };
+            let field = FaceField {
+                t: &t,
+                isotropic,
+                scale: 1.0,
+            };
             let settings = PasteSettings {
                 seed: 11,
                 ..Default::default()
@@ -236,7 +245,7 @@ fn rbf_field_returns_each_constraint_at_its_face() {
     assert!(report.exact);
     for c in &constraints {
         let f = c.face as usize;
-        let n = m.normals[f];
+        let n = m.normal(f);
         let expected = (c.direction - n * n.dot(c.direction)).normalize() * 2.0 * c.scale;
         assert!(
             (t[f] - expected).length() < 1e-3 * expected.length(),
@@ -800,12 +809,14 @@ fn difficult_faces_are_seeded_first_early_on() {
     let field = FaceField {
         t: &t,
         isotropic: false,
+        scale: 1.0,
     };
     let difficulty = face_difficulty(&m, field);
-    let area: f64 = m.areas.iter().map(|&a| a as f64).sum();
+    let areas: Vec<f32> = (0..m.face_count()).map(|f| m.area(f)).collect();
+    let area: f64 = areas.iter().map(|&a| a as f64).sum();
     let mesh_mean: f64 = difficulty
         .iter()
-        .zip(&m.areas)
+        .zip(&areas)
         .map(|(&d, &a)| d as f64 * a as f64)
         .sum::<f64>()
         / area;
@@ -883,6 +894,7 @@ fn regrowing_covers_hull_area_the_solve_uncovered() {
     let field = FaceField {
         t: &t,
         isotropic: false,
+        scale: 1.0,
     };
     let mut grower = Grower::new(&m, field, GrowSettings::default());
     let (mut before_sum, mut after_sum, mut regrown) = (0.0, 0.0, 0usize);
@@ -954,6 +966,7 @@ fn culled_faces_leave_the_composite_unchanged() {
     let field = FaceField {
         t: &t,
         isotropic: true,
+        scale: 1.0,
     };
     // Every layer kept, to compare with what is drawn.
     let mut settings = PasteSettings {
@@ -1025,7 +1038,11 @@ fn dropping_hidden_layers_changes_no_decision() {
         let mesh = load(name);
         let m = TriMesh::new(&mesh).unwrap();
         let t = global_up_field(&m, Vec3::Y, 0.2 * diagonal(&mesh));
-        let field = FaceField { t: &t, isotropic };
+        let field = FaceField {
+            t: &t,
+            isotropic,
+            scale: 1.0,
+        };
         let run = |keep_hidden: bool| {
             let mut settings = PasteSettings {
                 seed: 9,

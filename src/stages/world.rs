@@ -274,7 +274,7 @@ pub struct StageFailure(pub Option<crate::pipeline::PipelineError>);
 
 /// What the `export` stage asks the runner to write (systems do no file I/O).
 /// The entity whose arrays an [`ExportJob`] writes, and which of them.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct ExportSource {
     /// The active mesh at export time.
     pub entity: Entity,
@@ -284,6 +284,9 @@ pub struct ExportSource {
     pub colours: bool,
     /// Which texture coordinates go to the OBJ.
     pub uvs: ExportUvs,
+    /// Its lapped pastes go to the files (format `pastes`), with these
+    /// texture patches.
+    pub pastes: Option<Vec<Image>>,
     /// The export system's tick: a later change of these components is an
     /// error (the previews would not show what the files hold).
     pub tick: bevy_ecs::change_detection::Tick,

@@ -56,11 +56,13 @@ impl Default for CoverageSettings {
 /// under the field `T` covers `A / ‖T‖² · unit_px²` pixels (`unit_px`:
 /// pixels per patch unit of the finest texture patch). At least 1, at most
 /// `max_level`.
-pub fn sample_levels(areas: &[f32], field: &[Vec3], unit_px: f32, max_level: u16) -> Vec<u16> {
-    areas
-        .iter()
-        .zip(field)
-        .map(|(&a, t)| {
+pub fn sample_levels(
+    area_and_field: impl Iterator<Item = (f32, Vec3)>,
+    unit_px: f32,
+    max_level: u16,
+) -> Vec<u16> {
+    area_and_field
+        .map(|(a, t)| {
             let scale2 = t.length_squared().max(f32::MIN_POSITIVE);
             let px = (a / scale2) * unit_px * unit_px;
             (px.max(0.0).sqrt().ceil() as u16).clamp(1, max_level.max(1))
@@ -505,7 +507,7 @@ mod tests {
             assert!((mean - 1.0 / 3.0).abs() < 1e-5, "{k}: {mean}");
         }
         // A face of 100 square texture pixels gets level 10.
-        let levels = sample_levels(&[4.0], &[Vec3::new(0.0, 2.0, 0.0)], 10.0, 64);
+        let levels = sample_levels([(4.0, Vec3::new(0.0, 2.0, 0.0))].into_iter(), 10.0, 64);
         assert_eq!(levels, vec![10]);
     }
 }

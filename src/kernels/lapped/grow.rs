@@ -251,8 +251,8 @@ impl<'a> Grower<'a> {
         }
         let mesh = self.mesh;
         let f = seed as usize;
-        let n = mesh.normals[f];
-        let field_t = self.field.t[f];
+        let n = mesh.normal(f);
+        let field_t = self.field.at(f);
         let scale = field_t.length().max(f32::MIN_POSITIVE);
         let dir = if self.field.isotropic || field_t.length_squared() == 0.0 {
             let x = mesh.corners(f);
@@ -355,7 +355,7 @@ impl<'a> Grower<'a> {
     /// The field vector of face `g` joining the patch.
     fn face_tangent(&self, patch: &SurfacePatch, g: u32) -> Vec3 {
         let mesh = self.mesh;
-        let own = self.field.t[g as usize];
+        let own = self.field.at(g as usize);
         if !self.field.isotropic && own.length_squared() > 0.0 {
             return own;
         }
@@ -372,7 +372,7 @@ impl<'a> Grower<'a> {
                 count += 1.0;
             }
         }
-        let n = mesh.normals[g as usize];
+        let n = mesh.normal(g as usize);
         let dir = (sum - n * n.dot(sum))
             .try_normalize()
             .unwrap_or_else(|| n.any_orthonormal_vector());
@@ -562,7 +562,7 @@ pub fn face_jacobian(mesh: &TriMesh, f: usize, t: Vec3, st: [Vec2; 3]) -> Option
     if grad[0] == Vec3::ZERO {
         return None;
     }
-    let s = t.cross(mesh.normals[f]);
+    let s = t.cross(mesh.normal(f));
     let mut phi_t = Vec2::ZERO;
     let mut phi_s = Vec2::ZERO;
     for i in 0..3 {
@@ -607,6 +607,7 @@ mod tests {
         let field = FaceField {
             t: &t,
             isotropic: false,
+            scale: 1.0,
         };
         let hull = hull_of(&circle_mask(64));
         let mut g = Grower::new(&m, field, GrowSettings::default());
@@ -640,7 +641,11 @@ mod tests {
         // disc rule stops growth.
         let t = global_up_field(&m, Vec3::Y, 4.0);
         for isotropic in [false, true] {
-            let field = FaceField { t: &t, isotropic };
+            let field = FaceField {
+                t: &t,
+                isotropic,
+                scale: 1.0,
+            };
             let settings = GrowSettings {
                 max_distortion: f32::INFINITY,
                 ..Default::default()
@@ -665,6 +670,7 @@ mod tests {
         let field = FaceField {
             t: &t,
             isotropic: false,
+            scale: 1.0,
         };
         let hull = hull_of(&circle_mask(64));
         let mut loose = Grower::new(

@@ -78,10 +78,6 @@ pub struct TriMesh {
     pub positions: Vec<Vec3>,
     /// Triangles, counter-clockwise seen from outside.
     pub tris: Vec<[u32; 3]>,
-    /// Unit face normals (zero for a degenerate face).
-    pub normals: Vec<Vec3>,
-    /// Face areas.
-    pub areas: Vec<f32>,
     /// Face across each edge.
     pub neighbours: Vec<[u32; 3]>,
     /// CSR offsets into `vertex_face_list`.
@@ -97,6 +93,61 @@ impl TriMesh {
     /// [`LappedError::NotTriangles`] for a polygon with more than three
     /// corners, [`LappedError::NoFaces`] for an empty mesh.
     pub fn new(mesh: &PolyMesh) -> Result<Self, LappedError> {
+        Self::check(mesh)?;
+        let tris = (0..mesh.face_count())
+            .map(|f| {
+                let v = mesh.face(f);
+                [v[0], v[1], v[2]]
+            })
+            .collect();
+        Ok(Self::from_parts(mesh.positions.clone(), tris))
+    }
+
+    /// [`TriMesh::new`] taking `mesh`'s positions and corners instead of
+    /// copying them (36 bytes per vertex at the paste loop's peak); give
+    /// them back with [`TriMesh::into_poly_mesh`]. On an error the mesh is
+    /// returned unchanged.
+    ///
+    /// # Errors
+    /// As [`TriMesh::new`].
+    #[allow(clippy::result_large_err)]
+    pub fn from_owned(mesh: PolyMesh) -> Result<Self, (PolyMesh, LappedError)> {
+        if let Err(e) = Self::check(&mesh) {
+            return Err((mesh, e));
+        }
+        if mesh.corner_vertex.len() != 3 * mesh.face_count() {
+            // Corners no face names: copy the faces' own.
+            return Self::new(&mesh).map_err(|e| (PolyMesh::new(), e));
+        }
+        let PolyMesh {
+            positions,
+            corner_vertex,
+            ..
+        } = mesh;
+        // The corners of a triangle mesh are its triangles, three at a time
+        // (same alignment; only a capacity that is not a multiple of three
+        // makes the cast copy).
+        let tris: Vec<[u32; 3]> = bytemuck::allocation::try_cast_vec(corner_vertex)
+            .unwrap_or_else(|(_, c)| bytemuck::cast_slice(&c).to_vec());
+        Ok(Self::from_parts(positions, tris))
+    }
+
+    /// The positions and triangles as the mesh [`TriMesh::from_owned`] took
+    /// them from (every face a triangle, in order).
+    pub fn into_poly_mesh(self) -> PolyMesh {
+        let face_start = (0..=self.tris.len() as u32).map(|f| 3 * f).collect();
+        PolyMesh {
+            positions: self.positions,
+            face_start,
+            corner_vertex: bytemuck::allocation::cast_vec(self.tris),
+        }
+    }
+
+    /// Refuses what the kernels cannot work on (as [`TriMesh::new`]).
+    ///
+    /// # Errors
+    /// As [`TriMesh::new`].
+    pub fn check(mesh: &PolyMesh) -> Result<(), LappedError> {
         if mesh.face_count() == 0 {
             return Err(LappedError::NoFaces);
         }
@@ -106,29 +157,23 @@ impl TriMesh {
                 corners: mesh.face_corners(face).len(),
             });
         }
-        let fc = mesh.face_count();
-        let tris: Vec<[u32; 3]> = (0..fc)
-            .map(|f| {
-                let v = mesh.face(f);
-                [v[0], v[1], v[2]]
-            })
-            .collect();
+        Ok(())
+    }
+
+    /// The adjacency of `tris` over `positions`.
+    fn from_parts(positions: Vec<Vec3>, tris: Vec<[u32; 3]>) -> Self {
         // Faces around each vertex, then the face across each edge from
         // them: no full `Topology` (~140 bytes per vertex, and a sort of
         // 16 bytes per corner) is built for what is read here.
-        let (vertex_face_start, vertex_face_list) = vertex_faces(&tris, mesh.vertex_count());
+        let (vertex_face_start, vertex_face_list) = vertex_faces(&tris, positions.len());
         let neighbours = face_neighbours(&tris, &vertex_face_start, &vertex_face_list);
-        let normals: Vec<Vec3> = (0..fc).map(|f| mesh.face_normal(f)).collect();
-        let areas: Vec<f32> = (0..fc).map(|f| mesh.face_area(f)).collect();
-        Ok(Self {
-            positions: mesh.positions.clone(),
+        Self {
+            positions,
             tris,
-            normals,
-            areas,
             neighbours,
             vertex_face_start,
             vertex_face_list,
-        })
+        }
     }
 
     /// Number of faces.
@@ -149,6 +194,30 @@ impl TriMesh {
     #[inline]
     pub fn corners(&self, f: usize) -> [Vec3; 3] {
         self.tris[f].map(|v| self.positions[v as usize])
+    }
+
+    /// Twice the area vector of face `f`: exactly
+    /// [`PolyMesh::face_normal_scaled`] of the triangle (computed, not
+    /// stored: normals and areas were 16 bytes per face).
+    #[inline]
+    fn normal_scaled(&self, f: usize) -> Vec3 {
+        let [a, b, c] = self.corners(f);
+        // `ZERO +` as the polygon sum starts, so even the signs of zero
+        // components match.
+        Vec3::ZERO + (b - a).cross(c - a)
+    }
+
+    /// Unit normal of face `f` (zero for a degenerate face), exactly
+    /// [`PolyMesh::face_normal`].
+    #[inline]
+    pub fn normal(&self, f: usize) -> Vec3 {
+        self.normal_scaled(f).normalize_or_zero()
+    }
+
+    /// Area of face `f`, exactly [`PolyMesh::face_area`].
+    #[inline]
+    pub fn area(&self, f: usize) -> f32 {
+        0.5 * self.normal_scaled(f).length()
     }
 
     /// The centroid of face `f` (computed, not stored: 24 bytes per face
@@ -174,8 +243,8 @@ impl TriMesh {
     #[inline]
     pub fn barycentric_gradients(&self, f: usize) -> [Vec3; 3] {
         let x = self.corners(f);
-        let n = self.normals[f];
-        let twice_area = 2.0 * self.areas[f];
+        let n = self.normal(f);
+        let twice_area = 2.0 * self.area(f);
         if twice_area <= f32::MIN_POSITIVE || n == Vec3::ZERO {
             return [Vec3::ZERO; 3];
         }
@@ -188,7 +257,7 @@ impl TriMesh {
     /// Without a shared edge, `v` is projected onto `g`'s plane.
     pub fn transport(&self, v: Vec3, f: usize, g: usize) -> Vec3 {
         let edge = (0..3).find(|&i| self.neighbours[f][i] == g as u32);
-        let (nf, ng) = (self.normals[f], self.normals[g]);
+        let (nf, ng) = (self.normal(f), self.normal(g));
         match edge {
             Some(i) => {
                 let t = self.tris[f];
@@ -282,6 +351,19 @@ pub struct FaceField<'a> {
     /// Isotropic textures: only `‖T‖` is used; the orientation is propagated
     /// during patch growth (§3.2, last paragraph).
     pub isotropic: bool,
+    /// Factor applied to `t` as it is read ([`FaceField::at`]): the stage
+    /// passes the field in world units per pixel with the patch's pixels
+    /// per unit here instead of a scaled copy (24 bytes per face). 1 for a
+    /// field already in patch units (`x · 1` is exact).
+    pub scale: f32,
+}
+
+impl FaceField<'_> {
+    /// `T` of face `f` times [`FaceField::scale`].
+    #[inline]
+    pub fn at(&self, f: usize) -> Vec3 {
+        self.t[f] * self.scale
+    }
 }
 
 #[cfg(test)]

@@ -364,6 +364,7 @@ mod tests {
         let field = FaceField {
             t: &t,
             isotropic: false,
+            scale: 1.0,
         };
         let mut g = Grower::new(&m, field, GrowSettings::default());
         let seed = 2 * (5 * 11 + 5);
@@ -408,7 +409,11 @@ mod tests {
             (false, 0),
             (true, 0),
         ] {
-            let field = FaceField { t: &t, isotropic };
+            let field = FaceField {
+                t: &t,
+                isotropic,
+                scale: 1.0,
+            };
             let mut g = Grower::new(
                 &m,
                 field,

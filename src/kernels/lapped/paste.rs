@@ -139,15 +139,15 @@ pub fn face_difficulty(mesh: &TriMesh, field: FaceField) -> Vec<f32> {
     let jump = if field.isotropic {
         vec![0.0; mesh.face_count()]
     } else {
-        field_discontinuity(mesh, field.t)
+        field_discontinuity(mesh, |f| field.at(f))
     };
     (0..mesh.face_count())
         .map(|f| {
-            let n = mesh.normals[f];
+            let n = mesh.normal(f);
             let bend = mesh.neighbours[f]
                 .iter()
                 .filter(|&&g| g != NO_FACE)
-                .map(|&g| n.dot(mesh.normals[g as usize]).clamp(-1.0, 1.0).acos())
+                .map(|&g| n.dot(mesh.normal(g as usize)).clamp(-1.0, 1.0).acos())
                 .fold(0.0f32, f32::max);
             (bend.max(jump[f]) / std::f32::consts::FRAC_PI_2).min(1.0)
         })
@@ -244,11 +244,15 @@ pub fn paste_until_covered(
         .iter()
         .map(TexturePatch::unit_px)
         .fold(1.0f32, f32::max);
-    let levels = sample_levels(&mesh.areas, field.t, unit_px, settings.coverage.max_level);
+    let levels = sample_levels(
+        (0..fc).map(|f| (mesh.area(f), field.at(f))),
+        unit_px,
+        settings.coverage.max_level,
+    );
     let mut coverage = Coverage::new(levels);
     // Degenerate faces show nothing: they count as covered.
     for f in 0..fc {
-        if mesh.areas[f] <= 0.0 {
+        if mesh.area(f) <= 0.0 {
             coverage.covered[f] = true;
         }
     }
@@ -278,7 +282,7 @@ pub fn paste_until_covered(
     let mut covered_count = fc - open_count;
     progress.inc(covered_count as u64);
     let weight =
-        |f: usize, boost: f32| mesh.areas[f] as f64 * (1.0 + (boost * difficulty[f]) as f64);
+        |f: usize, boost: f32| mesh.area(f) as f64 * (1.0 + (boost * difficulty[f]) as f64);
     let early_at = |covered: usize| (covered as f32) < settings.difficult_until * fc as f32;
     let mut early = early_at(covered_count);
     let boost_of = |early: bool| if early { settings.difficult_first } else { 0.0 };
@@ -462,7 +466,11 @@ mod tests {
         )
         .unwrap();
         for isotropic in [false, true] {
-            let field = FaceField { t: &t, isotropic };
+            let field = FaceField {
+                t: &t,
+                isotropic,
+                scale: 1.0,
+            };
             let out = paste_until_covered(
                 &m,
                 field,

@@ -358,8 +358,9 @@ impl Stage for Export {
             } else {
                 None
             };
-            let paste_export = (lapped_ok && settings.formats.iter().any(|f| f == "pastes"))
-                .then(|| runtime_pastes(mesh, &lapped, patch_textures));
+            // The pastes themselves are taken by `finish_export_job`.
+            let paste_textures = (lapped_ok && settings.formats.iter().any(|f| f == "pastes"))
+                .then(|| patch_textures.to_vec());
             let export_uvs = match (uvs, atlas) {
                 (Some(_), _) => ExportUvs::Corner,
                 (None, Some(_)) => ExportUvs::Atlas,
@@ -426,6 +427,7 @@ impl Stage for Export {
                     stage: ctx.index + 1,
                     colours: colours.is_some(),
                     uvs: export_uvs,
+                    pastes: paste_textures,
                     tick: ticks.this_run(),
                 }),
                 mesh: Default::default(),
@@ -435,7 +437,7 @@ impl Stage for Export {
                 previews,
                 images,
                 baked,
-                pastes: paste_export,
+                pastes: None,
                 baked_asset: None,
                 take_baked_asset: wants_asset,
                 original,
@@ -475,7 +477,7 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
         job.baked_asset = asset;
         job.take_baked_asset = false;
     }
-    let Some(source) = world.resource::<ExportJob>().source else {
+    let Some(source) = world.resource::<ExportJob>().source.clone() else {
         return Ok(());
     };
     let e = source.entity;
@@ -519,8 +521,13 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
             .map(|u| (u.0, world.resource::<Exemplar>().image.clone())),
         ExportUvs::Atlas => get::<AtlasTexture>(world, e, transfer).map(|a| (a.uvs, a.image)),
     };
+    let pastes = source.pastes.map(|textures| PasteExport {
+        pastes: runtime_pastes(world, e, &mesh, transfer),
+        textures,
+    });
     let mut job = world.resource_mut::<ExportJob>();
     job.mesh = mesh;
+    job.pastes = pastes;
     job.colours = colours;
     job.uvs = uvs;
     job.source = None;
@@ -537,34 +544,63 @@ type PasteQuery = (
     &'static PatchDrawn,
 );
 
-/// The runtime-pasting export of the pastes (Praun et al. §4): per paste,
-/// only the faces still drawn, with their corners' texture coordinates.
+/// The runtime-pasting export of the pastes of `mesh_entity` (Praun et al.
+/// §4), in paste order: per paste, only the faces still drawn, with their
+/// corners' texture coordinates. With [`Transfer::Move`] the paste entities'
+/// arrays are moved out (the lapped stage keeps only drawn faces, so they
+/// are the records as they are), not copied: at a million vertices they
+/// are ~80 bytes per vertex that were held twice through the result
+/// metrics.
 fn runtime_pastes(
+    world: &mut World,
+    mesh_entity: Entity,
     mesh: &crate::mesh::PolyMesh,
-    lapped: &[bevy_ecs::query::QueryItem<'_, '_, PasteQuery>],
-    textures: &[crate::image::Image],
-) -> PasteExport {
-    let pastes = lapped
-        .iter()
-        .map(|(_, _, texture, faces, uvs, drawn)| {
+    transfer: Transfer,
+) -> Vec<PasteRecord> {
+    let mut query = world.query::<(Entity, &PasteOf, &PasteOrder)>();
+    let mut order: Vec<(u32, Entity)> = query
+        .iter(world)
+        .filter(|(_, of, _)| of.0 == mesh_entity)
+        .map(|(e, _, o)| (o.0, e))
+        .collect();
+    order.sort_unstable();
+    order
+        .into_iter()
+        .filter_map(|(_, e)| {
+            let mut paste = world.get_entity_mut(e).ok()?;
+            let texture = paste.get::<TexturePatchIndex>()?.0;
+            let drawn = paste.get::<PatchDrawn>()?.0.clone();
+            let (faces, uvs) = match transfer {
+                Transfer::Copy => (
+                    paste.get::<PatchFaces>()?.0.clone(),
+                    paste.get::<PatchUvs>()?.0.clone(),
+                ),
+                Transfer::Move => (
+                    std::mem::take(&mut paste.get_mut::<PatchFaces>()?.0),
+                    std::mem::take(&mut paste.get_mut::<PatchUvs>()?.0),
+                ),
+            };
+            if drawn.iter().all(|&d| d) {
+                return Some(PasteRecord {
+                    texture,
+                    faces,
+                    uvs,
+                });
+            }
             let mut record = PasteRecord {
-                texture: texture.0,
+                texture,
                 ..Default::default()
             };
             let mut offset = 0usize;
-            for (&f, &draw) in faces.0.iter().zip(&drawn.0) {
+            for (&f, &draw) in faces.iter().zip(&drawn) {
                 let n = mesh.face_corners(f as usize).len();
                 if draw {
                     record.faces.push(f);
-                    record.uvs.extend_from_slice(&uvs.0[offset..offset + n]);
+                    record.uvs.extend_from_slice(&uvs[offset..offset + n]);
                 }
                 offset += n;
             }
-            record
+            Some(record)
         })
-        .collect();
-    PasteExport {
-        textures: textures.to_vec(),
-        pastes,
-    }
+        .collect()
 }

@@ -534,14 +534,14 @@ impl Stage for LappedPaste {
                mut spacing: ResMut<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
-               meshes: Query<(&Geometry, &FaceField)>,
+               mut meshes: Query<(&mut Geometry, &FaceField)>,
                old: Query<(Entity, &PasteOf)>| {
             let fail = |message: String| PipelineError::Stage {
                 index: ctx.index + 1,
                 kind: Self::KIND.into(),
                 message,
             };
-            let Ok((geometry, field)) = meshes.get(active.0) else {
+            let Ok((mut geometry, field)) = meshes.get_mut(active.0) else {
                 failure.0 = Some(fail(
                     "the active mesh has no tangent field; add `tangent_field` right before".into(),
                 ));
@@ -557,19 +557,19 @@ impl Stage for LappedPaste {
             };
             let layout = (settings.atlas_size > 0).then(|| atlas_layout(&geometry.0, &atlas_settings));
             release_freed_memory();
-let tri = match TriMesh::new(&geometry.0) {
-                Ok(t) if field.t.len() == t.face_count() => t,
-                Ok(_) => {
-                    failure.0 = Some(fail(
-                        "the tangent field does not fit the mesh; run `tangent_field` after the last stage that changes the mesh".into(),
-                    ));
-                    return;
-                }
+            let fits = match TriMesh::check(&geometry.0) {
+                Ok(()) => field.t.len() == geometry.0.face_count(),
                 Err(e) => {
                     failure.0 = Some(fail(e.to_string()));
                     return;
                 }
             };
+            if !fits {
+                failure.0 = Some(fail(
+                    "the tangent field does not fit the mesh; run `tangent_field` after the last stage that changes the mesh".into(),
+                ));
+                return;
+            }
             let mask = match &mask_image {
                 Ok(m) => m.as_ref(),
                 Err(e) => {
@@ -613,14 +613,22 @@ let tri = match TriMesh::new(&geometry.0) {
             };
             let paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
             let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
-            let per_patch: Vec<Vec3> = if field.per_pixel {
-                field.t.iter().map(|t| *t * unit_px).collect()
-            } else {
-                Vec::new()
-            };
+            // A field in world units per pixel is read in patch units
+            // (scaled as it is read, not copied).
             let view = FieldView {
-                t: if field.per_pixel { &per_patch } else { &field.t },
+                t: &field.t,
                 isotropic: field.isotropic,
+                scale: if field.per_pixel { unit_px } else { 1.0 },
+            };
+            // The loop takes the mesh's positions and corners instead of
+            // copying them; they go back right after it.
+            let tri = match TriMesh::from_owned(std::mem::take(&mut geometry.0)) {
+                Ok(t) => t,
+                Err((mesh, e)) => {
+                    geometry.0 = mesh;
+                    failure.0 = Some(fail(e.to_string()));
+                    return;
+                }
             };
             let progress = Progress::new(tri.face_count() as u64, "lapped_paste");
             let out = paste_until_covered(&tri, view, &textures, &paste_settings, &progress);
@@ -632,10 +640,11 @@ let tri = match TriMesh::new(&geometry.0) {
             record_metrics(&mut metrics, ctx.index, &out, draws_per_face, &textures);
 
             // World units per exemplar texel, for the quality metrics.
-            let mean_scale =
-                view.t.iter().map(|t| t.length() as f64).sum::<f64>() / view.t.len().max(1) as f64;
+            let mean_scale = (0..view.t.len())
+                .map(|f| view.at(f).length() as f64)
+                .sum::<f64>()
+                / view.t.len().max(1) as f64;
             spacing.0 = (mean_scale as f32 / unit_px).max(f32::MIN_POSITIVE);
-            drop(per_patch);
 
             // Only the faces runtime pasting draws are kept (§4): the
             // hidden ones were ~3/4 of all layers on a scan. The coverage
@@ -644,7 +653,7 @@ let tri = match TriMesh::new(&geometry.0) {
                 pastes, coverage, ..
             } = out;
             drop(coverage);
-            drop(tri);
+            geometry.0 = tri.into_poly_mesh();
             let kept: Vec<(u32, Vec<u32>, Vec<Vec2>)> = pastes
                 .into_iter()
                 .zip(&drawn)
