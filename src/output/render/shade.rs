@@ -84,6 +84,10 @@ pub(crate) struct SmoothNormals {
     split: Vec<(u32, Vec3)>,
 }
 
+/// A face around a vertex while its normals are made: the vertex's corner
+/// in it, its area vector and its unit normal.
+type AroundFace = (u32, Vec3, Vec3);
+
 impl SmoothNormals {
     pub fn new(mesh: &PolyMesh, crease_deg: f32) -> Self {
         let nv = mesh.vertex_count();
@@ -99,52 +103,58 @@ impl SmoothNormals {
         }
         let mut fill = start.clone();
         let mut incident = vec![0u32; mesh.corner_count()];
-        let mut corner_face = vec![0u32; mesh.corner_count()];
         for f in 0..fc {
             for c in mesh.face_corners(f) {
                 let v = mesh.corner_vertex[c] as usize;
                 incident[fill[v] as usize] = c as u32;
                 fill[v] += 1;
-                corner_face[c] = f as u32;
             }
         }
         drop(fill);
-        let scaled: Vec<Vec3> = (0..fc)
-            .into_par_iter()
-            .map(|f| mesh.face_normal_scaled(f))
-            .collect();
-        let unit: Vec<Vec3> = scaled.par_iter().map(|n| n.normalize_or_zero()).collect();
+        let face_of = |c: u32| mesh.face_start.partition_point(|&s| s <= c) - 1;
         let cos = crease_deg.clamp(0.0, 180.0).to_radians().cos();
         let mut vertex = vec![Vec3::ZERO; nv];
+        // Each vertex's faces' area vectors and unit normals are computed
+        // in a scratch its worker reuses, not stored per face and per
+        // corner (72 bytes per vertex at the export's peak); a face is
+        // computed once per corner, by the same function, so the values
+        // are the same.
         let mut split: Vec<(u32, Vec3)> = vertex
             .par_iter_mut()
             .enumerate()
-            .fold(Vec::new, |mut split, (v, out)| {
-                let around = &incident[start[v] as usize..start[v + 1] as usize];
-                let face = |c: u32| corner_face[c as usize] as usize;
-                let mut full = Vec3::ZERO;
-                for &g in around {
-                    full += scaled[face(g)];
-                }
-                let shared = full.try_normalize();
-                *out = shared.unwrap_or(Vec3::ZERO);
-                for &c in around {
-                    let own = unit[face(c)];
-                    let mut n = Vec3::ZERO;
-                    let mut all = true;
-                    for &g in around {
-                        if unit[face(g)].dot(own) >= cos {
-                            n += scaled[face(g)];
-                        } else {
-                            all = false;
+            .fold(
+                || (Vec::new(), Vec::new()),
+                |(mut split, mut local): (Vec<(u32, Vec3)>, Vec<AroundFace>), (v, out)| {
+                    let around = &incident[start[v] as usize..start[v + 1] as usize];
+                    local.clear();
+                    local.extend(around.iter().map(|&c| {
+                        let scaled = mesh.face_normal_scaled(face_of(c));
+                        (c, scaled, scaled.normalize_or_zero())
+                    }));
+                    let mut full = Vec3::ZERO;
+                    for &(_, scaled, _) in &local {
+                        full += scaled;
+                    }
+                    let shared = full.try_normalize();
+                    *out = shared.unwrap_or(Vec3::ZERO);
+                    for &(c, _, own) in &local {
+                        let mut n = Vec3::ZERO;
+                        let mut all = true;
+                        for &(_, scaled, unit) in &local {
+                            if unit.dot(own) >= cos {
+                                n += scaled;
+                            } else {
+                                all = false;
+                            }
+                        }
+                        if !(all && shared.is_some()) {
+                            split.push((c, n.try_normalize().unwrap_or(own)));
                         }
                     }
-                    if !(all && shared.is_some()) {
-                        split.push((c, n.try_normalize().unwrap_or(own)));
-                    }
-                }
-                split
-            })
+                    (split, local)
+                },
+            )
+            .map(|(split, _)| split)
             .reduce(Vec::new, |mut a, mut b| {
                 a.append(&mut b);
                 a
