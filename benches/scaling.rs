@@ -17,6 +17,15 @@
 //! spacing of the scan, so `retile` and `subdivide_sqrt2` derive the scan's
 //! vertex count), which measures the synthesis itself at 10 k to 1 M.
 //!
+//! Each method also runs once on a 2 k-vertex scan, the baseline: the
+//! binary, the exemplar and its analysis, the atlas and preview images,
+//! which do not grow with the mesh. The marginal columns are the
+//! differences to it over the difference of vertex counts — the cost of
+//! one more vertex, which stays flat when a method is linear (the raw
+//! per-vertex figures fall with size where the fixed part dominates).
+//! CPU seconds are the child's user + system time (`getrusage`), steadier
+//! than wall time on a shared machine.
+//!
 //! Not a criterion bench: one run per size is the measurement (each takes
 //! seconds to minutes), and peak memory needs a process of its own.
 
@@ -34,6 +43,24 @@ const CONFIGS: [(&str, &str); 6] = [
     ("lapped", "31_lapped_bunny_planks.toml"),
     ("jump + bake", "40_bake_bunny.toml"),
 ];
+
+/// Vertices of the baseline scan every method runs on first.
+const BASELINE_VERTICES: usize = 2_000;
+
+/// User + system seconds of the finished child processes so far.
+fn children_cpu_seconds() -> f64 {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: `getrusage` fills the zeroed struct it is given and reads
+        // nothing else.
+        let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+        if unsafe { libc::getrusage(libc::RUSAGE_CHILDREN, &mut usage) } == 0 {
+            let secs = |t: libc::timeval| t.tv_sec as f64 + t.tv_usec as f64 * 1e-6;
+            return secs(usage.ru_utime) + secs(usage.ru_stime);
+        }
+    }
+    f64::NAN
+}
 
 fn main() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -67,10 +94,11 @@ fn main() {
         .ok()
         .map(|l| l.split(',').map(|s| s.trim().to_string()).collect());
     println!(
-        "| method | vertices | seconds | µs / vertex | peak MB | bytes / vertex | slowest stage |"
+        "| method | vertices | seconds | CPU s | µs / vertex | peak MB | bytes / vertex | marginal CPU µs / vertex | marginal bytes / vertex | slowest stage |"
     );
-    println!("|---|---|---|---|---|---|---|");
-    for &n in &sizes {
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let mut baselines: std::collections::HashMap<&str, (f64, f64, f64)> = Default::default();
+    for &n in std::iter::once(&BASELINE_VERTICES).chain(&sizes) {
         let (mesh, report) = messy::write_messy_scan(dir.path(), n, 1);
         // SURFSYNTH_SCALING_KEEP=FOLDER keeps the scans, to look or profile.
         if let Ok(keep) = std::env::var("SURFSYNTH_SCALING_KEEP") {
@@ -97,6 +125,7 @@ fn main() {
                     &format!("input.texture_scale={texels_per_unit}"),
                 ]);
             }
+            let cpu_before = children_cpu_seconds();
             let run = cmd
                 .arg("--set")
                 .arg(format!("input.mesh={}", mesh.display()))
@@ -105,6 +134,7 @@ fn main() {
                 .arg("-q")
                 .output()
                 .expect("the binary runs");
+            let cpu = children_cpu_seconds() - cpu_before;
             if !run.status.success() {
                 println!(
                     "| {method} | {} | failed: {} | | | | |",
@@ -155,8 +185,18 @@ fn main() {
                 })
                 .unwrap_or_default();
             let v = report.vertices as f64;
+            let (marginal_cpu, marginal_bytes) = match baselines.get(method) {
+                Some(&(bv, bcpu, bpeak)) if v > bv => (
+                    format!("{:.1}", (cpu - bcpu) / (v - bv) * 1e6),
+                    format!("{:.0}", (peak - bpeak) / (v - bv)),
+                ),
+                _ => {
+                    baselines.insert(method, (v, cpu, peak));
+                    ("baseline".into(), "baseline".into())
+                }
+            };
             println!(
-                "| {method} | {} | {secs:.2} | {:.1} | {:.0} | {:.0} | {slowest}{bake} |",
+                "| {method} | {} | {secs:.2} | {cpu:.2} | {:.1} | {:.0} | {:.0} | {marginal_cpu} | {marginal_bytes} | {slowest}{bake} |",
                 report.vertices,
                 secs / v * 1e6,
                 peak / 1e6,

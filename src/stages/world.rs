@@ -524,7 +524,8 @@ pub struct Sqrt2Pyramid(pub Vec<Entity>);
 /// stage; the `export` formats `glb` and `baked_obj` write it.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct BakedAsset {
-    /// The original mesh, fan-triangulated (vertices unchanged).
+    /// The original mesh, fan-triangulated (vertices unchanged); empty
+    /// while [`BakedAsset::on_source`].
     pub mesh: PolyMesh,
     /// Per corner of `mesh`, its atlas coordinates (`v = 0` at the top row).
     pub uvs: Vec<Vec2>,
@@ -533,4 +534,19 @@ pub struct BakedAsset {
     /// Further baked exemplar maps by role (`normal`: tangent-space RGB,
     /// `roughness`, `height`: one channel), in that order when present.
     pub maps: Vec<(String, Image)>,
+    /// The asset's mesh is the source mesh as the world holds it (a
+    /// triangle mesh is its own fan triangulation) and `mesh` is empty:
+    /// the export's previews read the world's, and `finish_export_job`
+    /// copies it in once the previews and the result metrics are done, so
+    /// the run does not hold a second copy of the mesh at its peak (44
+    /// bytes per vertex). See [`BakedAsset::mesh_or`].
+    pub on_source: bool,
+}
+
+impl BakedAsset {
+    /// The asset's mesh: `source` (the source mesh's geometry) while
+    /// [`BakedAsset::on_source`], else its own.
+    pub fn mesh_or<'a>(&'a self, source: &'a PolyMesh) -> &'a PolyMesh {
+        if self.on_source { source } else { &self.mesh }
+    }
 }

@@ -449,15 +449,20 @@ fn bake_world(
     if !maps_note.is_empty() {
         record.push(("baked_maps_note", to_json(&maps_note)));
     }
-    // A triangle mesh is its own fan triangulation.
-    let tri_mesh = if mesh.is_triangle_mesh() {
+    // A triangle mesh is its own fan triangulation: the asset refers to
+    // the world's (`BakedAsset::on_source`) instead of holding a copy.
+    let (tri_mesh, on_source) = if mesh.is_triangle_mesh() {
         drop(tris);
-        mesh.clone()
+        (PolyMesh::new(), true)
     } else {
-        PolyMesh::from_triangles(mesh.positions.clone(), &tris)
+        (
+            PolyMesh::from_triangles(mesh.positions.clone(), &tris),
+            false,
+        )
     };
     let asset = BakedAsset {
         mesh: tri_mesh,
+        on_source,
         // In place: the per-triangle array becomes the per-corner one.
         uvs: atlas.corner_uvs.into_flattened(),
         colour,

@@ -187,6 +187,7 @@ impl Stage for Export {
             Option<Res<SynthesisedImage>>,
         ),
                originals: Query<(Entity, &Geometry, &VertexColours), With<SourceMesh>>,
+               sources: Query<&Geometry, With<SourceMesh>>,
                ticks: bevy_ecs::system::SystemChangeTick| {
             let Ok((geometry, colours, uvs, blend, atlas, source_texels)) = meshes.get(active.0)
             else {
@@ -342,8 +343,14 @@ impl Stage for Export {
                         texture: &asset.colour,
                         wrap: crate::image::sample::Wrap::Clamp,
                     };
-                    let baked_views =
-                        render_views(&asset.mesh, &baked_shading, settings.preview_size, &options);
+                    let empty = crate::mesh::PolyMesh::new();
+                    let source = sources.iter().next().map_or(&empty, |g| &g.0);
+                    let baked_views = render_views(
+                        asset.mesh_or(source),
+                        &baked_shading,
+                        settings.preview_size,
+                        &options,
+                    );
                     for (i, img) in baked_views.into_iter().enumerate() {
                         images.push((format!("bake_preview_{i}.png"), img));
                     }
@@ -469,6 +476,11 @@ pub enum Transfer {
 /// not): put `export` last.
 pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), PipelineError> {
     if world.resource::<ExportJob>().take_baked_asset {
+        if transfer == Transfer::Copy {
+            // The world stays whole for its readers: its asset gets the
+            // mesh it refers to.
+            fill_asset_mesh(world);
+        }
         let asset = match transfer {
             Transfer::Copy => world.get_resource::<BakedAsset>().cloned(),
             Transfer::Move => world.remove_resource::<BakedAsset>(),
@@ -478,6 +490,7 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
         job.take_baked_asset = false;
     }
     let Some(source) = world.resource::<ExportJob>().source.clone() else {
+        asset_mesh_from_source(world);
         return Ok(());
     };
     let e = source.entity;
@@ -531,7 +544,50 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
     job.colours = colours;
     job.uvs = uvs;
     job.source = None;
+    // Last, when the mesh may have moved into the job: the asset's copy.
+    asset_mesh_from_source(world);
     Ok(())
+}
+
+/// Gives the world's [`BakedAsset`] the source mesh it refers to.
+fn fill_asset_mesh(world: &mut World) {
+    if !world
+        .get_resource::<BakedAsset>()
+        .is_some_and(|a| a.on_source)
+    {
+        return;
+    }
+    let mesh = source_geometry(world).unwrap_or_default();
+    let mut asset = world.resource_mut::<BakedAsset>();
+    asset.mesh = mesh;
+    asset.on_source = false;
+}
+
+/// Gives the export job's asset the source mesh it refers to: the job's
+/// mesh when the source mesh was exported (and so moved into the job),
+/// else the world's.
+fn asset_mesh_from_source(world: &mut World) {
+    if !world
+        .resource::<ExportJob>()
+        .baked_asset
+        .as_ref()
+        .is_some_and(|a| a.on_source)
+    {
+        return;
+    }
+    let from_world = source_geometry(world).filter(|m| m.face_count() > 0);
+    let mut job = world.resource_mut::<ExportJob>();
+    let mesh = from_world.unwrap_or_else(|| job.mesh.clone());
+    if let Some(asset) = job.baked_asset.as_mut() {
+        asset.mesh = mesh;
+        asset.on_source = false;
+    }
+}
+
+/// A copy of the source mesh's geometry.
+fn source_geometry(world: &mut World) -> Option<crate::mesh::PolyMesh> {
+    let mut q = world.query_filtered::<&Geometry, With<SourceMesh>>();
+    q.iter(world).next().map(|g| g.0.clone())
 }
 
 /// What the export reads of a paste entity.
