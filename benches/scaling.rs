@@ -167,7 +167,10 @@ fn main() {
                 peak = peak.min(m["peak_rss_bytes"].as_f64().unwrap_or(f64::NAN));
             }
             if let Some(reason) = failed {
-                println!("| {method} | {} | failed: {reason} | | | | | | | |", report.vertices);
+                println!(
+                    "| {method} | {} | failed: {reason} | | | | | | | |",
+                    report.vertices
+                );
                 continue;
             }
             let slowest = m["stages"]
