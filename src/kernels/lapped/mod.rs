@@ -115,15 +115,15 @@ impl TriMesh {
         if let Err(e) = Self::check(&mesh) {
             return Err((mesh, e));
         }
-        if mesh.corner_vertex.len() != 3 * mesh.face_count() {
-            // Corners no face names: copy the faces' own.
-            return Self::new(&mesh).map_err(|e| (PolyMesh::new(), e));
-        }
+        let fc = mesh.face_count();
         let PolyMesh {
             positions,
-            corner_vertex,
+            mut corner_vertex,
             ..
         } = mesh;
+        // Every face has three corners, so face `f` is corners `3f..3f + 3`;
+        // corners past the last face belong to no face.
+        corner_vertex.truncate(3 * fc);
         // The corners of a triangle mesh are its triangles, three at a time
         // (same alignment; only a capacity that is not a multiple of three
         // makes the cast copy).
@@ -404,6 +404,37 @@ pub(crate) mod test_meshes {
 mod tests {
     use super::*;
     use crate::mesh::Topology;
+
+    #[test]
+    fn an_owned_mesh_gives_the_same_adjacency_and_comes_back_whole() {
+        for mesh in [test_meshes::grid(5, 0.5), test_meshes::sphere(2)] {
+            let copied = TriMesh::new(&mesh).unwrap();
+            let owned = TriMesh::from_owned(mesh.clone()).unwrap();
+            assert_eq!(owned.positions, copied.positions);
+            assert_eq!(owned.tris, copied.tris);
+            assert_eq!(owned.neighbours, copied.neighbours);
+            assert_eq!(owned.vertex_face_list, copied.vertex_face_list);
+            for f in 0..mesh.face_count() {
+                // Computed when read, bit for bit the polygon mesh's.
+                assert_eq!(owned.normal(f).to_array(), mesh.face_normal(f).to_array());
+                assert_eq!(owned.area(f).to_bits(), mesh.face_area(f).to_bits());
+            }
+            assert_eq!(owned.into_poly_mesh(), mesh);
+        }
+        // A polygon is refused and the mesh handed back untouched.
+        let mut quad = PolyMesh::new();
+        quad.positions = vec![Vec3::ZERO, Vec3::X, Vec3::ONE, Vec3::Y];
+        quad.push_face(&[0, 1, 2, 3]);
+        let (back, e) = TriMesh::from_owned(quad.clone()).unwrap_err();
+        assert_eq!(back, quad);
+        assert!(matches!(
+            e,
+            LappedError::NotTriangles {
+                face: 0,
+                corners: 4
+            }
+        ));
+    }
 
     #[test]
     fn grid_adjacency_and_gradients() {
