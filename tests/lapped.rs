@@ -1130,3 +1130,52 @@ metric_samples = 100
         "{small_face} -> {large_face}"
     );
 }
+
+/// The `pastes` export reads the paste entities when the run ends (so they
+/// are moved, not copied, through the result metrics): a stage after
+/// `export` that pastes again would write pastes the previews do not show,
+/// so it is refused, naming the fix, and no output folder is left.
+#[test]
+fn pastes_changed_after_export_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("after_export.toml");
+    let out = dir.path().join("out");
+    let text = format!(
+        r#"seed = 1
+[input]
+mesh = "{}"
+exemplar = "{}"
+texture_scale = 0.15
+
+[[stage]]
+kind = "tangent_field"
+isotropic = true
+
+[[stage]]
+kind = "lapped_paste"
+
+[[stage]]
+kind = "export"
+formats = ["pastes"]
+
+[[stage]]
+kind = "lapped_paste"
+"#,
+        common::shared("meshes/bunny_1k8.obj").display(),
+        common::shared("textures/stones.png").display()
+    );
+    std::fs::write(&config, text).unwrap();
+    let (code, _, stderr) = common::run_cli(&[
+        "run",
+        config.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "-q",
+    ]);
+    assert_ne!(code, 0, "a later paste must not be written unpreviewed");
+    assert!(
+        stderr.contains("changed the pastes it exports") && stderr.contains("put `export` last"),
+        "{stderr}"
+    );
+    assert!(!out.join("result_pastes.obj").exists());
+}

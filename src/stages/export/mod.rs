@@ -512,6 +512,25 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
             message: "a stage after `export` changed the mesh it exports; put `export` last".into(),
         });
     }
+    // The pastes are read here, not at export time: one a later stage made
+    // or changed would be written but not previewed.
+    if source.pastes.is_some() {
+        let mut q = world.query::<(
+            &PasteOf,
+            bevy_ecs::change_detection::Ref<PatchFaces>,
+            bevy_ecs::change_detection::Ref<PatchUvs>,
+        )>();
+        if q.iter(world).any(|(of, faces, uvs)| {
+            of.0 == e && (changed(Some(faces.last_changed())) || changed(Some(uvs.last_changed())))
+        }) {
+            return Err(PipelineError::Stage {
+                index: source.stage,
+                kind: Export::KIND.into(),
+                message: "a stage after `export` changed the pastes it exports; put `export` last"
+                    .into(),
+            });
+        }
+    }
     fn get<T: Component<Mutability = bevy_ecs::component::Mutable> + Clone + Default>(
         world: &mut World,
         e: Entity,

@@ -621,11 +621,14 @@ impl Stage for LappedPaste {
                 scale: if field.per_pixel { unit_px } else { 1.0 },
             };
             // The loop takes the mesh's positions and corners instead of
-            // copying them; they go back right after it.
-            let tri = match TriMesh::from_owned(std::mem::take(&mut geometry.0)) {
+            // copying them; they go back right after it, unchanged (so
+            // change detection is bypassed: the mesh is the same).
+            let tri = match TriMesh::from_owned(std::mem::take(
+                &mut geometry.bypass_change_detection().0,
+            )) {
                 Ok(t) => t,
                 Err((mesh, e)) => {
-                    geometry.0 = mesh;
+                    geometry.bypass_change_detection().0 = mesh;
                     failure.0 = Some(fail(e.to_string()));
                     return;
                 }
@@ -653,7 +656,7 @@ impl Stage for LappedPaste {
                 pastes, coverage, ..
             } = out;
             drop(coverage);
-            geometry.0 = tri.into_poly_mesh();
+            geometry.bypass_change_detection().0 = tri.into_poly_mesh();
             let kept: Vec<(u32, Vec<u32>, Vec<Vec2>)> = pastes
                 .into_iter()
                 .zip(&drawn)
