@@ -2,6 +2,7 @@
 //! metrics, then the files.
 
 use super::{LoadedInput, Pipeline, PipelineError, StageCtx, load_input_from};
+use crate::stages::tangent_field::FaceField;
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::SingleThreadedExecutor;
@@ -153,8 +154,9 @@ enum Keep {
     /// Everything, for callers that inspect the world ([`run_in_world`]).
     All,
     /// Only what the result metrics and the export job read: the jump-map
-    /// blend layers (144 bytes per vertex) and per-vertex scales go before
-    /// the result metrics build their topology.
+    /// blend layers (144 bytes per vertex), per-vertex scales and lapped
+    /// textures' tangent field (24 bytes per vertex) go before the result
+    /// metrics build their topology.
     Read,
 }
 
@@ -162,11 +164,13 @@ enum Keep {
 /// [`Keep::Read`]).
 fn release_unread(world: &mut World) {
     let entities: Vec<Entity> = world
-        .query_filtered::<Entity, Or<(With<BlendUvs>, With<VertexScale>)>>()
+        .query_filtered::<Entity, Or<(With<BlendUvs>, With<VertexScale>, With<FaceField>)>>()
         .iter(world)
         .collect();
     for e in entities {
-        world.entity_mut(e).remove::<(BlendUvs, VertexScale)>();
+        world
+            .entity_mut(e)
+            .remove::<(BlendUvs, VertexScale, FaceField)>();
     }
 }
 
