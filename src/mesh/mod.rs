@@ -39,6 +39,26 @@ pub struct PolyMesh {
     pub corner_vertex: Vec<u32>,
 }
 
+/// Area-weighted normal of the polygon `corners` over `positions` by
+/// Newell's method, its length twice the area, with corners taken relative
+/// to the first one (see [`PolyMesh::face_normal_scaled`], which is this
+/// for a face; meshes that store triangles differently call it too, so
+/// their normals and areas are the same bits).
+#[inline]
+pub fn area_vector(positions: &[Vec3], corners: &[u32]) -> Vec3 {
+    let Some(&first) = corners.first() else {
+        return Vec3::ZERO;
+    };
+    let origin = positions[first as usize];
+    let mut n = Vec3::ZERO;
+    for w in corners.windows(2).skip(1) {
+        let p = positions[w[0] as usize] - origin;
+        let q = positions[w[1] as usize] - origin;
+        n += p.cross(q);
+    }
+    n
+}
+
 impl PolyMesh {
     /// An empty mesh (no vertices, no faces).
     pub fn new() -> Self {
@@ -133,18 +153,7 @@ impl PolyMesh {
     /// cancellation: the result depends only on the face's shape.
     #[inline]
     pub fn face_normal_scaled(&self, f: usize) -> Vec3 {
-        let face = self.face(f);
-        let Some(&first) = face.first() else {
-            return Vec3::ZERO;
-        };
-        let origin = self.positions[first as usize];
-        let mut n = Vec3::ZERO;
-        for w in face.windows(2).skip(1) {
-            let p = self.positions[w[0] as usize] - origin;
-            let q = self.positions[w[1] as usize] - origin;
-            n += p.cross(q);
-        }
-        n
+        area_vector(&self.positions, self.face(f))
     }
 
     /// Unit normal of face `f` (zero for a degenerate face).

@@ -196,15 +196,12 @@ impl TriMesh {
         self.tris[f].map(|v| self.positions[v as usize])
     }
 
-    /// Twice the area vector of face `f`: exactly
-    /// [`PolyMesh::face_normal_scaled`] of the triangle (computed, not
-    /// stored: normals and areas were 16 bytes per face).
+    /// The area vector of face `f` (length twice the area), computed by
+    /// the polygon mesh's own function, not stored: normals and areas were
+    /// 16 bytes per face.
     #[inline]
     fn normal_scaled(&self, f: usize) -> Vec3 {
-        let [a, b, c] = self.corners(f);
-        // `ZERO +` as the polygon sum starts, so even the signs of zero
-        // components match.
-        Vec3::ZERO + (b - a).cross(c - a)
+        crate::mesh::area_vector(&self.positions, &self.tris[f])
     }
 
     /// Unit normal of face `f` (zero for a degenerate face), exactly
