@@ -478,8 +478,18 @@ fn atlas_layout(mesh: &PolyMesh, settings: &AtlasSettings) -> Result<AtlasLayout
             _ => Err(format!("face {f} is not a triangle")),
         })
         .collect::<Result<_, _>>()?;
-    let uv = crate::kernels::atlas::build_uv_atlas(&mesh.positions, &tris, settings)
-        .map_err(|e| e.to_string())?;
+    // Laying out a million-vertex scan takes tens of seconds: a part of
+    // its own on the stage's progress.
+    let progress = Progress::new(0, LappedPaste::KIND);
+    let uv = crate::kernels::atlas::build_uv_atlas_with_progress(
+        &mesh.positions,
+        &tris,
+        settings,
+        &progress,
+    )
+    .map_err(|e| e.to_string());
+    progress.finish();
+    let uv = uv?;
     Ok(AtlasLayout {
         charts: uv.charts.count,
         corner_uvs: uv.corner_uvs,
