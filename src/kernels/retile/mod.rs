@@ -59,7 +59,19 @@
 //! where the surface's thin parts need more vertices than the target leaves
 //! them (a thin tube needs three vertices around whatever the target; a
 //! perforated plate needs its hole walls): the level is then as coarse as
-//! the surface allows, kept with a warning, not refused.
+//! the surface allows, kept with a warning, not refused. On the test suite's
+//! perforated plate (genus 100, walls a tenth of the hole size), 800 and more
+//! land within 5 %; 400 and 600 give about 700. A coarser level remeshed
+//! from its finer one stops higher than one remeshed from the input (600
+//! from 2,400 gives about 740), and one that would not halve ends the
+//! pyramid.
+//!
+//! What keeps thin parts coarse is that the remesher can collapse into
+//! features: an edge from a wall to a rim collapses into the rim vertex when
+//! the midpoint would cut the rim, and a triangle on one side of a crease
+//! agrees with the input at a corner on the crease through the face on its
+//! side (`remesh.rs`). Without these, a plate asked for 1,000 vertices kept
+//! 1,203, and 1,500 kept 2,477: the walls' vertices could not go.
 //!
 //! Deterministic: the same input and settings (including
 //! [`RetileSettings::seed`]) give the same output at any rayon thread count.

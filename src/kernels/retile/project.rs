@@ -426,6 +426,73 @@ impl SurfaceProjector {
         self.project_near(p, face)
     }
 
+    /// Whether `pred` holds for the normal of any input triangle through the
+    /// surface point at `bary` in `face`: `face` itself, the triangle across
+    /// the edge the point lies on, or the triangles around the vertex it lies
+    /// at (a coordinate of at most [`Self::ON_FEATURE`] counts as zero). On a
+    /// crease or a corner of the input this is every normal the surface has
+    /// there. Without adjacency (a projector not built from a [`TriMesh`]),
+    /// only `face`. At most [`Self::MAX_FAN`] triangles around a vertex are
+    /// asked.
+    pub(crate) fn any_normal_at(
+        &self,
+        face: u32,
+        bary: Vec3,
+        mut pred: impl FnMut(Vec3) -> bool,
+    ) -> bool {
+        let Some(normal) = self.normals.get(face as usize) else {
+            return false;
+        };
+        if pred(*normal) {
+            return true;
+        }
+        if self.neighbours.is_empty() {
+            return false;
+        }
+        let b = bary.to_array();
+        let zero = b.map(|x| x <= Self::ON_FEATURE);
+        match zero.iter().filter(|&&z| z).count() {
+            1 => {
+                // On the edge opposite the zero corner k: corner k+1 to k+2.
+                let k = zero.iter().position(|&z| z).unwrap_or(0);
+                let g = self.neighbours[face as usize][(k + 1) % 3];
+                g != NONE && pred(self.normals[g as usize])
+            }
+            2 => {
+                let j = zero.iter().position(|&z| !z).unwrap_or(0);
+                let v = self.triangles[face as usize][j];
+                // Walk the fan of v both ways across its two edges in each
+                // triangle (corner i to i+1 and corner i-1 to i).
+                for side in [0usize, 2] {
+                    let mut g = face;
+                    for _ in 0..Self::MAX_FAN {
+                        let Some(i) = self.triangles[g as usize].iter().position(|&x| x == v)
+                        else {
+                            break;
+                        };
+                        let n = self.neighbours[g as usize][(i + side) % 3];
+                        if n == NONE || n == face {
+                            break;
+                        }
+                        if pred(self.normals[n as usize]) {
+                            return true;
+                        }
+                        g = n;
+                    }
+                }
+                false
+            }
+            _ => false,
+        }
+    }
+
+    /// Barycentric coordinates at most this are on an edge or a vertex of
+    /// the input ([`Self::any_normal_at`]); closest points in an edge or
+    /// vertex region come out exactly zero there.
+    pub(crate) const ON_FEATURE: f32 = 1e-6;
+    /// Most triangles [`Self::any_normal_at`] asks around one vertex.
+    pub(crate) const MAX_FAN: usize = 64;
+
     /// The closest point to `p` among the triangles facing the same way as
     /// `normal` (positive dot product), so that a point is not snapped onto
     /// the far side of a thin part; `hint` is a triangle likely to be near

@@ -10,7 +10,10 @@
 //!    within a class, see [`TriMesh::sort_spatially`]), unless the
 //!    collapse would change the topology (link condition, valences, boundary
 //!    rules in [`collapse_ok`]), create an edge longer than `4/3·L`, or turn a
-//!    triangle over;
+//!    triangle over. Both ends meet at the midpoint (Botsch & Kobbelt); where
+//!    that is refused, one end goes into the other, which stays where it is
+//!    (a vertex in the wall of a hole into one on its rim, where the
+//!    midpoint would cut the rim's crease);
 //! 3. flip edges that bring the valences of their four vertices closer to 6
 //!    (interior) and 4 (boundary), unless that turns a triangle over;
 //! 4. tangential relaxation: a few times, move each vertex towards the
@@ -32,7 +35,9 @@
 //! collapsing the shortest edges, and a few more flip and relaxation rounds
 //! smooth the result. "Turned over" means the triangle normal has a
 //! non-positive dot product with its previous normal or with the
-//! reference-surface normal at any of its corners, or — for triangles whose
+//! reference-surface normal at any of its corners (a corner on a crease or a
+//! corner of the input agrees if any input face through its point does), or
+//! — for triangles whose
 //! corners see normals more than about 45° apart, i.e. that straddle a crease
 //! of the input — at the closest point of the input around its centroid
 //! (found by walking the input's triangles from a corner's source triangle,
@@ -363,11 +368,26 @@ fn try_collapse(
     let a = mesh.vert[h as usize];
     let b = mesh.to(h);
     let (pa, pb) = (mesh.pos[a as usize], mesh.pos[b as usize]);
-    let Some((g, p)) = collapse_plan(mesh, h) else {
+    let Some((mut g, mut p)) = collapse_plan(mesh, h) else {
         return false;
     };
-    if !collapse_ok(mesh, proj, g, p, hi, scratch) {
-        return false;
+    let check = collapse_check(mesh, proj, g, p, hi, scratch);
+    if check != Check::Ok {
+        // Between two interior vertices, the midpoint may cut a crease or
+        // corner of the input that one end lies on (a vertex in a wall next
+        // to a rim): the other end then goes into that one, which stays.
+        // (The topology does not depend on where they meet.)
+        if check == Check::Topology || p == pa || p == pb {
+            return false;
+        }
+        let t = mesh.twin[h as usize];
+        if collapse_ok(mesh, proj, h, pb, hi, scratch) {
+            (g, p) = (h, pb);
+        } else if t != NONE && collapse_ok(mesh, proj, t, pa, hi, scratch) {
+            (g, p) = (t, pa);
+        } else {
+            return false;
+        }
     }
     let (ra, rb) = (mesh.ref_normal[a as usize], mesh.ref_normal[b as usize]);
     let keep = mesh.to(g);
@@ -400,6 +420,29 @@ pub(crate) fn collapse_ok(
     hi: f32,
     scratch: &mut Scratch,
 ) -> bool {
+    collapse_check(mesh, proj, h, p, hi, scratch) == Check::Ok
+}
+
+/// Why a collapse is refused, if it is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Check {
+    Ok,
+    /// The topology would change: refused wherever the vertices meet.
+    Topology,
+    /// An edge would grow too long or a triangle turn over: another
+    /// meeting point may do.
+    Shape,
+}
+
+/// [`collapse_ok`], saying why not.
+fn collapse_check(
+    mesh: &TriMesh,
+    proj: &SurfaceProjector,
+    h: u32,
+    p: Vec3,
+    hi: f32,
+    scratch: &mut Scratch,
+) -> Check {
     let a = mesh.vert[h as usize];
     let b = mesh.to(h);
     let t = mesh.twin[h as usize];
@@ -411,16 +454,16 @@ pub(crate) fn collapse_ok(
     };
     if t == NONE {
         if mesh.twin[next(h) as usize] == NONE && mesh.twin[prev(h) as usize] == NONE {
-            return false;
+            return Check::Topology;
         }
     } else if mesh.on_boundary[a as usize] {
-        return false;
+        return Check::Topology;
     }
     for v in [c, d] {
         if v != NONE {
             let min = if mesh.on_boundary[v as usize] { 3 } else { 4 };
             if mesh.valence(v) < min {
-                return false;
+                return Check::Topology;
             }
         }
     }
@@ -430,13 +473,29 @@ pub(crate) fn collapse_ok(
     mesh.ring(b, &mut ring_b);
     let skip = [h / 3, if t == NONE { NONE } else { t / 3 }];
     // Until it is projected, the merged vertex must suit the surface at both ends.
-    let refs = [mesh.ref_normal[a as usize], mesh.ref_normal[b as usize]];
-    let ok = link_and_lengths_ok(mesh, (a, b, c, d), &ring_a, &ring_b, p, hi, scratch)
-        && fan_keeps_orientation(mesh, proj, a, skip, p, refs)
-        && (p == mesh.pos[b as usize] || fan_keeps_orientation(mesh, proj, b, skip, p, refs));
+    // Collapsed into `b` where it is, the merged vertex is `b`.
+    let rb = mesh.ref_normal[b as usize];
+    let refs = if p == mesh.pos[b as usize] {
+        [rb, rb]
+    } else {
+        [mesh.ref_normal[a as usize], rb]
+    };
+    let p_at =
+        (p == mesh.pos[b as usize]).then(|| (mesh.src_face[b as usize], mesh.src_bary[b as usize]));
+    let check = match link_and_lengths_ok(mesh, (a, b, c, d), &ring_a, &ring_b, p, hi, scratch) {
+        Check::Ok
+            if fan_keeps_orientation(mesh, proj, a, skip, p, refs, p_at)
+                && (p_at.is_some()
+                    || fan_keeps_orientation(mesh, proj, b, skip, p, refs, None)) =>
+        {
+            Check::Ok
+        }
+        Check::Ok => Check::Shape,
+        other => other,
+    };
     scratch.ring_a = ring_a;
     scratch.ring_b = ring_b;
-    ok
+    check
 }
 
 fn link_and_lengths_ok(
@@ -447,27 +506,28 @@ fn link_and_lengths_ok(
     p: Vec3,
     hi: f32,
     scratch: &mut Scratch,
-) -> bool {
+) -> Check {
     let epoch = scratch.next_epoch(mesh.pos.len());
     for &x in ring_a {
         scratch.stamp[x as usize] = epoch;
     }
     for &x in ring_b {
         if scratch.stamp[x as usize] == epoch && x != c && x != d {
-            return false;
+            return Check::Topology;
         }
     }
     let shared = if d == NONE { 3 } else { 4 };
     if ring_a.len() + ring_b.len() < 3 + shared {
-        return false;
+        return Check::Topology;
     }
     let hi2 = hi * hi;
     let moved_b = p != mesh.pos[b as usize];
-    ring_a
+    let short = ring_a
         .iter()
         .filter(|&&x| x != b)
         .chain(ring_b.iter().filter(|&&x| moved_b && x != a))
-        .all(|&x| (mesh.pos[x as usize] - p).length_squared() < hi2)
+        .all(|&x| (mesh.pos[x as usize] - p).length_squared() < hi2);
+    if short { Check::Ok } else { Check::Shape }
 }
 
 /// Whether a triangle with (unnormalised) normal `n` agrees with the
@@ -477,34 +537,65 @@ fn agrees(n: Vec3, r: Vec3) -> bool {
     n.dot(r) > 0.0 || r == Vec3::ZERO
 }
 
+/// Where a corner of a new triangle lies on the input, if known: input
+/// face and barycentric coordinates.
+type CornerAt = Option<(u32, Vec3)>;
+
 /// Whether the new triangle `corners` with normal `n` faces the way the
 /// reference surface does: at each corner (reference normals `refs`), and,
 /// when the corners' normals differ by more than a crease angle, also at the
 /// closest point of the input around its centroid (walked to from input
 /// face `hint`).
+///
+/// A corner on a crease or a corner of the input (`at`, where it lies on
+/// the input) carries the normal of one of the faces meeting there, and the
+/// triangle may lie on another: a wall triangle at the rim of a hole whose
+/// corner took the top face's normal. Such a corner agrees when any input
+/// face through its point does ([`SurfaceProjector::any_normal_at`]).
 fn triangle_faces_surface(
     proj: &SurfaceProjector,
     n: Vec3,
     corners: [Vec3; 3],
     refs: [Vec3; 3],
+    at: [CornerAt; 3],
     hint: u32,
 ) -> bool {
-    if !refs.iter().all(|&r| agrees(n, r)) {
+    let own = refs.map(|r| agrees(n, r));
+    if !(0..3).all(|i| own[i] || corner_agrees(proj, n, refs[i], at[i])) {
         return false;
+    }
+    let centroid = (corners[0] + corners[1] + corners[2]) / 3.0;
+    // A corner that agrees only through another face at its point is on a
+    // crease: the triangle must then also face the way of the input's
+    // closest point to its centroid (searched over the whole input, as the
+    // final check of a level does, since a local walk may stop on the wrong
+    // side of the crease).
+    if own.contains(&false) {
+        return proj
+            .project_near(centroid, hint)
+            .is_some_and(|sp| agrees(n, proj.face_normal(sp.face)));
     }
     let creased = refs[0].dot(refs[1]) < CREASE_COS
         || refs[1].dot(refs[2]) < CREASE_COS
         || refs[0].dot(refs[2]) < CREASE_COS;
     !creased
         || proj
-            .project_local((corners[0] + corners[1] + corners[2]) / 3.0, hint)
+            .project_local(centroid, hint)
             .is_none_or(|sp| agrees(n, proj.face_normal(sp.face)))
+}
+
+/// Whether normal `n` agrees with a corner's reference normal `r` or, on a
+/// crease or corner of the input, with any input face through the point
+/// `at` where the corner lies.
+fn corner_agrees(proj: &SurfaceProjector, n: Vec3, r: Vec3, at: CornerAt) -> bool {
+    agrees(n, r) || at.is_some_and(|(f, b)| proj.any_normal_at(f, b, |m| agrees(n, m)))
 }
 
 /// Whether moving vertex `v` to `p` keeps every face of its fan (except the
 /// faces `skip`) facing the way it did and the way the reference surface
 /// does ([`triangle_faces_surface`]); `refs` stand for the moved vertex's
-/// reference normal (both must agree).
+/// reference normal (both must agree), and `p_at` is where `p` lies on the
+/// input, if known.
 fn fan_keeps_orientation(
     mesh: &TriMesh,
     proj: &SurfaceProjector,
@@ -512,8 +603,10 @@ fn fan_keeps_orientation(
     skip: [u32; 2],
     p: Vec3,
     refs: [Vec3; 2],
+    p_at: CornerAt,
 ) -> bool {
     let pv = mesh.pos[v as usize];
+    let at = |x: u32| Some((mesh.src_face[x as usize], mesh.src_bary[x as usize]));
     mesh.fan(v).all(|g| {
         let f = g / 3;
         if f == skip[0] || f == skip[1] {
@@ -526,12 +619,13 @@ fn fan_keeps_orientation(
         let new = (px - p).cross(py - p);
         let (rx, ry) = (mesh.ref_normal[x as usize], mesh.ref_normal[y as usize]);
         new.dot(old) > 0.0
-            && agrees(new, refs[1])
+            && corner_agrees(proj, new, refs[1], p_at)
             && triangle_faces_surface(
                 proj,
                 new,
                 [p, px, py],
                 [refs[0], rx, ry],
+                [p_at, at(x), at(y)],
                 mesh.src_face[x as usize],
             )
     })
@@ -625,12 +719,27 @@ fn flip_keeps_orientation(
             .normalize_or_zero();
     let n1 = (p(c) - p(d)).cross(p(a) - p(d));
     let n2 = (p(d) - p(c)).cross(p(b) - p(c));
+    let at = |v: u32| Some((mesh.src_face[v as usize], mesh.src_bary[v as usize]));
     let hint = mesh.src_face[c as usize];
     n1.dot(n2) > 0.0
         && n1.dot(old) > 0.0
         && n2.dot(old) > 0.0
-        && triangle_faces_surface(proj, n1, [p(d), p(c), p(a)], [r(d), r(c), r(a)], hint)
-        && triangle_faces_surface(proj, n2, [p(c), p(d), p(b)], [r(c), r(d), r(b)], hint)
+        && triangle_faces_surface(
+            proj,
+            n1,
+            [p(d), p(c), p(a)],
+            [r(d), r(c), r(a)],
+            [at(d), at(c), at(a)],
+            hint,
+        )
+        && triangle_faces_surface(
+            proj,
+            n2,
+            [p(c), p(d), p(b)],
+            [r(c), r(d), r(b)],
+            [at(c), at(d), at(b)],
+            hint,
+        )
 }
 
 /// Area-weighted unit vertex normals of the current mesh (zero when dead).
@@ -706,7 +815,7 @@ fn relax(mesh: &mut TriMesh, proj: &SurfaceProjector, steps: usize) {
         for (v, mv) in moves.into_iter().enumerate() {
             let Some(p) = mv else { continue };
             let r = mesh.ref_normal[v];
-            if fan_keeps_orientation(mesh, proj, v as u32, [NONE, NONE], p, [r, r]) {
+            if fan_keeps_orientation(mesh, proj, v as u32, [NONE, NONE], p, [r, r], None) {
                 mesh.pos[v] = p;
             }
         }
@@ -722,7 +831,8 @@ fn relax(mesh: &mut TriMesh, proj: &SurfaceProjector, steps: usize) {
     for (v, sp) in snapped.into_iter().enumerate() {
         let Some(sp) = sp else { continue };
         let r = proj.face_normal(sp.face);
-        if fan_keeps_orientation(mesh, proj, v as u32, [NONE, NONE], sp.point, [r, r]) {
+        let at = Some((sp.face, sp.bary));
+        if fan_keeps_orientation(mesh, proj, v as u32, [NONE, NONE], sp.point, [r, r], at) {
             mesh.pos[v] = sp.point;
             mesh.src_face[v] = sp.face;
             mesh.src_bary[v] = sp.bary;
