@@ -719,27 +719,24 @@ fn flip_keeps_orientation(
             .normalize_or_zero();
     let n1 = (p(c) - p(d)).cross(p(a) - p(d));
     let n2 = (p(d) - p(c)).cross(p(b) - p(c));
-    let at = |v: u32| Some((mesh.src_face[v as usize], mesh.src_bary[v as usize]));
     let hint = mesh.src_face[c as usize];
+    // Triangle (x, y, z) with normal n faces the surface.
+    let faces = |n: Vec3, [x, y, z]: [u32; 3]| {
+        let at = |v: u32| Some((mesh.src_face[v as usize], mesh.src_bary[v as usize]));
+        triangle_faces_surface(
+            proj,
+            n,
+            [p(x), p(y), p(z)],
+            [r(x), r(y), r(z)],
+            [at(x), at(y), at(z)],
+            hint,
+        )
+    };
     n1.dot(n2) > 0.0
         && n1.dot(old) > 0.0
         && n2.dot(old) > 0.0
-        && triangle_faces_surface(
-            proj,
-            n1,
-            [p(d), p(c), p(a)],
-            [r(d), r(c), r(a)],
-            [at(d), at(c), at(a)],
-            hint,
-        )
-        && triangle_faces_surface(
-            proj,
-            n2,
-            [p(c), p(d), p(b)],
-            [r(c), r(d), r(b)],
-            [at(c), at(d), at(b)],
-            hint,
-        )
+        && faces(n1, [d, c, a])
+        && faces(n2, [c, d, b])
 }
 
 /// Area-weighted unit vertex normals of the current mesh (zero when dead).
