@@ -830,16 +830,18 @@ fn messy_atlas(
 }
 
 /// Issue 15: on a messy scan (150+ small components, single faces left by
-/// noise, slivers, isolated triangles, far from the origin) half the atlas
-/// is covered by charts, which still never overlap and keep one texel
-/// density (charts within 1 %, 95 % of the surface within 2×).
+/// noise, slivers, isolated triangles, far from the origin) 60 % of the
+/// atlas is covered by charts, which still never overlap and keep one
+/// texel density (charts within 1 %, 95 % of the surface within 2×). The
+/// skyline packing alone filled 0.56 here; charts settling into gaps under
+/// outlines and in ring charts give 0.635.
 #[test]
 fn atlas_of_a_messy_scan_fills_half_the_texture() {
     let size = 2048;
     let (positions, tris, atlas, _) = messy_atlas(20_000, size);
     assert_sound_atlas("messy scan", &positions, &tris, &atlas, size as usize);
     assert!(
-        atlas.fill >= 0.5,
+        atlas.fill >= 0.6,
         "fill {} with {} charts",
         atlas.fill,
         atlas.charts.count

@@ -26,10 +26,12 @@
 //! 4. **Packing** ([`pack`]): each chart turned to its minimum-area
 //!    rectangle; at a trial scale its footprint (texel rows per texel
 //!    column, grown by [`AtlasSettings::padding_px`] texels of gutter) is
-//!    placed, tallest first and in the best of four quarter turns, on a
-//!    column skyline, so charts nest into each other's outlines instead of
+//!    placed, tallest first and in the best of four quarter turns, where it
+//!    sits lowest, so charts nest into each other's outlines instead of
 //!    their bounding rectangles; a bisection finds the largest common scale
-//!    that fits.
+//!    that fits, first on a column skyline, then a few steps further with
+//!    charts also settling into gaps under other charts' outlines and
+//!    inside ring-shaped charts (a scan's holes).
 //! 5. **Texels** ([`raster`]): which face covers each texel centre, and
 //!    dilation of chart texels into the gutters so bilinear filtering and
 //!    mipmaps do not bleed the background in.
