@@ -8,13 +8,13 @@
 //!
 //! The bisection runs in two phases. First on a column skyline (each chart
 //! rests on the highest chart in its columns: fast, 0.494 filled on that
-//! scan, 2048², 4 px gutters), to 1 % of the scale. Then [`GAP_TRIALS`]
-//! steps towards the area bound with the gap packer
+//! scan, 2048², 4 px gutters), to 1 % of the scale. Then [`GAP_ROUNDS`]
+//! rounds towards the area bound with the gap packer
 //! ([`gap_profile_pack`]): each column keeps its taken rows as intervals,
 //! so a chart also settles into a gap under another's outline or inside a
-//! ring-shaped chart around a scan's hole (0.619 on that scan; 0.632 fully
-//! bisected). Each gap step costs several skyline steps, hence the two
-//! phases.
+//! ring-shaped chart around a scan's hole (0.626 on that scan; 0.632 with
+//! a full bisection). Each gap pack costs several skyline packs, hence the
+//! two phases.
 
 use super::Charts;
 use glam::{DVec2, Vec2};
@@ -387,11 +387,12 @@ fn gap_profile_pack(
     Some(out)
 }
 
-/// Bisection steps of the scale with [`gap_profile_pack`], after the
-/// skyline's: on a 400 k-vertex messy scan (1,586 charts, 2048², 4 px
-/// gutters) the skyline fills 0.494 of the atlas and five gap steps 0.619,
-/// at about 1.3 s a step there (the skyline's are 0.3 s).
-const GAP_TRIALS: usize = 5;
+/// Rounds of the scale search with [`gap_profile_pack`] after the
+/// skyline's, two packs each (the interval shrinks to a third a round): on
+/// a 400 k-vertex messy scan (1,586 charts, 2048², 4 px gutters) the
+/// skyline fills 0.494 of the atlas and the gaps 0.62, at about 1.3 s a
+/// pack there (the skyline's are 0.3 s).
+const GAP_ROUNDS: usize = 3;
 
 /// Classes of gap height (powers of two) a column indexes.
 const FIT_CLASSES: usize = 16;
@@ -629,18 +630,25 @@ pub fn pack_charts(charts: &Charts, size: u32, padding_px: u32) -> Option<(Vec<[
             None => hi = mid,
         }
     }
-    // Then larger scales, with charts also settling into gaps: a few
-    // bisection steps between the skyline's scale and the bound (each
-    // costs more than the whole skyline search).
+    // Then larger scales, with charts also settling into gaps, between the
+    // skyline's scale and the bound: each round packs at a third and two
+    // thirds of the interval at once (each pack is sequential and costs
+    // more than the whole skyline search) and keeps the largest that fits.
+    // The same scales are tried at any thread count.
     let mut hi = top;
-    for _ in 0..GAP_TRIALS {
-        let mid = 0.5 * (lo + hi);
-        match pack_at(mid, true) {
-            Some(p) => {
-                lo = mid;
-                best = (mid, p);
+    for _ in 0..GAP_ROUNDS {
+        let (a, b) = (lo + (hi - lo) / 3.0, lo + 2.0 * (hi - lo) / 3.0);
+        let (pa, pb) = rayon::join(|| pack_at(a, true), || pack_at(b, true));
+        match (pa, pb) {
+            (_, Some(p)) => {
+                lo = b;
+                best = (b, p);
             }
-            None => hi = mid,
+            (Some(p), None) => {
+                (lo, hi) = (a, b);
+                best = (a, p);
+            }
+            (None, None) => hi = a,
         }
     }
     let (scale, positions) = best;
