@@ -10,7 +10,7 @@
 //! rests on the highest chart in its columns: fast, 0.494 filled on that
 //! scan, 2048², 4 px gutters), to 1 % of the scale. Then [`GAP_ROUNDS`]
 //! rounds towards the area bound with the gap packer
-//! ([`gap_profile_pack`]): each column keeps its taken rows as intervals,
+//! ([`profile_pack`] with gaps): each column keeps its taken rows as intervals,
 //! so a chart also settles into a gap under another's outline or inside a
 //! ring-shaped chart around a scan's hole (0.626 on that scan; 0.632 with
 //! a full bisection). Each gap pack costs several skyline packs, hence the
@@ -225,68 +225,20 @@ fn footprint(tris: &[[DVec2; 3]], width: u32, height: u32, pad: u32, block: u32)
 }
 
 /// Places charts (in the given order, each as one of its footprints: its
-/// turns) on a column skyline of `cols` block columns and `rows` block
-/// rows: each goes where it sits highest (then leftmost, then first turn),
-/// its top profile resting on the skyline, so charts nest into each
-/// other's notches. Returns block positions and turns, or `None` when one
-/// does not fit.
-fn skyline_profile_pack(
-    prints: &[[Footprint; 4]],
-    cols: usize,
-    rows: u32,
-) -> Option<Vec<(u32, u32, u8)>> {
-    let mut sky = vec![0u32; cols];
-    let mut out = Vec::with_capacity(prints.len());
-    for turns in prints {
-        let mut best: Option<(u32, usize, u8)> = None;
-        for (o, fp) in turns.iter().enumerate() {
-            let w = fp.top.len();
-            if w > cols {
-                return None;
-            }
-            let height = fp.bottom.iter().copied().max().unwrap_or(0);
-            for x in 0..=cols - w {
-                let mut y = 0u32;
-                let mut worse = false;
-                for j in 0..w {
-                    if fp.top[j] < fp.bottom[j] {
-                        y = y.max(sky[x + j].saturating_sub(fp.top[j]));
-                    }
-                    if best.is_some_and(|(by, _, _)| y >= by) {
-                        worse = true;
-                        break;
-                    }
-                }
-                if !worse && y + height <= rows {
-                    best = Some((y, x, o as u8));
-                }
-            }
-        }
-        let (y, x, o) = best?;
-        let fp = &turns[o as usize];
-        for j in 0..fp.top.len() {
-            if fp.top[j] < fp.bottom[j] {
-                sky[x + j] = sky[x + j].max(y + fp.bottom[j]);
-            }
-        }
-        out.push((x as u32, y, o));
-    }
-    Some(out)
-}
-
-/// Places charts (in the given order, each as one of its footprints: its
 /// turns) in an atlas of `cols` block columns and `rows` block rows: each
 /// goes where it sits highest (then leftmost, then first turn) without
 /// touching a block another chart reserved. Each column keeps the block
 /// rows taken as sorted intervals, so a chart may settle into a gap left
 /// under another chart's outline or inside a ring-shaped chart (a scan's
 /// holes), not only on top of the highest chart in its columns (a
-/// skyline). Returns block positions and turns, or `None` when one does
-/// not fit.
-fn gap_profile_pack(
+/// skyline, where every chart goes with `gaps` false: cheaper, and its
+/// profile still nests into the charts below). Returns block positions and
+/// turns, or `None` when one does not fit.
+fn profile_pack(
     prints: &[[Footprint; 4]],
     cols: usize,
     rows: u32,
+    gaps: bool,
 ) -> Option<Vec<(u32, u32, u8)>> {
     let mut taken: Vec<Vec<(u32, u32)>> = vec![Vec::new(); cols];
     // Per column, where its first gap of at least 2^k free rows starts:
@@ -311,11 +263,7 @@ fn gap_profile_pack(
     // (lower bound, x, turn) of every position, packed to sort.
     let mut cands: Vec<u64> = Vec::new();
     for turns in prints {
-        // Branch and bound: every position's lower bound first (cheap, from
-        // `fit`), then the full search in increasing bound order, until the
-        // bound passes the best row found.
-        // The skyline's answer (on top of everything, always free) bounds
-        // the search from above.
+        // The skyline's answer: on top of everything, always free.
         let mut sky: Option<(u32, usize, u8)> = None;
         for (o, fp) in turns.iter().enumerate() {
             let w = fp.top.len();
@@ -333,45 +281,9 @@ fn gap_profile_pack(
                 }
             }
         }
-        cands.clear();
-        for (o, fp) in turns.iter().enumerate() {
-            let w = fp.top.len();
-            let height = fp.bottom.iter().copied().max().unwrap_or(0);
-            if height > rows {
-                continue;
-            }
-            // Ties with the skyline's row may still be further left.
-            let below = sky.map_or(rows - height + 1, |(by, _, _)| {
-                (by + 1).min(rows - height + 1)
-            });
-            for x in 0..=cols - w {
-                if let Some(b) = fit_bound_class(&fit[x..x + w], fp, below, None) {
-                    cands.push(u64::from(b) << 32 | (x as u64) << 2 | o as u64);
-                }
-            }
-        }
-        cands.sort_unstable();
         let mut best: Option<(u32, usize, u8)> = sky;
-        for &c in &cands {
-            let (bound, x, o) = (
-                (c >> 32) as u32,
-                ((c >> 2) & 0x3FFF_FFFF) as usize,
-                (c & 3) as u8,
-            );
-            if best.is_some_and(|(by, _, _)| bound > by) {
-                break;
-            }
-            let fp = &turns[o as usize];
-            let w = fp.top.len();
-            let height = fp.bottom.iter().copied().max().unwrap_or(0);
-            let below = best.map_or(rows - height + 1, |(by, _, _)| {
-                (by + 1).min(rows - height + 1)
-            });
-            if let Some(y) = lowest_fit(&taken[x..x + w], fp, bound, below)
-                && best.is_none_or(|b| (y, x, o) < b)
-            {
-                best = Some((y, x, o));
-            }
+        if gaps {
+            place_in_gaps(turns, &taken, &fit, rows, &mut cands, &mut best);
         }
         let (y, x, o) = best?;
         let fp = &turns[o as usize];
@@ -387,7 +299,63 @@ fn gap_profile_pack(
     Some(out)
 }
 
-/// Rounds of the scale search with [`gap_profile_pack`] after the
+/// The branch and bound of [`profile_pack`] below the skyline's answer
+/// `best`: every position's lower bound first (cheap, from `fit`), then
+/// the full search in increasing bound order, until the bound passes the
+/// best row found; `best` ends as the lowest, then leftmost, then first
+/// turn. `cands` is scratch.
+fn place_in_gaps(
+    turns: &[Footprint; 4],
+    taken: &[Vec<(u32, u32)>],
+    fit: &[[u32; FIT_CLASSES]],
+    rows: u32,
+    cands: &mut Vec<u64>,
+    best: &mut Option<(u32, usize, u8)>,
+) {
+    let cols = taken.len();
+    let sky = *best;
+    cands.clear();
+    for (o, fp) in turns.iter().enumerate() {
+        let w = fp.top.len();
+        let height = fp.bottom.iter().copied().max().unwrap_or(0);
+        if height > rows {
+            continue;
+        }
+        // Ties with the skyline's row may still be further left.
+        let below = sky.map_or(rows - height + 1, |(by, _, _)| {
+            (by + 1).min(rows - height + 1)
+        });
+        for x in 0..=cols - w {
+            if let Some(b) = fit_bound_class(&fit[x..x + w], fp, below, None) {
+                cands.push(u64::from(b) << 32 | (x as u64) << 2 | o as u64);
+            }
+        }
+    }
+    cands.sort_unstable();
+    for &c in cands.iter() {
+        let (bound, x, o) = (
+            (c >> 32) as u32,
+            ((c >> 2) & 0x3FFF_FFFF) as usize,
+            (c & 3) as u8,
+        );
+        if best.is_some_and(|(by, _, _)| bound > by) {
+            break;
+        }
+        let fp = &turns[o as usize];
+        let w = fp.top.len();
+        let height = fp.bottom.iter().copied().max().unwrap_or(0);
+        let below = best.map_or(rows - height + 1, |(by, _, _)| {
+            (by + 1).min(rows - height + 1)
+        });
+        if let Some(y) = lowest_fit(&taken[x..x + w], fp, bound, below)
+            && best.is_none_or(|b| (y, x, o) < b)
+        {
+            *best = Some((y, x, o));
+        }
+    }
+}
+
+/// Rounds of the scale search with [`profile_pack`] with gaps after the
 /// skyline's, two packs each (the interval shrinks to a third a round): on
 /// a 400 k-vertex messy scan (1,586 charts, 2048², 4 px gutters) the
 /// skyline fills 0.494 of the atlas and the gaps 0.62, at about 1.3 s a
@@ -595,11 +563,7 @@ pub fn pack_charts(charts: &Charts, size: u32, padding_px: u32) -> Option<(Vec<[
                 })
             })
             .collect();
-        if gaps {
-            gap_profile_pack(&prints, cols, rows)
-        } else {
-            skyline_profile_pack(&prints, cols, rows)
-        }
+        profile_pack(&prints, cols, rows, gaps)
     };
     let largest = placed
         .iter()
@@ -742,15 +706,15 @@ mod tests {
             [roof.clone(), roof.clone(), roof.clone(), roof.clone()],
             four(|| block(6, 6)),
         ];
-        let placed = gap_profile_pack(&prints, 8, 8).expect("both fit");
+        let placed = profile_pack(&prints, 8, 8, true).expect("both fit");
         assert_eq!(placed[0], (0, 0, 0));
         assert_eq!(placed[1], (1, 2, 0), "{placed:?}");
         // A U settles its contents inside.
         let prints = [four(|| cup(8, 8, 1, 1)), four(|| block(6, 7))];
-        let placed = gap_profile_pack(&prints, 8, 8).expect("both fit");
+        let placed = profile_pack(&prints, 8, 8, true).expect("both fit");
         assert_eq!(placed[1], (1, 0, 0), "{placed:?}");
         // Taken blocks never overlap, and a full atlas refuses.
-        assert!(gap_profile_pack(&[four(|| block(8, 8)), four(|| block(1, 1))], 8, 8).is_none());
+        assert!(profile_pack(&[four(|| block(8, 8)), four(|| block(1, 1))], 8, 8, true).is_none());
     }
 
     #[test]
