@@ -188,7 +188,7 @@ fn every_face_of_the_shared_closed_meshes_is_covered() {
             // Independently: every sample of every face is opaque under the
             // composite of the pastes that hold it.
             for f in 0..m.face_count() {
-                let layers: Vec<_> = out.coverage.layers(f).copied().collect();
+                let layers: Vec<_> = out.coverage.layers(f).collect();
                 assert!(!layers.is_empty(), "{what}: face {f} has no paste");
                 for b in lattice_samples(out.coverage.levels[f]) {
                     let clear: f32 = layers
@@ -996,7 +996,7 @@ fn culled_faces_leave_the_composite_unchanged() {
         };
     let (mut layers_total, mut drawn_total, mut worst) = (0usize, 0usize, 0.0f32);
     for f in 0..m.face_count() {
-        let layers: Vec<_> = out.coverage.layers(f).copied().collect();
+        let layers: Vec<_> = out.coverage.layers(f).collect();
         let kept: Vec<_> = layers
             .iter()
             .filter(|l| drawn[l.paste as usize][l.slot as usize])

@@ -78,15 +78,39 @@ pub fn lattice_samples(k: u16) -> Vec<[f32; 3]> {
     let mut out = Vec::with_capacity(k * k);
     for j in 0..k {
         for i in 0..k - j {
-            let (u, v) = ((i as f32 + 1.0 / 3.0) * inv, (j as f32 + 1.0 / 3.0) * inv);
-            out.push([1.0 - u - v, u, v]);
+            out.push(lattice_point(i, j, false, inv));
             if i + j + 2 <= k {
-                let (u, v) = ((i as f32 + 2.0 / 3.0) * inv, (j as f32 + 2.0 / 3.0) * inv);
-                out.push([1.0 - u - v, u, v]);
+                out.push(lattice_point(i, j, true, inv));
             }
         }
     }
     out
+}
+
+/// Sample `index` of [`lattice_samples`]`(k)`, the same bits.
+pub fn lattice_sample(k: u16, index: u32) -> [f32; 3] {
+    let k = k.max(1) as usize;
+    let inv = 1.0 / k as f32;
+    let mut rest = index as usize;
+    for j in 0..k {
+        // Row `j`: `k − j` lower sub-triangles, `k − j − 1` upper ones,
+        // interleaved lower, upper, lower, …
+        let row = 2 * (k - j) - 1;
+        if rest < row {
+            return lattice_point(rest / 2, j, rest % 2 == 1, inv);
+        }
+        rest -= row;
+    }
+    lattice_point(0, k - 1, false, inv)
+}
+
+/// Centroid of the lower (or `upper`) sub-triangle `(i, j)` of the
+/// subdivision with cell size `inv`.
+#[inline]
+fn lattice_point(i: usize, j: usize, upper: bool, inv: f32) -> [f32; 3] {
+    let third = if upper { 2.0 / 3.0 } else { 1.0 / 3.0 };
+    let (u, v) = ((i as f32 + third) * inv, (j as f32 + third) * inv);
+    [1.0 - u - v, u, v]
 }
 
 /// One paste holding a face.
@@ -111,17 +135,21 @@ const NIL: u32 = u32::MAX;
 /// holes in the heap; pages of a chunk not yet written are not resident.
 const CHUNK: usize = 1 << 20;
 
-/// A layer in a face's list: the layer and the next one in paste order.
+/// A layer in a face's list: the layer without its texture patch (which
+/// the paste gives, [`Coverage::paste_texture`]) and the next one in paste
+/// order; 36 bytes.
 #[derive(Clone, Copy, Debug)]
 struct Node {
-    layer: FaceLayer,
+    paste: u32,
+    slot: u32,
+    uv: [Vec2; 3],
     next: u32,
 }
 
 /// Coverage state of every face.
 ///
 /// The pastes holding each face are a singly linked list per face in one
-/// pool of nodes (40 bytes a layer, 4 bytes a face; freed nodes are
+/// pool of nodes (36 bytes a layer, 4 bytes a face; freed nodes are
 /// reused), in paste order. A `Vec` per face cost 24 bytes per face plus an
 /// allocation of four layers (184 bytes per face) and, with every layer
 /// ever pasted kept, ~9 layers per vertex on a scan.
@@ -129,11 +157,10 @@ struct Node {
 pub struct Coverage {
     /// Whether the face is covered.
     pub covered: Vec<bool>,
-    /// The last two barycentric coordinates of the least covered sample
-    /// of the face's last test (the first is `1 − b1 − b2`, as the lattice
-    /// makes it); NaN before the first test and once covered
-    /// ([`Coverage::uncovered_point`]).
-    worst: Vec<[f32; 2]>,
+    /// The least covered sample of the face's last test, as its index in
+    /// [`lattice_samples`] of the face's level; [`NIL`] before the first
+    /// test and once covered ([`Coverage::uncovered_point`]).
+    worst: Vec<u32>,
     /// Subdivision level of each face's samples ([`sample_levels`]).
     pub levels: Vec<u16>,
     /// First layer of each face, [`NIL`] for none.
@@ -143,6 +170,9 @@ pub struct Coverage {
     nodes: Vec<Vec<Node>>,
     /// First free node of the pool, [`NIL`] for none.
     free: u32,
+    /// Each paste's texture patch, by paste index (the layers do not
+    /// repeat it).
+    paste_texture: Vec<u32>,
     /// Every layer ever added, hidden ones included.
     added: u64,
 }
@@ -182,19 +212,25 @@ fn accumulated(alphas: &[f32]) -> f32 {
 /// The layers in a face's list.
 pub struct FaceLayers<'a> {
     nodes: &'a [Vec<Node>],
+    paste_texture: &'a [u32],
     at: u32,
 }
 
-impl<'a> Iterator for FaceLayers<'a> {
-    type Item = &'a FaceLayer;
+impl Iterator for FaceLayers<'_> {
+    type Item = FaceLayer;
     #[inline]
-    fn next(&mut self) -> Option<&'a FaceLayer> {
+    fn next(&mut self) -> Option<FaceLayer> {
         if self.at == NIL {
             return None;
         }
         let node = node(self.nodes, self.at);
         self.at = node.next;
-        Some(&node.layer)
+        Some(FaceLayer {
+            paste: node.paste,
+            texture: self.paste_texture[node.paste as usize],
+            slot: node.slot,
+            uv: node.uv,
+        })
     }
 }
 
@@ -214,11 +250,12 @@ impl Coverage {
         let n = levels.len();
         Self {
             covered: vec![false; n],
-            worst: vec![[f32::NAN; 2]; n],
+            worst: vec![NIL; n],
             levels,
             head: vec![NIL; n],
             nodes: Vec::new(),
             free: NIL,
+            paste_texture: Vec::new(),
             added: 0,
         }
     }
@@ -229,6 +266,7 @@ impl Coverage {
     pub fn layers(&self, f: usize) -> FaceLayers<'_> {
         FaceLayers {
             nodes: &self.nodes,
+            paste_texture: &self.paste_texture,
             at: self.head[f],
         }
     }
@@ -243,13 +281,19 @@ impl Coverage {
     /// last test; `None` before the first test and once covered.
     #[inline]
     pub fn uncovered_point(&self, f: usize) -> Option<[f32; 3]> {
-        let [u, v] = self.worst[f];
-        (!u.is_nan()).then_some([1.0 - u - v, u, v])
+        let w = self.worst[f];
+        (w != NIL).then(|| lattice_sample(self.levels[f], w))
     }
 
-    /// Appends `layer` to face `f`'s list.
-    fn push(&mut self, f: usize, layer: FaceLayer) {
-        let new = Node { layer, next: NIL };
+    /// Appends the layer of paste `paste` (at `slot` in its face list,
+    /// corners at `uv`) to face `f`'s list.
+    fn push(&mut self, f: usize, paste: u32, slot: u32, uv: [Vec2; 3]) {
+        let new = Node {
+            paste,
+            slot,
+            uv,
+            next: NIL,
+        };
         let id = if self.free == NIL {
             if self.nodes.last().is_none_or(|c| c.len() == CHUNK) {
                 self.nodes.push(Vec::with_capacity(CHUNK));
@@ -321,34 +365,31 @@ impl Coverage {
         settings: &CoverageSettings,
     ) {
         let _span = tracing::trace_span!("coverage", faces = faces.len()).entered();
+        let p = paste as usize;
+        if self.paste_texture.len() <= p {
+            self.paste_texture.resize(p + 1, 0);
+        }
+        self.paste_texture[p] = texture;
         for (slot, (&f, uv)) in faces.iter().zip(uvs).enumerate() {
-            self.push(
-                f as usize,
-                FaceLayer {
-                    paste,
-                    texture,
-                    slot: slot as u32,
-                    uv: *uv,
-                },
-            );
+            self.push(f as usize, paste, slot as u32, *uv);
             self.added += 1;
         }
         let this = &*self;
-        let results: Vec<(f32, Option<[f32; 3]>, u64)> = faces
+        let results: Vec<(f32, Option<u32>, u64)> = faces
             .par_iter()
             .map(|&f| {
-                let layers: Vec<FaceLayer> = this.layers(f as usize).copied().collect();
+                let layers: Vec<FaceLayer> = this.layers(f as usize).collect();
                 let n = layers.len();
                 let samples = lattice_samples(this.levels[f as usize]);
                 let mut covered = 0usize;
-                let mut worst: Option<(f32, [f32; 3])> = None;
+                let mut worst: Option<(f32, u32)> = None;
                 let mut alphas = vec![0.0f32; n];
                 // Bit k: layer k was seen (not transparent, not hidden) at
                 // some sample; only the first 64 layers are candidates.
                 let m = n.min(64);
                 let all: u64 = if m == 64 { u64::MAX } else { (1u64 << m) - 1 };
                 let mut seen = 0u64;
-                for b in &samples {
+                for (index, b) in samples.iter().enumerate() {
                     for (a, l) in alphas.iter_mut().zip(&layers) {
                         *a = textures[l.texture as usize].alpha_at(at(&l.uv, *b));
                     }
@@ -356,7 +397,7 @@ impl Coverage {
                     if a >= settings.opaque {
                         covered += 1;
                     } else if worst.is_none_or(|(w, _)| a < w) {
-                        worst = Some((a, *b));
+                        worst = Some((a, index as u32));
                     }
                     for k in 0..m {
                         if seen & (1 << k) == 0
@@ -377,7 +418,7 @@ impl Coverage {
         for (&f, (fraction, worst, hidden)) in faces.iter().zip(results) {
             let f = f as usize;
             self.covered[f] = fraction >= settings.threshold || worst.is_none();
-            self.worst[f] = worst.map_or([f32::NAN; 2], |b| [b[1], b[2]]);
+            self.worst[f] = worst.unwrap_or(NIL);
             if hidden != 0 && !settings.keep_hidden {
                 self.remove(f, hidden);
             }
@@ -399,48 +440,37 @@ impl Coverage {
         (0..self.face_count()).map(|f| self.layers(f).count()).sum()
     }
 
-    /// Per paste (`paste_count` of them), the faces it still holds, in its
-    /// original face order, with their corners' texture coordinates; the
-    /// layers' `slot`s are renumbered to the positions in these lists.
+    /// Per paste (`paste_count` of them), the faces it still holds, in
+    /// face order, with their corners' texture coordinates; the layers'
+    /// `slot`s are renumbered to the positions in these lists.
+    ///
+    /// Filled in one sweep over the faces into lists of the counted
+    /// lengths: no index of all held layers beside the pool and the
+    /// lists (12 bytes a layer, the loop's peak on a scan).
     pub fn paste_lists(&mut self, paste_count: usize) -> Vec<(Vec<u32>, Vec<[Vec2; 3]>)> {
-        // Counting sort of the held layers by paste, then by old slot.
-        let mut start = vec![0u32; paste_count + 1];
+        let mut count = vec![0usize; paste_count];
         for f in 0..self.face_count() {
             for l in self.layers(f) {
-                start[l.paste as usize + 1] += 1;
+                count[l.paste as usize] += 1;
             }
         }
-        for p in 0..paste_count {
-            start[p + 1] += start[p];
-        }
-        let mut fill = start.clone();
-        // (old slot, face, node) per held layer, grouped by paste.
-        let mut order = vec![(0u32, 0u32, 0u32); start[paste_count] as usize];
+        let mut lists: Vec<(Vec<u32>, Vec<[Vec2; 3]>)> = count
+            .iter()
+            .map(|&n| (Vec::with_capacity(n), Vec::with_capacity(n)))
+            .collect();
+        drop(count);
         for f in 0..self.face_count() {
             let mut at = self.head[f];
             while at != NIL {
-                let n = node(&self.nodes, at);
-                let k = &mut fill[n.layer.paste as usize];
-                order[*k as usize] = (n.layer.slot, f as u32, at);
-                *k += 1;
+                let n = node_mut(&mut self.nodes, at);
+                let (faces, uvs) = &mut lists[n.paste as usize];
+                n.slot = faces.len() as u32;
+                faces.push(f as u32);
+                uvs.push(n.uv);
                 at = n.next;
             }
         }
-        (0..paste_count)
-            .map(|p| {
-                let group = &mut order[start[p] as usize..start[p + 1] as usize];
-                group.sort_unstable();
-                let mut faces = Vec::with_capacity(group.len());
-                let mut uvs = Vec::with_capacity(group.len());
-                for (slot, &(_, f, node)) in group.iter().enumerate() {
-                    let layer = &mut node_mut(&mut self.nodes, node).layer;
-                    layer.slot = slot as u32;
-                    faces.push(f);
-                    uvs.push(layer.uv);
-                }
-                (faces, uvs)
-            })
-            .collect()
+        lists
     }
 }
 
@@ -466,7 +496,7 @@ pub fn drawn_faces(
         let per_face: Vec<Vec<bool>> = (lo..hi)
             .into_par_iter()
             .map(|f| {
-                let layers: Vec<FaceLayer> = coverage.layers(f).copied().collect();
+                let layers: Vec<FaceLayer> = coverage.layers(f).collect();
                 let samples = lattice_samples(coverage.levels[f]);
                 (0..layers.len())
                     .map(|k| {
@@ -493,6 +523,20 @@ pub fn drawn_faces(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_lattice_sample_by_index_is_the_listed_one_bit_for_bit() {
+        for k in 1u16..=20 {
+            for (i, b) in lattice_samples(k).iter().enumerate() {
+                let one = lattice_sample(k, i as u32);
+                assert_eq!(
+                    one.map(f32::to_bits),
+                    b.map(f32::to_bits),
+                    "k {k}, sample {i}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn lattice_samples_fill_the_face_evenly() {

@@ -259,17 +259,20 @@ pub fn solve_direct(m: &Csr, bs: &[f64], bt: &[f64]) -> Option<(Vec<f64>, Vec<f6
     if n == 0 {
         return Some((Vec::new(), Vec::new()));
     }
-    let mut triplets: Vec<Triplet<usize, usize, f64>> = Vec::with_capacity(m.val.len());
+    // 32-bit indices (a patch has fewer than 2³² vertices): the factor's
+    // row indices take half the memory of `usize` ones.
+    let mut triplets: Vec<Triplet<u32, u32, f64>> = Vec::with_capacity(m.val.len());
     for r in 0..n {
         for k in m.start[r] as usize..m.start[r + 1] as usize {
-            let c = m.col[k] as usize;
+            let c = m.col[k];
             if r != 0 && c != 0 {
-                triplets.push(Triplet::new(r, c, m.val[k]));
+                triplets.push(Triplet::new(r as u32, c, m.val[k]));
             }
         }
     }
     triplets.push(Triplet::new(0, 0, 1.0));
-    let a = SparseColMat::<usize, f64>::try_new_from_triplets(n, n, &triplets).ok()?;
+    let a = SparseColMat::<u32, f64>::try_new_from_triplets(n, n, &triplets).ok()?;
+    drop(triplets);
     let llt = a.sp_cholesky(faer::Side::Lower).ok()?;
     let mut rhs = faer::Mat::<f64>::zeros(n, 2);
     for i in 1..n {

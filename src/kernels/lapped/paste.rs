@@ -239,7 +239,7 @@ pub fn paste_until_covered(
     );
     let fc = mesh.face_count();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(settings.seed);
-    let difficulty = face_difficulty(mesh, field);
+    let mut difficulty = face_difficulty(mesh, field);
     let unit_px = textures
         .iter()
         .map(TexturePatch::unit_px)
@@ -256,7 +256,9 @@ pub fn paste_until_covered(
             coverage.covered[f] = true;
         }
     }
-    let mut seeds = vec![0u32; fc];
+    // Seeds per face, saturating: `max_seeds_per_face` counts to 65,535
+    // (the stage allows 10,000).
+    let mut seeds = vec![0u16; fc];
     // Open faces (uncovered, seeded fewer than `max_seeds_per_face` times)
     // with their seed weights in a Fenwick tree: picking a seed and closing
     // faces cost O(log F), so a run is O(pastes · log F + faces pasted), not
@@ -281,31 +283,49 @@ pub fn paste_until_covered(
     let mut report = PasteReport::default();
     let mut covered_count = fc - open_count;
     progress.inc(covered_count as u64);
-    let weight =
-        |f: usize, boost: f32| mesh.area(f) as f64 * (1.0 + (boost * difficulty[f]) as f64);
+    // A face's seed weight: its area, times `1 + boost · difficulty` early
+    // on. The difficulties are let go when the early phase ends (the
+    // weight is then the area, exactly: `x · 1.0 = x`).
+    let weight = |f: usize, boost: f32, difficulty: &[f32]| {
+        if boost == 0.0 {
+            mesh.area(f) as f64
+        } else {
+            mesh.area(f) as f64 * (1.0 + (boost * difficulty[f]) as f64)
+        }
+    };
     let early_at = |covered: usize| (covered as f32) < settings.difficult_until * fc as f32;
     let mut early = early_at(covered_count);
     let boost_of = |early: bool| if early { settings.difficult_first } else { 0.0 };
     let mut tree = Fenwick::from_weights((0..fc).map(|f| {
         if open[f] {
-            weight(f, boost_of(early))
+            weight(f, boost_of(early), &difficulty)
         } else {
             0.0
         }
     }));
+    if !early {
+        difficulty = Vec::new();
+    }
     while pastes.len() < max_pastes && open_count > 0 {
         // Choose the seed face: area-weighted, difficult faces first early on.
         if early && !early_at(covered_count) {
             early = false;
-            tree =
-                Fenwick::from_weights((0..fc).map(|f| if open[f] { weight(f, 0.0) } else { 0.0 }));
+            difficulty = Vec::new();
+            drop(tree);
+            tree = Fenwick::from_weights((0..fc).map(|f| {
+                if open[f] {
+                    weight(f, 0.0, &difficulty)
+                } else {
+                    0.0
+                }
+            }));
         }
         let pick = rng.random::<f64>() * tree.total();
         let Some(face) = tree.first_above(pick, &open) else {
             break;
         };
         let face = face as u32;
-        seeds[face as usize] += 1;
+        seeds[face as usize] = seeds[face as usize].saturating_add(1);
         let bary = match coverage.uncovered_point(face as usize) {
             Some(b) => b,
             None => {
@@ -362,9 +382,12 @@ pub fn paste_until_covered(
         let boost = boost_of(early);
         for &f in patch.faces.iter().chain([&face]) {
             let f = f as usize;
-            if open[f] && (coverage.covered[f] || seeds[f] >= settings.max_seeds_per_face) {
+            if open[f]
+                && (coverage.covered[f]
+                    || u32::from(seeds[f]) >= settings.max_seeds_per_face.min(u16::MAX.into()))
+            {
                 open[f] = false;
-                tree.add(f, -weight(f, boost));
+                tree.add(f, -weight(f, boost, &difficulty));
                 settled += 1;
             }
         }

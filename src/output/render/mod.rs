@@ -336,7 +336,7 @@ impl shade::Scene<'_> {
         let setup = |t: u32| {
             raster::setup(
                 t,
-                self.tris[t as usize],
+                self.tris.corners(t as usize),
                 &projected,
                 &self.mesh.positions,
                 &self.mesh.corner_vertex,

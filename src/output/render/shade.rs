@@ -12,15 +12,69 @@ pub(crate) struct Scene<'a> {
     pub mesh: &'a PolyMesh,
     pub shading: &'a Shading<'a>,
     pub options: &'a RenderOptions,
-    /// Fan triangulation as mesh corner triples.
-    pub tris: Vec<[u32; 3]>,
-    /// The face of each triangle.
-    pub face_of: Vec<u32>,
+    /// Fan triangulation as mesh corner triples, with the face of each.
+    pub tris: FanTriangles,
     /// Corner normals for smooth shading; `None` for flat shading (unit
     /// face normals, made when needed).
     pub normals: Option<SmoothNormals>,
     /// For [`Shading::Layers`]: per face, the layers that cover it.
     pub layers: LayerIndex,
+}
+
+/// The fan triangles of a mesh's faces as corner triples, with the face of
+/// each. A mesh of triangles is its own triangulation (triangle `t` is
+/// corners `3t..3t+3` of face `t`), so nothing is stored for it: on a
+/// million-vertex scan the two lists were 32 bytes per vertex at the
+/// preview's peak.
+pub(crate) enum FanTriangles {
+    /// Every face is a triangle.
+    Faces(usize),
+    /// Polygons, fan-triangulated by [`PolyMesh::triangulate_corners`].
+    Fans {
+        tris: Vec<[u32; 3]>,
+        face_of: Vec<u32>,
+    },
+}
+
+impl FanTriangles {
+    pub fn of(mesh: &PolyMesh) -> Self {
+        let fc = mesh.face_count();
+        if (0..fc).all(|f| mesh.face_corners(f).len() == 3) {
+            Self::Faces(fc)
+        } else {
+            let (tris, face_of) = mesh.triangulate_corners();
+            Self::Fans { tris, face_of }
+        }
+    }
+
+    #[inline]
+    pub fn len(&self) -> usize {
+        match self {
+            Self::Faces(n) => *n,
+            Self::Fans { tris, .. } => tris.len(),
+        }
+    }
+
+    /// Triangle `t`'s corners.
+    #[inline]
+    pub fn corners(&self, t: usize) -> [u32; 3] {
+        match self {
+            Self::Faces(_) => {
+                let c = 3 * t as u32;
+                [c, c + 1, c + 2]
+            }
+            Self::Fans { tris, .. } => tris[t],
+        }
+    }
+
+    /// The face triangle `t` lies in.
+    #[inline]
+    pub fn face(&self, t: usize) -> usize {
+        match self {
+            Self::Faces(_) => t,
+            Self::Fans { face_of, .. } => face_of[t] as usize,
+        }
+    }
 }
 
 /// Per face, the `(layer, offset of the face's first corner in layer.uvs)`
@@ -210,14 +264,12 @@ impl<'a> Scene<'a> {
             Normals::Flat => None,
             Normals::Smooth { crease_deg } => Some(SmoothNormals::new(mesh, crease_deg)),
         };
-        let (tris, face_of) = mesh.triangulate_corners();
         Self {
             mesh,
             shading,
             options,
             layers: LayerIndex::new(mesh, shading),
-            tris,
-            face_of,
+            tris: FanTriangles::of(mesh),
             normals,
         }
     }
@@ -235,7 +287,7 @@ impl<'a> Scene<'a> {
         } else {
             [1.0 / 3.0; 3]
         };
-        let face = self.face_of[t.source as usize] as usize;
+        let face = self.tris.face(t.source as usize);
         let c = t.corners.map(|c| c as usize);
 
         let mut n = match &self.normals {
@@ -285,7 +337,7 @@ impl<'a> Scene<'a> {
             } => {
                 // Map the drawn corners back to the fan triangle's order
                 // (setup may have swapped two of them).
-                let orig = self.tris[t.source as usize];
+                let orig = self.tris.corners(t.source as usize);
                 let pos = t
                     .corners
                     .map(|c| orig.iter().position(|&o| o == c).unwrap_or(0));
