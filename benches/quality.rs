@@ -45,6 +45,10 @@
 #[allow(dead_code)]
 mod peer;
 
+#[path = "../tests/common/gates.rs"]
+#[allow(dead_code)]
+mod gates;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -417,21 +421,7 @@ fn read_sources(path: &Path, size: u32) -> Result<Option<SourceMap>, String> {
             img.height()
         ));
     }
-    let texels = img
-        .pixels()
-        .map(|p| {
-            if p.0[2] == u16::MAX {
-                [f32::from(p.0[0]) + 0.5, f32::from(p.0[1]) + 0.5]
-            } else {
-                [f32::NAN; 2]
-            }
-        })
-        .collect();
-    Ok(Some(SourceMap {
-        width: size,
-        height: size,
-        texels,
-    }))
+    Ok(Some(gates::source_map(&img)))
 }
 
 /// One thread setting's wall and CPU seconds, or why it failed.

@@ -1179,3 +1179,58 @@ kind = "lapped_paste"
     );
     assert!(!out.join("result_pastes.obj").exists());
 }
+
+/// The automatic patch count assumes a splotch fills [`SPLOTCH_FILL`] of
+/// its square: the masks' mean fill is within 0.05 of it.
+#[test]
+fn splotches_fill_the_share_of_their_square_the_patch_count_assumes() {
+    use surfsynth::stages::lapped_paste::SPLOTCH_FILL;
+    let fills: Vec<f64> = (0..64u64)
+        .map(|seed| {
+            let m = splotch_mask(96, seed);
+            m.inside.iter().filter(|&&i| i).count() as f64 / m.inside.len() as f64
+        })
+        .collect();
+    let mean = fills.iter().sum::<f64>() / fills.len() as f64;
+    assert!(
+        (mean - SPLOTCH_FILL).abs() < 0.05,
+        "splotches fill {mean:.3} of their square on average, SPLOTCH_FILL is {SPLOTCH_FILL}"
+    );
+}
+
+/// Automatic texture patches: at most 3/4 of the exemplar's side (one
+/// paste then copies under a third of the exemplar), at most 0.3 of the
+/// diagonal, and enough of them to cover the exemplar.
+#[test]
+fn automatic_patches_copy_under_a_third_of_the_exemplar_and_cover_it() {
+    use surfsynth::stages::lapped_paste::{LappedPasteSettings, SPLOTCH_FILL, auto_patches};
+    let auto = LappedPasteSettings::default();
+    assert_eq!(
+        (auto.patch_pixels, auto.patches),
+        (0, 0),
+        "both automatic by default"
+    );
+    // A large mesh against a 128² exemplar: the side cap binds.
+    let (px, n) = auto_patches(&auto, (128, 128), 1.0, 10_000.0);
+    assert_eq!(px, 96);
+    assert!(SPLOTCH_FILL * f64::from(px * px) < 16_384.0 / 3.0);
+    // n random splotches leave at most 5 % of the exemplar uncovered.
+    let a = SPLOTCH_FILL * f64::from(px * px) / 16_384.0;
+    assert!(
+        (1.0 - a).powi(n as i32) <= 0.05 && (1.0 - a).powi(n as i32 - 1) > 0.05,
+        "{n}"
+    );
+    // A small mesh: 0.3 of its diagonal.
+    let (px, _) = auto_patches(&auto, (128, 128), 1.0, 200.0);
+    assert_eq!(px, 60);
+    // A tiny exemplar: 3/4 of its side, never more than the side.
+    let (px, _) = auto_patches(&auto, (20, 40), 1.0, 10_000.0);
+    assert_eq!(px, 15);
+    // Explicit settings are kept.
+    let fixed = LappedPasteSettings {
+        patch_pixels: 32,
+        patches: 3,
+        ..auto
+    };
+    assert_eq!(auto_patches(&fixed, (128, 128), 1.0, 10_000.0), (32, 3));
+}

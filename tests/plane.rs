@@ -313,6 +313,28 @@ fn plane_outputs_are_the_same_bytes_at_one_and_two_threads() {
     }
 }
 
+/// The shared photos the planar gates run on.
+const SHARED_TEXTURES: [&str; 5] = ["brick", "grass", "planks", "stones", "water"];
+
+/// Runs `configs/plane/METHOD.toml` at its own (the benchmark's) size on
+/// the shared `texture` into `dir/texture`; returns that folder.
+fn run_at_benchmark_size(method: &str, texture: &str, dir: &Path) -> PathBuf {
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/plane/{method}.toml"));
+    let out = dir.join(texture);
+    let exemplar = shared(&format!("textures/{texture}.png"));
+    let (code, _, stderr) = run_cli(&[
+        "run",
+        config.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        &format!("input.exemplar={}", exemplar.display()),
+        "-q",
+    ]);
+    assert_eq!(code, 0, "{method} on {texture}: {stderr}");
+    out
+}
+
 /// Issue 13's repeat gate for `jump_surface` on a regular grid plane: no
 /// verbatim region larger than a third of the exemplar is repeated more
 /// than twice (`result.quality.verbatim.large_region_repeats`, the
@@ -324,21 +346,9 @@ fn plane_outputs_are_the_same_bytes_at_one_and_two_threads() {
 /// near-whole copies of the exemplar side by side (issue 13, open).
 #[test]
 fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
-    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/jump_surface.toml");
     let dir = tempfile::tempdir().unwrap();
-    for texture in ["brick", "grass", "planks", "stones", "water"] {
-        let out = dir.path().join(texture);
-        let exemplar = shared(&format!("textures/{texture}.png"));
-        let (code, _, stderr) = run_cli(&[
-            "run",
-            config.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--set",
-            &format!("input.exemplar={}", exemplar.display()),
-            "-q",
-        ]);
-        assert_eq!(code, 0, "{texture}: {stderr}");
+    for texture in SHARED_TEXTURES {
+        let out = run_at_benchmark_size("jump_surface", texture, dir.path());
         let m: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
                 .unwrap();
@@ -355,4 +365,48 @@ fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
             "{texture}: a verbatim region larger than a third of the exemplar is repeated {repeats} times"
         );
     }
+}
+
+/// Lapped textures on the planar benchmark (256² from the 128² shared
+/// photos, `configs/plane/lapped.toml` with its automatic texture patches:
+/// 3/4 of the exemplar's side, enough of them to cover it) against the
+/// peer, on the parts of issue 13's gate they meet: structure ≤ the
+/// peer's + 0.05, no verbatim region larger than a third of the exemplar
+/// repeated more than twice; and [`common::gates::NEAR_PEER`]'s sharpness
+/// (≥ 0.8 × the peer's) and histogram bars. With the former 32-pixel
+/// patches, structure on planks was 0.317 against the peer's 0.133.
+/// Not gated, because not met yet (issue 13 open), measured: coherence
+/// mean 1.04–1.70 × the peer's, p90 0.75–1.50 ×, completeness 1.1–2.5 ×,
+/// sharpness 0.84–0.99 (issue 13 asks ≥ 0.9; grass and planks miss it).
+#[test]
+fn lapped_on_the_plane_keeps_the_exemplars_structure_without_large_verbatim_copies() {
+    let dir = tempfile::tempdir().unwrap();
+    let gate = common::gates::Gate {
+        coherence_mean: f32::INFINITY,
+        coherence_p90: f32::INFINITY,
+        completeness: f32::INFINITY,
+        structure_above: 0.05,
+        ..common::gates::NEAR_PEER
+    };
+    let mut results = Vec::new();
+    for texture in SHARED_TEXTURES {
+        let out = run_at_benchmark_size("lapped", texture, dir.path());
+        let exemplar =
+            surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
+        let (img, sources) = common::gates::plane_result(&out);
+        let ours = common::gates::quality_of(&img, Some(&sources), &exemplar);
+        let verbatim = ours.verbatim.expect("lapped writes its source texels");
+        println!(
+            "{texture}: largest copied region {} px, large_region_repeats {}",
+            verbatim.largest_region, verbatim.large_region_repeats
+        );
+        assert!(
+            verbatim.large_region_repeats <= 2,
+            "{texture}: a verbatim region larger than a third of the exemplar is repeated {} times",
+            verbatim.large_region_repeats
+        );
+        let peer = common::gates::peer_quality(&exemplar, img.width, img.height);
+        results.push((texture.to_string(), ours, peer));
+    }
+    common::gates::assert_all_near_peer(&results, &gate);
 }

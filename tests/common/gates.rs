@@ -388,3 +388,33 @@ pub fn plane_image(
     );
     Image::from_data(side, side, ch as u32, out).expect("image size")
 }
+
+/// `plane.png` and `plane_sources.png` of a planar run in `dir`, as the
+/// quality bench reads them: the image, and per pixel the exemplar texel.
+pub fn plane_result(dir: &std::path::Path) -> (Image, SourceMap) {
+    let img = surfsynth::image::load_image(&dir.join("plane.png")).expect("plane.png");
+    let src = image::open(dir.join("plane_sources.png"))
+        .expect("plane_sources.png")
+        .into_rgb16();
+    (img, source_map(&src))
+}
+
+/// The source map of a `plane_sources.png` (16-bit RGB: R = exemplar x
+/// index, G = y, B = 65535 where known; texel centres at `+ 0.5`).
+pub fn source_map(src: &image::ImageBuffer<image::Rgb<u16>, Vec<u16>>) -> SourceMap {
+    let texels = src
+        .pixels()
+        .map(|p| {
+            if p.0[2] == u16::MAX {
+                [f32::from(p.0[0]) + 0.5, f32::from(p.0[1]) + 0.5]
+            } else {
+                [f32::NAN; 2]
+            }
+        })
+        .collect();
+    SourceMap {
+        width: src.width(),
+        height: src.height(),
+        texels,
+    }
+}

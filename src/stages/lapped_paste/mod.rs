@@ -6,6 +6,15 @@
 //! faces that later pastes hide completely are flagged for runtime pasting
 //! (§4), and optionally the pastes are composited into a texture atlas (§4).
 //!
+//! Extension (issue 13): with `[input] texture_scale` the texture patches
+//! are automatic ([`auto_patches`]): several patches of at most 3/4 of the
+//! exemplar's side cut at random places, enough to cover it, so pastes show
+//! the exemplar's variety without copying more than about a quarter of it
+//! at once. On the planar benchmark this halves the coherence error and
+//! the structure distance on planks (ARCHITECTURE.md, "Lapped textures:
+//! the automatic texture patches"). The paper's single patch is
+//! `patches = 1` with `patch_pixels` the exemplar's side.
+//!
 //! Reads: the active mesh's `Geometry` and `FaceField`, the exemplar.
 //! Writes: paste entities, the `TexturePatches` resource, an
 //! `AtlasTexture` on the mesh (with `atlas_size > 0`), `TexelSpacing`.
@@ -102,7 +111,7 @@ impl Default for LappedPasteSettings {
         Self {
             mask: MaskKind::Splotch,
             mask_image: String::new(),
-            patches: 1,
+            patches: 0,
             patch_pixels: 0,
             falloff: 3.0,
             hull_vertices: 16,
@@ -140,13 +149,13 @@ impl StageSettings for LappedPasteSettings {
             name: "patches",
             unit: "",
             range: ParamRange::Int(0, 64),
-            doc: "number of texture patches (each paste picks one at random); extra ones are cut at random places with their own splotch; 0 = 1 with an explicit tangent_field patch_size, else enough patches to hold the exemplar's area, (w·h)/patch_pixels², at most 16",
+            doc: "number of texture patches (each paste picks one at random); extra ones are cut at random places with their own splotch; 0 = 1 with an explicit tangent_field patch_size, else enough that their splotches (about 47 % of their squares) cover 95 % of the exemplar at random places, at most 16",
         },
         ParamDoc {
             name: "patch_pixels",
             unit: "pixels",
             range: ParamRange::Int(0, 4096),
-            doc: "side of the square exemplar region of a predefined shape; 0 = the exemplar's smaller side with an explicit tangent_field patch_size, else the pixels spanning 0.15 of the mesh's bounding-box diagonal at the texture scale (patches small against the object, as Praun et al. paste), clamped to 16..=the smaller side",
+            doc: "side of the square exemplar region of a predefined shape; 0 = the exemplar's smaller side with an explicit tangent_field patch_size, else the pixels spanning 0.3 of the mesh's bounding-box diagonal at the texture scale (patches small against the object, as Praun et al. paste), clamped to 16..=3/4 of the smaller side (so one paste copies about a quarter of the exemplar, below the verbatim bound of a third)",
         },
         ParamDoc {
             name: "falloff",
@@ -282,13 +291,32 @@ impl LappedPasteSettings {
 /// Largest share of the mesh's bounding-box diagonal a texture patch spans
 /// when its size follows `[input] texture_scale` (the default of an explicit
 /// `patch_size` in diagonals before the shared scale existed).
-pub const AUTO_PATCH_DIAGONAL: f32 = 0.15;
+pub const AUTO_PATCH_DIAGONAL: f32 = 0.3;
 
 /// Smallest side of a texture patch chosen automatically, pixels.
 pub const AUTO_PATCH_MIN_PIXELS: u32 = 16;
 
 /// Most texture patches chosen automatically.
 pub const AUTO_PATCHES_MAX: u32 = 16;
+
+/// Largest side of a texture patch chosen automatically, as a fraction of
+/// the exemplar's smaller side. A splotch fills about 47 % of its square
+/// (radius 55–100 % of the largest, [`splotch_mask`]), so one paste of a
+/// patch of 3/4 of the side shows about a quarter of the exemplar: below
+/// a third, the verbatim bound of the quality metrics
+/// (`large_region_repeats`). On the planar benchmark whole-exemplar
+/// patches copied regions of 45 % of the exemplar 4 times; 3/4 copied at
+/// most 25 %, none larger than a third.
+pub const AUTO_PATCH_SIDE_FRACTION: f32 = 0.75;
+
+/// Share of its square a splotch fills on average (see
+/// [`AUTO_PATCH_SIDE_FRACTION`]); sets the automatic patch count.
+pub const SPLOTCH_FILL: f64 = 0.47;
+
+/// Share of the exemplar the automatic texture patches cover together
+/// (each at a random place), so a lapped texture shows the exemplar's
+/// variety rather than a few regions of it.
+pub const AUTO_PATCH_COVER: f64 = 0.95;
 
 /// Mean exemplar pixels per world unit of a per-pixel field (lengths are
 /// world units per pixel).
@@ -299,8 +327,12 @@ fn field_pixels_per_unit(t: &[Vec3]) -> f32 {
 
 /// `patch_pixels` and `patches` when they are 0 and the field follows the
 /// texture scale: a patch spans at most [`AUTO_PATCH_DIAGONAL`] of the
-/// diagonal (at least [`AUTO_PATCH_MIN_PIXELS`], at most the exemplar's
-/// smaller side), and enough patches are cut to hold the exemplar's area.
+/// diagonal and at most [`AUTO_PATCH_SIDE_FRACTION`] of the exemplar's
+/// smaller side (at least [`AUTO_PATCH_MIN_PIXELS`]), and enough patches
+/// are cut at random places that their splotches cover
+/// [`AUTO_PATCH_COVER`] of the exemplar: `n` with `(1 − a)ⁿ ≤ 1 −
+/// AUTO_PATCH_COVER` for the share `a` of the exemplar one splotch fills
+/// (at most [`AUTO_PATCHES_MAX`]).
 pub fn auto_patches(
     settings: &LappedPasteSettings,
     (w, h): (u32, u32),
@@ -311,14 +343,17 @@ pub fn auto_patches(
     let pixels = if settings.patch_pixels > 0 {
         settings.patch_pixels
     } else {
+        let cap = ((AUTO_PATCH_SIDE_FRACTION * side as f32).floor() as u32).max(1);
         let fit = (AUTO_PATCH_DIAGONAL * diagonal * pixels_per_unit).round();
-        (fit.clamp(0.0, side as f32) as u32).clamp(AUTO_PATCH_MIN_PIXELS.min(side), side)
+        (fit.clamp(0.0, cap as f32) as u32).clamp(AUTO_PATCH_MIN_PIXELS.min(cap), cap)
     };
     let patches = if settings.patches > 0 {
         settings.patches
     } else {
-        let need = (f64::from(w) * f64::from(h)) / f64::from(pixels.max(1)).powi(2);
-        (need.ceil() as u32).clamp(1, AUTO_PATCHES_MAX)
+        let p = f64::from(pixels.max(1));
+        let a = (SPLOTCH_FILL * p * p / (f64::from(w) * f64::from(h))).min(0.999);
+        let need = (1.0 - AUTO_PATCH_COVER).ln() / (1.0 - a).ln();
+        (need.ceil().min(f64::from(AUTO_PATCHES_MAX)) as u32).clamp(1, AUTO_PATCHES_MAX)
     };
     (pixels, patches)
 }
