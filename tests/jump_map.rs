@@ -559,6 +559,89 @@ fn synthesized_addresses_stay_valid_for_any_size_and_order() {
         )
         .unwrap();
         assert!(p.texels.iter().all(|t| map.sources().contains(t.x, t.y)));
+        // The quilted patches (the default) at sizes that are no multiple
+        // of the patch step, down to one pixel.
+        for (w, h) in [(1, 1), (61, 45), (3, 300), (200, 2)] {
+            let q = synthesize_patches(
+                &ex,
+                &map,
+                &PatchSynthesisSettings {
+                    width: w,
+                    height: h,
+                    seed: 5,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            assert_eq!(q.sources.texels.len(), (w * h) as usize);
+            assert!(
+                q.sources
+                    .texels
+                    .iter()
+                    .all(|t| map.sources().contains(t.x, t.y)),
+                "{boundary:?} quilted {w}x{h}"
+            );
+        }
+    }
+}
+
+/// Quilted patches (the default seams) meet their neighbours where the
+/// colours agree: the colour step across the output's seam edges (where
+/// neighbours do not copy exemplar neighbours) is smaller than with the
+/// paper's straight patch edges, on every shared texture; and no patch
+/// continues its neighbour's source (the seams exist).
+#[test]
+fn quilted_seams_follow_low_error_paths() {
+    for name in ["brick", "grass", "planks", "stones", "water"] {
+        let ex = load(&format!("{name}.png"));
+        let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+        let step = |seams: PatchSeams| {
+            let out = synthesize_patches(
+                &ex,
+                &map,
+                &PatchSynthesisSettings {
+                    seams,
+                    seed: 1,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let (w, h, c) = (out.image.width as usize, out.image.height as usize, 3);
+            let t = &out.sources.texels;
+            let px = |i: usize| &out.image.data[i * c..i * c + c];
+            let (mut sum, mut n) = (0.0f64, 0usize);
+            for y in 0..h {
+                for x in 0..w {
+                    let i = y * w + x;
+                    for (j, dx, dy) in [(i + 1, 1i64, 0i64), (i + w, 0, 1)] {
+                        if (dx == 1 && x + 1 >= w) || (dy == 1 && y + 1 >= h) {
+                            continue;
+                        }
+                        let coherent = t[j].x as i64 == t[i].x as i64 + dx
+                            && t[j].y as i64 == t[i].y as i64 + dy;
+                        if !coherent {
+                            sum += px(i)
+                                .iter()
+                                .zip(px(j))
+                                .map(|(a, b)| f64::from(a - b).powi(2))
+                                .sum::<f64>();
+                            n += 1;
+                        }
+                    }
+                }
+            }
+            (sum / n.max(1) as f64, n)
+        };
+        let (straight, n_straight) = step(PatchSeams::Straight);
+        let (cut, n_cut) = step(PatchSeams::Cut);
+        println!(
+            "{name}: mean squared step across seams {cut:.4} (cut, {n_cut} edges) vs {straight:.4} (straight, {n_straight})"
+        );
+        assert!(n_cut > 0, "{name}: quilted patches have seams");
+        assert!(
+            cut < straight,
+            "{name}: quilted seams {cut:.4} are not smoother than straight ones {straight:.4}"
+        );
     }
 }
 

@@ -96,6 +96,16 @@ pub const AT_PEER: Gate = Gate {
     histogram_above: 0.01,
 };
 
+/// The bar of issue 13 for the jump-map and lapped methods: coherence
+/// p90 and completeness at most the peer's, coherence mean ≤ 1.1 × the
+/// peer's, sharpness ≥ 0.9 of the exemplar's (and ≥ 0.8 × the peer's),
+/// structure ≤ the peer's + 0.05; histogram as [`NEAR_PEER`].
+pub const ISSUE_13: Gate = Gate {
+    coherence_mean: 1.1,
+    coherence_p90: 1.0,
+    ..AT_PEER
+};
+
 /// The measures `gate` finds failing, one line each ("M: ours a vs peer b,
 /// bound c"); empty when `ours` passes.
 pub fn gate_failures(ours: &ImageQuality, peer: &ImageQuality, gate: &Gate) -> Vec<String> {

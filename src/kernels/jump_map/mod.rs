@@ -57,7 +57,7 @@ pub use order::{PixelOrder, PixelOrderIter};
 pub use settings::{Boundary, JumpMapSettings};
 pub use sources::{SourceMap, SynthesisOutput};
 pub use synth_patch::{
-    PatchSynthesisSettings, synthesize_patch_sources_with_progress, synthesize_patches,
+    PatchSeams, PatchSynthesisSettings, synthesize_patch_sources_with_progress, synthesize_patches,
     synthesize_patches_with_progress,
 };
 pub use synth_pixel::{

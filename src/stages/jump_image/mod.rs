@@ -8,7 +8,7 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::jump_map::{
-    ControlField, ControlledSynthesisSettings, PatchSynthesisSettings, PixelOrder,
+    ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelOrder,
     PixelSynthesisSettings, synthesize_controlled_with_progress, synthesize_patches_with_progress,
     synthesize_pixels_with_progress,
 };
@@ -37,6 +37,8 @@ pub struct JumpImageSettings {
     pub patch_fraction: f32,
     /// Patch side of the patch method.
     pub patch_side: f32,
+    /// How the patch method's patches meet: `cut` or `straight`.
+    pub seams: String,
     /// Boundary-avoidance band.
     pub boundary_fraction: f32,
     /// Control field of the controlled method.
@@ -58,6 +60,7 @@ impl Default for JumpImageSettings {
             order: "hilbert".into(),
             patch_fraction: 0.5,
             patch_side: 0.3,
+            seams: "cut".into(),
             boundary_fraction: 0.2,
             field: "perspective".into(),
             field_scale: [1.0, 0.25],
@@ -85,7 +88,7 @@ impl StageSettings for JumpImageSettings {
             name: "method",
             unit: "",
             range: ParamRange::OneOf(&["pixel", "patch", "controlled"]),
-            doc: "pixel: per-pixel copy/jump (§5); patch: regular patches in Hilbert order (§7.1); controlled: orientation and scale fields (§7.2)",
+            doc: "pixel: per-pixel copy/jump (§5); patch: patches chosen by the jump map (§7.1), quilted with minimum-error seams unless seams = \"straight\"; controlled: orientation and scale fields (§7.2)",
         },
         ParamDoc {
             name: "order",
@@ -104,6 +107,12 @@ impl StageSettings for JumpImageSettings {
             unit: "fraction",
             range: ParamRange::Float(0.01, 1.0),
             doc: "patch: patch side as a fraction of the exemplar side (§7.1; paper 1/5-1/2)",
+        },
+        ParamDoc {
+            name: "seams",
+            unit: "",
+            range: ParamRange::OneOf(&["cut", "straight"]),
+            doc: "patch: cut = patches overlap a sixth of their side, are chosen among the jump map's suggestions by their overlap error and meet along its minimum-error path (image quilting, an extension); straight = edge to edge as in §7.1",
         },
         ParamDoc {
             name: "boundary_fraction",
@@ -227,6 +236,11 @@ impl Stage for JumpImage {
                         height: settings.height,
                         patch_fraction: settings.patch_side,
                         seed: s,
+                        seams: if settings.seams == "straight" {
+                            PatchSeams::Straight
+                        } else {
+                            PatchSeams::Cut
+                        },
                     },
                     &progress,
                 )
