@@ -61,6 +61,6 @@ pub use synth_patch::{
     synthesize_patches_with_progress,
 };
 pub use synth_pixel::{
-    PixelSynthesisSettings, synthesize_pixels, synthesize_pixels_with_progress, synthesize_sources,
-    synthesize_sources_with_progress,
+    MATCH_RADIUS, PixelChoice, PixelSynthesisSettings, synthesize_pixels,
+    synthesize_pixels_with_progress, synthesize_sources, synthesize_sources_with_progress,
 };

@@ -63,7 +63,37 @@ pub struct PixelSynthesisSettings {
     pub boundary_fraction: f32,
     /// Seed of the synthesis RNG. Default 0.
     pub seed: u64,
+    /// How a pixel picks among what its neighbours offer. Default
+    /// [`PixelChoice::Random`] (the paper).
+    pub choice: PixelChoice,
 }
+
+/// How [`synthesize_pixels`] picks a pixel's source.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum PixelChoice {
+    /// The paper (§5.1): a random synthesised neighbour, and by weight one
+    /// of its jumps or none.
+    #[default]
+    Random,
+    /// An extension (jump acceptance checked against the neighbourhood,
+    /// as in k-coherent synthesis): the paper's random draw still decides
+    /// whether the pixel jumps, at the paper's frequency; a jump goes to
+    /// the destination in the drawn neighbour's list, and a copy continues
+    /// the synthesised neighbour, whose exemplar neighbourhood best matches
+    /// the pixels already synthesised around it ([`MATCH_RADIUS`]).
+    ///
+    /// On the planar benchmark (256² from the 128² photos) it lowers the
+    /// coherence mean by 20–60 % and p90 by 15–68 % against `Random` on every
+    /// shared texture (brick p90 0.00377 → 0.00121, the peer's 0.00122),
+    /// but the longer coherent runs copy regions larger than a third of
+    /// the exemplar more often (water: 4 times, against 2), so it is an
+    /// option, not the default.
+    Matched,
+}
+
+/// Radius of the square window of synthesised pixels a
+/// [`PixelChoice::Matched`] candidate is compared over (2: 5 × 5).
+pub const MATCH_RADIUS: i64 = 2;
 
 impl Default for PixelSynthesisSettings {
     fn default() -> Self {
@@ -74,6 +104,7 @@ impl Default for PixelSynthesisSettings {
             patch_fraction: 0.5,
             boundary_fraction: 0.2,
             seed: 0,
+            choice: PixelChoice::default(),
         }
     }
 }
@@ -300,6 +331,64 @@ impl Ctx<'_> {
     }
 }
 
+/// The synthesised 4-neighbours of padded pixel `pi` (the first `n` of
+/// the arrays) and the direction from each to it (0: +x, 1: −x, 2: +y,
+/// 3: −y).
+#[inline(always)]
+fn synthesised_neighbours(grid: &[u32], pi: usize, pw: usize) -> ([u32; 4], [u8; 4], usize) {
+    let mut cand = [0u32; 4];
+    let mut dirs = [0u8; 4];
+    let mut n = 0usize;
+    for (a, d) in [
+        (grid[pi - 1], 0u8),
+        (grid[pi + 1], 1),
+        (grid[pi - pw], 2),
+        (grid[pi + pw], 3),
+    ] {
+        cand[n] = a;
+        dirs[n] = d;
+        n += usize::from(a != NONE);
+    }
+    (cand, dirs, n)
+}
+
+/// The loop's fixed facts for `settings` on `map`.
+fn context<'a>(map: &'a JumpMap, settings: &PixelSynthesisSettings) -> Ctx<'a> {
+    let table = JumpTable::new(
+        map,
+        base_range(map.sources(), settings.patch_fraction),
+        settings.boundary_fraction,
+    );
+    Ctx {
+        map,
+        mask: (1u32 << table.shift) - 1,
+        table,
+        w: map.width(),
+        h: map.height(),
+        region: map.sources(),
+    }
+}
+
+/// The source map of the padded `grid` (row stride `pw`) of a `w × h`
+/// output.
+fn source_map(grid: &[u32], pw: usize, w: u32, h: u32, ctx: &Ctx) -> SourceMap {
+    let mut texels = Vec::with_capacity(w as usize * h as usize);
+    for row in grid.chunks_exact(pw).skip(1).take(h as usize) {
+        texels.extend(
+            row[1..=w as usize]
+                .iter()
+                .map(|&a| TexelCoord::new(a & ctx.mask, a >> ctx.table.shift)),
+        );
+    }
+    SourceMap {
+        width: w,
+        height: h,
+        exemplar_width: ctx.map.width(),
+        exemplar_height: ctx.map.height(),
+        texels,
+    }
+}
+
 /// Pixels between two progress reports of the synthesis loop.
 const PROGRESS_PIXELS: u64 = 1 << 16;
 
@@ -323,19 +412,7 @@ fn run<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
         }
         let pi = (y as usize + 1) * pw + x as usize + 1;
         // Already-synthesized neighbours and the direction from each to here.
-        let mut cand = [0u32; 4];
-        let mut dirs = [0u8; 4];
-        let mut n = 0usize;
-        for (a, d) in [
-            (grid[pi - 1], 0u8),
-            (grid[pi + 1], 1),
-            (grid[pi - pw], 2),
-            (grid[pi + pw], 3),
-        ] {
-            cand[n] = a;
-            dirs[n] = d;
-            n += usize::from(a != NONE);
-        }
+        let (cand, dirs, n) = synthesised_neighbours(grid, pi, pw);
         let addr = if n == 0 {
             ctx.random_address(rng)
         } else {
@@ -355,6 +432,137 @@ fn run<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
                 b
             } else {
                 ctx.forced::<TOROIDAL>(a, dir, rng)
+            }
+        };
+        grid[pi] = addr;
+    }
+}
+
+/// Exemplar colours (RGB, grey repeated) by packed address.
+fn packed_colours(exemplar: &Image, shift: u32) -> Vec<[f32; 3]> {
+    let (w, h, c) = (
+        exemplar.width as usize,
+        exemplar.height as usize,
+        exemplar.channels as usize,
+    );
+    let mut out = vec![[0.0f32; 3]; h << shift];
+    for y in 0..h {
+        for x in 0..w {
+            let p = &exemplar.data[(y * w + x) * c..(y * w + x) * c + c];
+            out[(y << shift) | x] = if c >= 3 {
+                [p[0], p[1], p[2]]
+            } else {
+                [p[0]; 3]
+            };
+        }
+    }
+    out
+}
+
+/// The loop of [`PixelChoice::Matched`]: as [`run`], but among the
+/// candidates of a pixel (the drawn neighbour's jump destinations when the
+/// draw says jump, else every synthesised neighbour's continuation) the one
+/// whose exemplar window best matches the synthesised pixels around.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn run_matched<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
+    order: I,
+    grid: &mut [u32],
+    pw: usize,
+    ph: usize,
+    ctx: &Ctx,
+    colours: &[[f32; 3]],
+    rng: &mut Pcg64Mcg,
+    progress: &Progress,
+) {
+    let k = ctx.table.k;
+    let mut done = 0u64;
+    let mut options: Vec<u32> = Vec::with_capacity(2 * k + 4);
+    let (ew, eh) = (i64::from(ctx.w), i64::from(ctx.h));
+    let shift = ctx.table.shift;
+    let error = |grid: &[u32], pi: usize, a: u32| -> f32 {
+        let (ax, ay) = (i64::from(a & ctx.mask), i64::from(a >> shift));
+        let (px, py) = ((pi % pw) as i64, (pi / pw) as i64);
+        let mut e = 0.0f32;
+        for dy in -MATCH_RADIUS..=MATCH_RADIUS {
+            let qy = py + dy;
+            if qy < 0 || qy >= ph as i64 {
+                continue;
+            }
+            for dx in -MATCH_RADIUS..=MATCH_RADIUS {
+                let qx = px + dx;
+                if (dx == 0 && dy == 0) || qx < 0 || qx >= pw as i64 {
+                    continue;
+                }
+                let q = grid[qy as usize * pw + qx as usize];
+                if q == NONE {
+                    continue;
+                }
+                let (mut sx, mut sy) = (ax + dx, ay + dy);
+                if TOROIDAL {
+                    sx = sx.rem_euclid(ew);
+                    sy = sy.rem_euclid(eh);
+                } else if sx < 0 || sy < 0 || sx >= ew || sy >= eh {
+                    continue;
+                }
+                let s = colours[((sy as usize) << shift) | sx as usize];
+                let o = colours[q as usize];
+                e += (s[0] - o[0]).powi(2) + (s[1] - o[1]).powi(2) + (s[2] - o[2]).powi(2);
+            }
+        }
+        e
+    };
+    for (x, y) in order {
+        done += 1;
+        if done.is_multiple_of(PROGRESS_PIXELS) {
+            progress.inc(PROGRESS_PIXELS);
+        }
+        let pi = (y as usize + 1) * pw + x as usize + 1;
+        let (cand, dirs, n) = synthesised_neighbours(grid, pi, pw);
+        let addr = if n == 0 {
+            ctx.random_address(rng)
+        } else {
+            let r = rng.next_u64();
+            let c = (((r >> 32) * n as u64) >> 32) as usize;
+            let (a, dir) = (cand[c], dirs[c]);
+            let u = r as u32;
+            let e = ctx.table.entry(a);
+            let jumps = (0..k).any(|j| u < e[2 * j]);
+            options.clear();
+            if jumps {
+                for j in 0..k {
+                    if e[2 * j] > 0 {
+                        let b = ctx.step::<TOROIDAL>(e[2 * j + 1], dir);
+                        if b != NONE {
+                            options.push(b);
+                        }
+                    }
+                }
+            } else {
+                for i in 0..n {
+                    let b = ctx.step::<TOROIDAL>(cand[i], dirs[i]);
+                    if b != NONE {
+                        options.push(b);
+                    }
+                }
+            }
+            options.sort_unstable();
+            options.dedup();
+            match options.len() {
+                0 => ctx.forced::<TOROIDAL>(a, dir, rng),
+                1 => options[0],
+                _ => {
+                    let mut best = options[0];
+                    let mut least = f32::INFINITY;
+                    for &o in &options {
+                        let err = error(grid, pi, o);
+                        if err < least {
+                            least = err;
+                            best = o;
+                        }
+                    }
+                    best
+                }
             }
         };
         grid[pi] = addr;
@@ -392,19 +600,7 @@ pub fn synthesize_sources_with_progress(
     )
     .entered();
     let (w, h) = (settings.width, settings.height);
-    let table = JumpTable::new(
-        map,
-        base_range(map.sources(), settings.patch_fraction),
-        settings.boundary_fraction,
-    );
-    let ctx = Ctx {
-        map,
-        mask: (1u32 << table.shift) - 1,
-        table,
-        w: map.width(),
-        h: map.height(),
-        region: map.sources(),
-    };
+    let ctx = context(map, settings);
     let pw = w as usize + 2;
     let mut grid = vec![NONE; pw * (h as usize + 2)];
     let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
@@ -429,21 +625,7 @@ pub fn synthesize_sources_with_progress(
         (o, true) => run::<true, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng, progress),
         (o, false) => run::<false, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng, progress),
     }
-    let mut texels = Vec::with_capacity(w as usize * h as usize);
-    for row in grid.chunks_exact(pw).skip(1).take(h as usize) {
-        texels.extend(
-            row[1..=w as usize]
-                .iter()
-                .map(|&a| TexelCoord::new(a & ctx.mask, a >> ctx.table.shift)),
-        );
-    }
-    Ok(SourceMap {
-        width: w,
-        height: h,
-        exemplar_width: map.width(),
-        exemplar_height: map.height(),
-        texels,
-    })
+    Ok(source_map(&grid, pw, w, h, &ctx))
 }
 
 /// Pixel-based synthesis (§5): the source map from [`synthesize_sources`] and
@@ -479,7 +661,44 @@ pub fn synthesize_pixels_with_progress(
             height: exemplar.height,
         });
     }
-    let sources = synthesize_sources_with_progress(map, settings, progress)?;
+    let sources = match settings.choice {
+        PixelChoice::Random => synthesize_sources_with_progress(map, settings, progress)?,
+        PixelChoice::Matched => matched_sources(exemplar, map, settings, progress)?,
+    };
     let image = sources.gather(exemplar)?;
     Ok(SynthesisOutput { image, sources })
+}
+
+/// The source map of [`PixelChoice::Matched`].
+fn matched_sources(
+    exemplar: &Image,
+    map: &JumpMap,
+    settings: &PixelSynthesisSettings,
+    progress: &Progress,
+) -> Result<SourceMap, JumpMapError> {
+    settings.validate()?;
+    progress.set_length(u64::from(settings.width) * u64::from(settings.height));
+    let _span = tracing::info_span!(
+        "jump_map_synthesize_pixels_matched",
+        w = settings.width,
+        h = settings.height
+    )
+    .entered();
+    let (w, h) = (settings.width, settings.height);
+    let ctx = context(map, settings);
+    let colours = packed_colours(exemplar, ctx.table.shift);
+    let (pw, ph) = (w as usize + 2, h as usize + 2);
+    let mut grid = vec![NONE; pw * ph];
+    let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
+    let toroidal = map.boundary() == Boundary::Toroidal;
+    let order: Box<dyn Iterator<Item = (u32, u32)>> = match settings.order {
+        PixelOrder::Hilbert => Box::new(HilbertIter::new(w, h)),
+        o => Box::new(o.iter(w, h)),
+    };
+    if toroidal {
+        run_matched::<true, _>(order, &mut grid, pw, ph, &ctx, &colours, &mut rng, progress);
+    } else {
+        run_matched::<false, _>(order, &mut grid, pw, ph, &ctx, &colours, &mut rng, progress);
+    }
+    Ok(source_map(&grid, pw, w, h, &ctx))
 }

@@ -8,9 +8,9 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::jump_map::{
-    ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelOrder,
-    PixelSynthesisSettings, synthesize_controlled_with_progress, synthesize_patches_with_progress,
-    synthesize_pixels_with_progress,
+    ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelChoice,
+    PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
+    synthesize_patches_with_progress, synthesize_pixels_with_progress,
 };
 use crate::kernels::metrics::{EnergySettings, image_texture_energy};
 use crate::pipeline::{Datum, Stage, StageCtx};
@@ -39,6 +39,8 @@ pub struct JumpImageSettings {
     pub patch_side: f32,
     /// How the patch method's patches meet: `cut` or `straight`.
     pub seams: String,
+    /// How the pixel method picks a source: `matched` or `random`.
+    pub choice: String,
     /// Boundary-avoidance band.
     pub boundary_fraction: f32,
     /// Control field of the controlled method.
@@ -61,6 +63,7 @@ impl Default for JumpImageSettings {
             patch_fraction: 0.5,
             patch_side: 0.3,
             seams: "cut".into(),
+            choice: "random".into(),
             boundary_fraction: 0.2,
             field: "perspective".into(),
             field_scale: [1.0, 0.25],
@@ -113,6 +116,12 @@ impl StageSettings for JumpImageSettings {
             unit: "",
             range: ParamRange::OneOf(&["cut", "straight"]),
             doc: "patch: cut = patches overlap a sixth of their side, are chosen among the jump map's suggestions by their overlap error and meet along its minimum-error path (image quilting, an extension); straight = edge to edge as in §7.1",
+        },
+        ParamDoc {
+            name: "choice",
+            unit: "",
+            range: ParamRange::OneOf(&["matched", "random"]),
+            doc: "pixel: random = a random neighbour and a jump by weight (§5.1, the default); matched = the paper's draw decides whether a pixel jumps, and the jump destination or neighbour continuation whose 5x5 exemplar window best matches the synthesised pixels around wins (an extension: lower coherence error, but larger verbatim copies)",
         },
         ParamDoc {
             name: "boundary_fraction",
@@ -287,6 +296,11 @@ impl Stage for JumpImage {
                         patch_fraction: settings.patch_fraction,
                         boundary_fraction: settings.boundary_fraction,
                         seed: s,
+                        choice: if settings.choice == "matched" {
+                            PixelChoice::Matched
+                        } else {
+                            PixelChoice::Random
+                        },
                     },
                     &progress,
                 )
