@@ -17,6 +17,8 @@
 //! folders of the methods are kept in `target/quality/runs/`.
 //!
 //! Environment knobs:
+//! - `QUALITY_TEXTURE_DIR=FOLDER`: where the textures are (every `*.png`
+//!   there); default `../shared/data/textures/`.
 //! - `QUALITY_TEXTURES=stones,water`: textures to run, by file stem; default
 //!   every `*.png` in `../shared/data/textures/` (listed at run time, so a new
 //!   texture is picked up).
@@ -157,7 +159,11 @@ fn list_env(name: &str) -> Option<Vec<String>> {
 }
 
 fn knobs(manifest: &Path) -> Result<Knobs, String> {
-    let dir = manifest.join("../shared/data/textures");
+    // QUALITY_TEXTURE_DIR=FOLDER: the PNGs of another folder (textures the
+    // project never tuned on); default the shared photos.
+    let dir = std::env::var_os("QUALITY_TEXTURE_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| manifest.join("../shared/data/textures"));
     let mut all: Vec<(String, PathBuf)> = std::fs::read_dir(&dir)
         .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
         .flatten()
