@@ -80,8 +80,8 @@ pub enum PatchSeams {
 /// 2001 use a sixth).
 pub const OVERLAP_DIVISOR: u32 = 6;
 
-/// Candidates within this fraction above the least overlap error are drawn
-/// from (Efros & Freeman 2001 use 0.1).
+/// Candidates within this fraction above the least overlap error are
+/// acceptable (Efros & Freeman 2001 draw among those, with 0.1).
 pub const CUT_TOLERANCE: f64 = 0.1;
 
 /// Uniformly random valid centres added to the jump map's candidates of
