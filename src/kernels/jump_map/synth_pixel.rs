@@ -464,18 +464,17 @@ fn packed_colours(exemplar: &Image, shift: u32) -> Vec<[f32; 3]> {
 /// draw says jump, else every synthesised neighbour's continuation) the one
 /// whose exemplar window best matches the synthesised pixels around.
 #[inline(never)]
-#[allow(clippy::too_many_arguments)]
 fn run_matched<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
     order: I,
     grid: &mut [u32],
     pw: usize,
-    ph: usize,
     ctx: &Ctx,
     colours: &[[f32; 3]],
     rng: &mut Pcg64Mcg,
     progress: &Progress,
 ) {
     let k = ctx.table.k;
+    let ph = grid.len() / pw;
     let mut done = 0u64;
     let mut options: Vec<u32> = Vec::with_capacity(2 * k + 4);
     let (ew, eh) = (i64::from(ctx.w), i64::from(ctx.h));
@@ -591,41 +590,76 @@ pub fn synthesize_sources_with_progress(
     settings: &PixelSynthesisSettings,
     progress: &Progress,
 ) -> Result<SourceMap, JumpMapError> {
+    pixel_sources(map, settings, None, progress)
+}
+
+/// The source map of [`PixelChoice::Random`] (no `exemplar`) or, with the
+/// exemplar whose colours the candidates are compared in, of
+/// [`PixelChoice::Matched`].
+fn pixel_sources(
+    map: &JumpMap,
+    settings: &PixelSynthesisSettings,
+    exemplar: Option<&Image>,
+    progress: &Progress,
+) -> Result<SourceMap, JumpMapError> {
     settings.validate()?;
     progress.set_length(u64::from(settings.width) * u64::from(settings.height));
     let _span = tracing::info_span!(
         "jump_map_synthesize_pixels",
         w = settings.width,
-        h = settings.height
+        h = settings.height,
+        matched = exemplar.is_some()
     )
     .entered();
     let (w, h) = (settings.width, settings.height);
     let ctx = context(map, settings);
+    let colours = exemplar.map(|ex| packed_colours(ex, ctx.table.shift));
     let pw = w as usize + 2;
     let mut grid = vec![NONE; pw * (h as usize + 2)];
     let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
     let toroidal = map.boundary() == Boundary::Toroidal;
-    match (settings.order, toroidal) {
-        (PixelOrder::Hilbert, true) => run::<true, _>(
-            HilbertIter::new(w, h),
-            &mut grid,
-            pw,
-            &ctx,
-            &mut rng,
-            progress,
-        ),
-        (PixelOrder::Hilbert, false) => run::<false, _>(
-            HilbertIter::new(w, h),
-            &mut grid,
-            pw,
-            &ctx,
-            &mut rng,
-            progress,
-        ),
-        (o, true) => run::<true, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng, progress),
-        (o, false) => run::<false, _>(o.iter(w, h), &mut grid, pw, &ctx, &mut rng, progress),
+    let mut loop_ = Loop {
+        grid: &mut grid,
+        pw,
+        ctx: &ctx,
+        colours: colours.as_deref(),
+        rng: &mut rng,
+        progress,
+    };
+    match settings.order {
+        PixelOrder::Hilbert => loop_.run(HilbertIter::new(w, h), toroidal),
+        o => loop_.run(o.iter(w, h), toroidal),
     }
     Ok(source_map(&grid, pw, w, h, &ctx))
+}
+
+/// What the synthesis loops share, to run one over an order.
+struct Loop<'a> {
+    grid: &'a mut [u32],
+    pw: usize,
+    ctx: &'a Ctx<'a>,
+    colours: Option<&'a [[f32; 3]]>,
+    rng: &'a mut Pcg64Mcg,
+    progress: &'a Progress,
+}
+
+impl Loop<'_> {
+    /// [`run`] or, with colours, [`run_matched`], specialised on `toroidal`.
+    fn run<I: Iterator<Item = (u32, u32)>>(&mut self, order: I, toroidal: bool) {
+        let (grid, pw, ctx, rng, progress) = (
+            &mut *self.grid,
+            self.pw,
+            self.ctx,
+            &mut *self.rng,
+            self.progress,
+        );
+        match (self.colours, toroidal) {
+            (None, true) => run::<true, _>(order, grid, pw, ctx, rng, progress),
+            (None, false) => run::<false, _>(order, grid, pw, ctx, rng, progress),
+            (Some(c), true) => run_matched::<true, _>(order, grid, pw, ctx, c, rng, progress),
+            (Some(c), false) => run_matched::<false, _>(order, grid, pw, ctx, c, rng, progress),
+        }
+    }
 }
 
 /// Pixel-based synthesis (§5): the source map from [`synthesize_sources`] and
@@ -663,42 +697,8 @@ pub fn synthesize_pixels_with_progress(
     }
     let sources = match settings.choice {
         PixelChoice::Random => synthesize_sources_with_progress(map, settings, progress)?,
-        PixelChoice::Matched => matched_sources(exemplar, map, settings, progress)?,
+        PixelChoice::Matched => pixel_sources(map, settings, Some(exemplar), progress)?,
     };
     let image = sources.gather(exemplar)?;
     Ok(SynthesisOutput { image, sources })
-}
-
-/// The source map of [`PixelChoice::Matched`].
-fn matched_sources(
-    exemplar: &Image,
-    map: &JumpMap,
-    settings: &PixelSynthesisSettings,
-    progress: &Progress,
-) -> Result<SourceMap, JumpMapError> {
-    settings.validate()?;
-    progress.set_length(u64::from(settings.width) * u64::from(settings.height));
-    let _span = tracing::info_span!(
-        "jump_map_synthesize_pixels_matched",
-        w = settings.width,
-        h = settings.height
-    )
-    .entered();
-    let (w, h) = (settings.width, settings.height);
-    let ctx = context(map, settings);
-    let colours = packed_colours(exemplar, ctx.table.shift);
-    let (pw, ph) = (w as usize + 2, h as usize + 2);
-    let mut grid = vec![NONE; pw * ph];
-    let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
-    let toroidal = map.boundary() == Boundary::Toroidal;
-    let order: Box<dyn Iterator<Item = (u32, u32)>> = match settings.order {
-        PixelOrder::Hilbert => Box::new(HilbertIter::new(w, h)),
-        o => Box::new(o.iter(w, h)),
-    };
-    if toroidal {
-        run_matched::<true, _>(order, &mut grid, pw, ph, &ctx, &colours, &mut rng, progress);
-    } else {
-        run_matched::<false, _>(order, &mut grid, pw, ph, &ctx, &colours, &mut rng, progress);
-    }
-    Ok(source_map(&grid, pw, w, h, &ctx))
 }
