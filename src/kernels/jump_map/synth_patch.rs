@@ -165,6 +165,32 @@ impl Centres {
         }
     }
 
+    /// The exemplar address `(dx, dy)` from `centre` (wrapped when
+    /// toroidal; inside the source region for a valid centre otherwise).
+    fn address(&self, centre: (i64, i64), dx: i64, dy: i64) -> (i64, i64) {
+        let (x, y) = (centre.0 + dx, centre.1 + dy);
+        if self.toroidal {
+            (x.rem_euclid(self.size.0), y.rem_euclid(self.size.1))
+        } else {
+            (x, y)
+        }
+    }
+
+    /// The source map of a filled `grid` of `settings`' size.
+    fn source_map(
+        &self,
+        settings: &PatchSynthesisSettings,
+        grid: Vec<Option<TexelCoord>>,
+    ) -> SourceMap {
+        SourceMap {
+            width: settings.width,
+            height: settings.height,
+            exemplar_width: self.size.0 as u32,
+            exemplar_height: self.size.1 as u32,
+            texels: grid.into_iter().map(|t| t.unwrap_or_default()).collect(),
+        }
+    }
+
     /// A uniformly random valid centre.
     fn random(&self, rng: &mut Pcg64Mcg) -> (i64, i64) {
         if self.toroidal {
@@ -223,10 +249,6 @@ pub fn synthesize_patch_sources_with_progress(
     let (w, h) = (settings.width, settings.height);
     let p = settings.patch_side(map);
     let centres = Centres::of(map, p);
-    let toroidal = centres.toroidal;
-    let (ew, eh) = centres.size;
-    // Maps a proposed centre address to a valid one, or None.
-    let valid = |x: i64, y: i64| centres.valid(x, y);
     let mut grid: Vec<Option<TexelCoord>> = vec![None; w as usize * h as usize];
     let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
     let mut table: Vec<((i64, i64), f64)> = Vec::new();
@@ -259,12 +281,12 @@ pub fn synthesize_patch_sources_with_progress(
             };
             let (ox, oy) = (cx - qx as i64, cy - qy as i64);
             for j in map.jumps_at(a.x, a.y) {
-                if let Some(c) = valid(j.to.x as i64 + ox, j.to.y as i64 + oy) {
+                if let Some(c) = centres.valid(j.to.x as i64 + ox, j.to.y as i64 + oy) {
                     table.push((c, j.weight as f64));
                 }
             }
             if continuation.is_none() {
-                continuation = valid(a.x as i64 + ox, a.y as i64 + oy);
+                continuation = centres.valid(a.x as i64 + ox, a.y as i64 + oy);
             }
         }
         let total: f64 = table.iter().map(|e| e.1).sum();
@@ -287,23 +309,12 @@ pub fn synthesize_patch_sources_with_progress(
         };
         for y in y0..y1 {
             for x in x0..x1 {
-                let mut ax = centre.0 + x as i64 - cx;
-                let mut ay = centre.1 + y as i64 - cy;
-                if toroidal {
-                    ax = ax.rem_euclid(ew);
-                    ay = ay.rem_euclid(eh);
-                }
+                let (ax, ay) = centres.address(centre, x as i64 - cx, y as i64 - cy);
                 grid[(y * w + x) as usize] = Some(TexelCoord::new(ax as u32, ay as u32));
             }
         }
     }
-    Ok(SourceMap {
-        width: w,
-        height: h,
-        exemplar_width: map.width(),
-        exemplar_height: map.height(),
-        texels: grid.into_iter().map(|t| t.unwrap_or_default()).collect(),
-    })
+    Ok(centres.source_map(settings, grid))
 }
 
 /// Patch-based synthesis (§7.1): the source map from
@@ -372,19 +383,16 @@ fn quilt_sources(
     let centres = Centres::of(map, p as u32);
     let toroidal = centres.toroidal;
     let (ew, eh) = centres.size;
-    let valid = |x: i64, y: i64| centres.valid(x, y);
     let ch = exemplar.channels as usize;
-    let colour = |x: i64, y: i64| -> &[f32] {
+    let colour = |(x, y): (i64, i64)| -> &[f32] {
         let i = (y as usize * exemplar.width as usize + x as usize) * ch;
         &exemplar.data[i..i + ch]
     };
-    let address = |centre: (i64, i64), dx: i64, dy: i64| -> (i64, i64) {
-        let (x, y) = (centre.0 + dx, centre.1 + dy);
-        if toroidal {
-            (x.rem_euclid(ew), y.rem_euclid(eh))
-        } else {
-            (x, y)
-        }
+    // Squared colour difference between what output pixel `q` holds and
+    // what a patch centred at `c` would put there.
+    let change = |(qx, qy): (usize, usize), a: TexelCoord, c: (i64, i64), (cx, cy): (i64, i64)| {
+        let new = colour(centres.address(c, qx as i64 - cx, qy as i64 - cy));
+        squared_difference(colour((a.x as i64, a.y as i64)), new)
     };
     let mut grid: Vec<Option<TexelCoord>> = vec![None; w * h];
     let mut rng = Pcg64Mcg::seed_from_u64(settings.seed);
@@ -433,9 +441,9 @@ fn quilt_sources(
             for &(qx, qy) in overlap.iter().step_by(2) {
                 let a = grid[qy * w + qx].expect("overlap pixels are set");
                 let (ox, oy) = (cx - qx as i64, cy - qy as i64);
-                continuations.push(address((a.x as i64, a.y as i64), ox, oy));
+                continuations.push(centres.address((a.x as i64, a.y as i64), ox, oy));
                 for j in map.jumps_at(a.x, a.y) {
-                    if let Some(c) = valid(j.to.x as i64 + ox, j.to.y as i64 + oy) {
+                    if let Some(c) = centres.valid(j.to.x as i64 + ox, j.to.y as i64 + oy) {
                         candidates.push(c);
                     }
                 }
@@ -454,18 +462,13 @@ fn quilt_sources(
             // between what is there and what the candidate would put there.
             errors.clear();
             errors.extend(candidates.iter().map(|&c| {
-                let mut e = 0.0f64;
-                for &(qx, qy) in &overlap {
-                    let a = grid[qy * w + qx].expect("overlap pixels are set");
-                    let (nx, ny) = address(c, qx as i64 - cx, qy as i64 - cy);
-                    let (old, new) = (colour(a.x as i64, a.y as i64), colour(nx, ny));
-                    e += old
-                        .iter()
-                        .zip(new)
-                        .map(|(u, v)| f64::from(u - v).powi(2))
-                        .sum::<f64>();
-                }
-                e
+                overlap
+                    .iter()
+                    .map(|&q| {
+                        let a = grid[q.1 * w + q.0].expect("overlap pixels are set");
+                        change(q, a, c, (cx, cy))
+                    })
+                    .sum::<f64>()
             }));
             let best = errors.iter().copied().fold(f64::INFINITY, f64::min);
             // Acceptable: within CUT_TOLERANCE of the best, or no more
@@ -502,13 +505,7 @@ fn quilt_sources(
             cost.resize(bw * bh, 0.0);
             for &(qx, qy) in &overlap {
                 let a = grid[qy * w + qx].expect("overlap pixels are set");
-                let (nx, ny) = address(centre, qx as i64 - cx, qy as i64 - cy);
-                let (old, new) = (colour(a.x as i64, a.y as i64), colour(nx, ny));
-                cost[(qy - y0) * bw + (qx - x0)] = old
-                    .iter()
-                    .zip(new)
-                    .map(|(u, v)| f64::from(u - v).powi(2))
-                    .sum();
+                cost[(qy - y0) * bw + (qx - x0)] = change((qx, qy), a, centre, (cx, cy));
             }
             new_side.clear();
             new_side.resize(bw * bh, true);
@@ -538,7 +535,7 @@ fn quilt_sources(
                 for x in x0..x1 {
                     let g = &mut grid[y * w + x];
                     if g.is_none() || new_side[(y - y0) * bw + (x - x0)] {
-                        let (ax, ay) = address(centre, x as i64 - cx, y as i64 - cy);
+                        let (ax, ay) = centres.address(centre, x as i64 - cx, y as i64 - cy);
                         *g = Some(TexelCoord::new(ax as u32, ay as u32));
                         usage[ay as usize * ew as usize + ax as usize] += 1;
                     }
@@ -546,13 +543,13 @@ fn quilt_sources(
             }
         }
     }
-    Ok(SourceMap {
-        width: settings.width,
-        height: settings.height,
-        exemplar_width: map.width(),
-        exemplar_height: map.height(),
-        texels: grid.into_iter().map(|t| t.unwrap_or_default()).collect(),
-    })
+    Ok(centres.source_map(settings, grid))
+}
+
+/// Sum of squared differences of two colours.
+#[inline]
+fn squared_difference(a: &[f32], b: &[f32]) -> f64 {
+    a.iter().zip(b).map(|(u, v)| f64::from(u - v).powi(2)).sum()
 }
 
 /// Mean squared colour difference between horizontally and vertically
@@ -561,21 +558,15 @@ fn quilt_sources(
 fn neighbour_step_error(ex: &Image) -> f64 {
     let (w, h, c) = (ex.width as usize, ex.height as usize, ex.channels as usize);
     let px = |x: usize, y: usize| &ex.data[(y * w + x) * c..(y * w + x + 1) * c];
-    let d = |a: &[f32], b: &[f32]| {
-        a.iter()
-            .zip(b)
-            .map(|(u, v)| f64::from(u - v).powi(2))
-            .sum::<f64>()
-    };
     let (mut sum, mut n) = (0.0f64, 0usize);
     for y in 0..h {
         for x in 0..w {
             if x + 1 < w {
-                sum += d(px(x, y), px(x + 1, y));
+                sum += squared_difference(px(x, y), px(x + 1, y));
                 n += 1;
             }
             if y + 1 < h {
-                sum += d(px(x, y), px(x, y + 1));
+                sum += squared_difference(px(x, y), px(x, y + 1));
                 n += 1;
             }
         }
