@@ -38,9 +38,8 @@ pub(crate) enum FanTriangles {
 
 impl FanTriangles {
     pub fn of(mesh: &PolyMesh) -> Self {
-        let fc = mesh.face_count();
-        if (0..fc).all(|f| mesh.face_corners(f).len() == 3) {
-            Self::Faces(fc)
+        if mesh.is_triangle_mesh() {
+            Self::Faces(mesh.face_count())
         } else {
             let (tris, face_of) = mesh.triangulate_corners();
             Self::Fans { tris, face_of }

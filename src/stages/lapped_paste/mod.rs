@@ -353,7 +353,9 @@ pub fn auto_patches(
         let p = f64::from(pixels.max(1));
         let a = (SPLOTCH_FILL * p * p / (f64::from(w) * f64::from(h))).min(0.999);
         let need = (1.0 - AUTO_PATCH_COVER).ln() / (1.0 - a).ln();
-        (need.ceil().min(f64::from(AUTO_PATCHES_MAX)) as u32).clamp(1, AUTO_PATCHES_MAX)
+        // A float-to-int cast saturates (an infinite `need` for a tiny
+        // patch becomes u32::MAX before the clamp).
+        (need.ceil() as u32).clamp(1, AUTO_PATCHES_MAX)
     };
     (pixels, patches)
 }
