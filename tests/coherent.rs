@@ -10,7 +10,7 @@ use glam::{Vec2, Vec3};
 use surfsynth::image::sample::Wrap;
 use surfsynth::image::{Image, load_image};
 use surfsynth::kernels::coherent::{
-    CoherentLevel, CoherentSettings, coherent_synthesis, pixel_centres,
+    CoherentLevel, CoherentSettings, coherent_refine, coherent_synthesis, pixel_centres,
 };
 use surfsynth::kernels::frames::TangentFrame;
 use surfsynth::kernels::wl_match::SynthesisLevel;
@@ -296,19 +296,22 @@ fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
 
 /// Composability across papers: `coherent` with `start = "sources"` refines
 /// a jump-map result (`configs/plane/jump_surface_coherent.toml` = the
-/// `jump_surface` planar config plus the refinement). On the configs' 256²
+/// `jump_surface` planar config, without its own seam refinement, plus the
+/// refinement). On the configs' 256²
 /// plane (at 128², as large as the exemplar, completeness is the same for
 /// both: there is no room to use more of the exemplar), the refined result has lower coherence error (mean and p90) and better
 /// completeness than the jump-map result alone, for stones and brick.
 #[test]
 fn refining_a_jump_map_result_lowers_its_errors() {
     let tmp = tempfile::tempdir().expect("a temporary folder");
-    let quality = |config: &str, texture: &str| {
+    let quality = |config: &str, texture: &str, extra: &[&str]| {
         let exemplar = common::shared(&format!("textures/{texture}.png"));
         let set = format!("input.exemplar={}", exemplar.display());
+        let mut args = vec!["--set", &set, "--set", "seed=1"];
+        args.extend_from_slice(extra);
         let m = run_config(
             &format!("plane/{config}.toml"),
-            &["--set", &set, "--set", "seed=1"],
+            &args,
             &tmp.path().join(format!("{config}_{texture}")),
         );
         let q = &m["result"]["quality"]["plane"];
@@ -316,8 +319,10 @@ fn refining_a_jump_map_result_lowers_its_errors() {
         (f("coherence_mean"), f("coherence_p90"), f("completeness"))
     };
     for texture in ["stones", "brick"] {
-        let jump = quality("jump_surface", texture);
-        let refined = quality("jump_surface_coherent", texture);
+        // The jump-map result the composed config refines: its own seam
+        // refinement off, as in jump_surface_coherent.toml.
+        let jump = quality("jump_surface", texture, &["--set", "stage.3.refine=none"]);
+        let refined = quality("jump_surface_coherent", texture, &[]);
         eprintln!(
             "{texture}: jump_surface {jump:?} vs refined {refined:?} (coherence mean, p90, completeness)"
         );
@@ -396,4 +401,98 @@ fn coherent_metrics(m: &serde_json::Value) -> &serde_json::Value {
         .iter()
         .find(|s| s["kind"] == "coherent")
         .expect("a coherent stage")["metrics"]
+}
+
+/// `coherent_refine` (the seam refinement of `jump_surface`): on a 48²
+/// plane copied from two places of the exemplar with a straight seam down
+/// the middle, a mask of the four columns at the seam. Vertices outside the
+/// mask keep their coordinates exactly; the masked ones only take a
+/// neighbour's patch (k = 0), so every coordinate is one of the two
+/// patches'; the neighbourhood energy falls; the result is the same at 1
+/// and 2 threads.
+#[test]
+fn masked_refinement_moves_only_the_masked_vertices_and_lowers_the_energy() {
+    const SIDE: usize = 48;
+    let mesh = &plane_pyramid(SIDE as u32)[0];
+    let frames = frames_up_y(mesh);
+    let exemplar = texture("stones");
+    // Each vertex's column and row, from its position (x right, y up).
+    let min = mesh
+        .positions
+        .iter()
+        .fold(Vec3::splat(f32::INFINITY), |a, p| a.min(*p));
+    let max = mesh
+        .positions
+        .iter()
+        .fold(Vec3::splat(f32::NEG_INFINITY), |a, p| a.max(*p));
+    let grid = |p: Vec3| {
+        (
+            (p.x - min.x).round() as usize,
+            (max.y - p.y).round() as usize,
+        )
+    };
+    let (left, right) = (Vec2::new(10.5, 20.5), Vec2::new(70.5, 60.5));
+    let start: Vec<Vec2> = mesh
+        .positions
+        .iter()
+        .map(|&p| {
+            let (x, y) = grid(p);
+            let origin = if x < SIDE / 2 { left } else { right };
+            origin + Vec2::new(x as f32, y as f32)
+        })
+        .collect();
+    let mask: Vec<bool> = mesh
+        .positions
+        .iter()
+        .map(|&p| (SIDE / 2 - 2..SIDE / 2 + 2).contains(&grid(p).0))
+        .collect();
+    let settings = CoherentSettings {
+        k: 0,
+        seed: 3,
+        wrap: Wrap::Clamp,
+        ..Default::default()
+    };
+    let level = SynthesisLevel {
+        mesh,
+        frames: &frames,
+    };
+    let run = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| {
+                coherent_refine(
+                    &level,
+                    &exemplar,
+                    &settings,
+                    &start,
+                    &mask,
+                    &Progress::hidden(),
+                )
+                .expect("refinement runs")
+            })
+    };
+    let r = run(1);
+    assert_eq!(r.coords, run(2).coords, "1 and 2 threads");
+    let mut moved = 0;
+    for (v, (&c, &s0)) in r.coords.iter().zip(&start).enumerate() {
+        if !mask[v] {
+            assert_eq!(c, s0, "vertex {v} outside the mask moved");
+            continue;
+        }
+        moved += usize::from(c != s0);
+        let (x, y) = grid(mesh.positions[v]);
+        let from = c - Vec2::new(x as f32, y as f32);
+        assert!(
+            from == left || from == right,
+            "vertex {v} left both patches: {c}"
+        );
+    }
+    let e = &r.report.energy;
+    eprintln!(
+        "moved {moved}, energy {e:?}, visited {:?}",
+        r.report.visited
+    );
+    assert!(moved > 0 && e[e.len() - 1] < e[0], "energy {e:?}");
 }

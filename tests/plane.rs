@@ -341,9 +341,12 @@ fn run_at_benchmark_size(method: &str, texture: &str, dir: &Path) -> PathBuf {
 /// verbatim-copy metric of `kernels::metrics::quality`, whose unit tests
 /// show it counting a tiled block 4 times). At the benchmark's size (256²
 /// from the 128² shared photos), where four copies of the exemplar would
-/// fit. Measured: 2 on every shared texture, with the largest copied
-/// region 79–82 % of the exemplar (mean 37–39 %): the result is still
-/// near-whole copies of the exemplar side by side (issue 13, open).
+/// fit. Measured: 0 on every shared texture (largest copied region about
+/// 3 000 px, under a fifth of the exemplar), because a patch stops copying
+/// at a quarter of the exemplar (`max_patch_area`). With the paper's
+/// unbounded patches the count was 2 at this seed and 4–5 at others
+/// (seed 5: brick 4, grass 5, stones 5), with copied regions of 79 % of
+/// the exemplar: near-whole copies side by side.
 #[test]
 fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
     let dir = tempfile::tempdir().unwrap();
@@ -365,6 +368,73 @@ fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
             "{texture}: a verbatim region larger than a third of the exemplar is repeated {repeats} times"
         );
     }
+}
+
+/// `jump_surface` on the planar benchmark (256² from the 128² shared
+/// photos, `configs/plane/jump_surface.toml` with the stage's defaults:
+/// pixel-aligned starts, patches capped at a quarter of the exemplar, the
+/// matched choice and the seam refinement) against the peer, on the parts
+/// of issue 13's gate ([`common::gates::ISSUE_13`]) it meets on every
+/// texture: completeness ≤ the peer's, sharpness ≥ 0.9, structure ≤ the
+/// peer's + 0.05, histogram, and no verbatim region larger than a third of
+/// the exemplar repeated more than twice. Against the paper's behaviour
+/// (the four options off, same seed, same measure) the coherence mean must
+/// fall on every texture. Coherence mean and p90 against the peer are
+/// printed, not gated (issue 13 open): measured 0.66–1.30 × and 0.81–1.07 ×
+/// here (brick mean 1.30 ×, water p90 1.07 ×); with the paper's behaviour
+/// 1.19–1.62 × and 0.80–1.64 ×, and sharpness 0.87–0.89 on grass, planks
+/// and water (every patch resampled at its start's sub-pixel phase).
+#[test]
+fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_other_gates() {
+    let gate = common::gates::Gate {
+        coherence_mean: f32::INFINITY,
+        coherence_p90: f32::INFINITY,
+        ..common::gates::ISSUE_13
+    };
+    let results = planar_results_without_large_repeats("jump_surface");
+    let dir = tempfile::tempdir().unwrap();
+    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/jump_surface.toml");
+    for (texture, ours, peer) in &results {
+        let out = dir.path().join(texture);
+        let exemplar = shared(&format!("textures/{texture}.png"));
+        let set = format!("input.exemplar={}", exemplar.display());
+        let mut args = vec![
+            "run",
+            config.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        args.extend(["--set", &set, "-q"]);
+        for paper in [
+            "stage.3.choice=random",
+            "stage.3.refine=none",
+            "stage.3.max_patch_area=0",
+            "stage.3.pixel_aligned=false",
+        ] {
+            args.extend(["--set", paper]);
+        }
+        let (code, _, stderr) = run_cli(&args);
+        assert_eq!(code, 0, "paper's jump_surface on {texture}: {stderr}");
+        let ex = surfsynth::image::load_image(&exemplar).unwrap();
+        let (img, sources) = common::gates::plane_result(&out);
+        let paper = common::gates::quality_of(&img, Some(&sources), &ex);
+        println!(
+            "jump_surface on {texture}: coherence mean {:.6} (paper's {:.6}, peer {:.6}), p90 {:.5} (paper's {:.5}, peer {:.5})",
+            ours.coherence_mean,
+            paper.coherence_mean,
+            peer.coherence_mean,
+            ours.coherence_p90,
+            paper.coherence_p90,
+            peer.coherence_p90
+        );
+        assert!(
+            ours.coherence_mean < paper.coherence_mean,
+            "{texture}: coherence mean {} vs the paper's behaviour {}",
+            ours.coherence_mean,
+            paper.coherence_mean
+        );
+    }
+    common::gates::assert_all_near_peer(&results, &gate);
 }
 
 /// Lapped textures on the planar benchmark (256² from the 128² shared

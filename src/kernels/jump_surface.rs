@@ -14,11 +14,25 @@
 //! face's base vertex plus edge offsets, for every choice of base vertex, so a
 //! renderer can blend the three (§6.5).
 //!
+//! Extensions, each an option whose default in [`SurfaceSynthSettings`] is
+//! the paper's (the `jump_surface` stage turns them on; measured in
+//! ARCHITECTURE.md, "Jump maps on surfaces without blur, repeats or seams"):
+//! - `pixel_aligned`: random starts at pixel centres. Copies and jumps keep
+//!   a start's sub-pixel phase, so a start between centres resamples its
+//!   whole patch (bilinear blur) wherever the mapping is pixel-aligned.
+//! - `max_patch_area`: a patch stops suggesting copies once it covers this
+//!   much of the exemplar, so no large region is copied again and again.
+//! - the matched choice ([`synthesize_surface_matched`]): where the draw
+//!   leaves a choice, the candidate whose exemplar neighbourhood best
+//!   matches the synthesised vertices wins.
+//!
 //! Coordinates: pixel addresses with x right, y down, integer values at pixel
 //! centres (`(x + 0.5) / width` is the texture coordinate u).
 
 use super::frames::TangentFrame;
 use super::vertex_order::{VertexOrder, vertex_order};
+use crate::image::Image;
+use crate::image::sample::Wrap;
 use crate::mesh::{PolyMesh, Topology};
 use glam::{Vec2, Vec3};
 use rand::{Rng, SeedableRng};
@@ -50,6 +64,20 @@ pub struct SurfaceSynthSettings {
     pub order: VertexOrder,
     /// Seed of the order and of every random choice.
     pub seed: u64,
+    /// Largest area one patch may copy, as a fraction of the exemplar's
+    /// area (an extension; 0 = unbounded, the paper). A patch is the set of
+    /// vertices grown by copies from one jump or random start; once its
+    /// texel area reaches this, its vertices no longer suggest copies, so
+    /// the next vertex jumps. Bounds the tail of the patch sizes, which
+    /// otherwise copies large parts of the exemplar verbatim again and
+    /// again. 0..=1.
+    pub max_patch_area: f32,
+    /// Random starts at pixel centres (an extension; false = anywhere, the
+    /// paper). Copies and jumps keep a start's sub-pixel phase, so a start
+    /// between pixel centres resamples the whole patch it grows (bilinear
+    /// blur) wherever the mapping is pixel-aligned (a flat mesh at one pixel
+    /// per vertex spacing); elsewhere it changes nothing.
+    pub pixel_aligned: bool,
 }
 
 impl Default for SurfaceSynthSettings {
@@ -60,6 +88,8 @@ impl Default for SurfaceSynthSettings {
             tileable: false,
             order: VertexOrder::EmergingFront,
             seed: 0,
+            max_patch_area: 0.0,
+            pixel_aligned: false,
         }
     }
 }
@@ -76,6 +106,13 @@ pub struct SurfaceSynthOutput {
     /// Vertices whose flattened one-ring is larger than the exemplar, so no
     /// address is valid (their texture is clamped).
     pub unfit: usize,
+    /// Vertices without a valid suggestion (the paper places them at
+    /// random) that the matched choice placed by matching their
+    /// neighbourhood; counted in `jumps`, not in `random_assignments`.
+    pub matched_starts: usize,
+    /// Per vertex, its patch: the jump or random start whose copies reached
+    /// it (numbered in synthesis order).
+    pub patch: Vec<u32>,
 }
 
 /// Texture-space offset of every directed edge `v → w`, aligned with
@@ -147,6 +184,93 @@ pub fn synthesize_surface<J: JumpLookup>(
     settings: &SurfaceSynthSettings,
     progress: &crate::progress::Progress,
 ) -> SurfaceSynthOutput {
+    synthesize_surface_matched(topo, offsets, jumps, settings, None, progress)
+}
+
+/// Random candidates of a matched start ([`synthesize_surface_matched`]).
+pub const RANDOM_CANDIDATES: usize = 32;
+
+/// The exemplar's colours for the matched choice.
+#[derive(Clone, Copy)]
+pub struct Matcher<'a> {
+    /// The exemplar.
+    pub image: &'a Image,
+    /// Its addressing.
+    pub wrap: Wrap,
+}
+
+impl Matcher<'_> {
+    /// The exemplar's colour at address `p` (integers at pixel centres).
+    #[inline]
+    fn colour(&self, p: Vec2) -> [f32; 4] {
+        let mut c = [0.0f32; 4];
+        let k = (self.image.channels as usize).min(4);
+        self.image
+            .sample_bilinear(p.x + 0.5, p.y + 0.5, self.wrap, &mut c[..k]);
+        c
+    }
+
+    /// The synthesised vertices within two edges of `v`: their offsets from
+    /// `v` (the first edge's plus the second's) and colours, into `out`.
+    fn gather(
+        &self,
+        topo: &Topology,
+        offsets: &[Vec2],
+        texel: &[Vec2],
+        done: &[bool],
+        v: u32,
+        out: &mut Vec<(Vec2, [f32; 4])>,
+    ) {
+        out.clear();
+        let start = topo.neighbour_start[v as usize] as usize;
+        for (k, &u) in topo.neighbours(v).iter().enumerate() {
+            let ou = offsets[start + k];
+            if done[u as usize] {
+                out.push((ou, self.colour(texel[u as usize])));
+            }
+            let su = topo.neighbour_start[u as usize] as usize;
+            for (j, &w) in topo.neighbours(u).iter().enumerate() {
+                if w == v || !done[w as usize] || topo.neighbours(v).binary_search(&w).is_ok() {
+                    continue;
+                }
+                let o = ou + offsets[su + j];
+                if out.iter().any(|e| (e.0 - o).length_squared() < 0.25) {
+                    continue;
+                }
+                out.push((o, self.colour(texel[w as usize])));
+            }
+        }
+    }
+
+    /// Sum of squared colour differences between the exemplar around `p`
+    /// and the gathered neighbourhood.
+    #[inline]
+    fn error(&self, p: Vec2, nb: &[(Vec2, [f32; 4])]) -> f32 {
+        nb.iter()
+            .map(|(o, t)| {
+                let c = self.colour(p + *o);
+                (0..4).map(|i| (c[i] - t[i]) * (c[i] - t[i])).sum::<f32>()
+            })
+            .sum()
+    }
+}
+
+/// [`synthesize_surface`] with the matched choice (an extension) when
+/// `matcher` is given: the paper's draw still decides whether a vertex
+/// copies or jumps; where that leaves a choice, the candidate whose exemplar
+/// neighbourhood best matches the synthesised vertices within two edges
+/// wins: among disagreeing copies (where patches meet), among all valid
+/// jumps of all neighbours (excluding jumps that continue a neighbour's
+/// copy), and among [`RANDOM_CANDIDATES`] random starts and those jumps
+/// where the paper starts at random.
+pub fn synthesize_surface_matched<J: JumpLookup>(
+    topo: &Topology,
+    offsets: &[Vec2],
+    jumps: &J,
+    settings: &SurfaceSynthSettings,
+    matcher: Option<Matcher>,
+    progress: &crate::progress::Progress,
+) -> SurfaceSynthOutput {
     let n = topo.vertex_count();
     let (w, h) = jumps.dims();
     let size = Vec2::new(w as f32, h as f32);
@@ -194,6 +318,8 @@ pub fn synthesize_surface<J: JumpLookup>(
     /// the jumps is known.
     #[derive(Clone, Copy)]
     struct Suggestion {
+        /// The neighbour's patch.
+        patch: u32,
         copy: Vec2,
         copy_mass: f32,
         jump_at: Vec2,
@@ -201,7 +327,56 @@ pub fn synthesize_surface<J: JumpLookup>(
         jump_scale: f32,
         jump_mass: f32,
     }
+    // Every jump of a neighbour's suggestion, with its mass in the
+    // selection table: its destination shifted by the look-up's sub-pixel
+    // position and the suggestion's shift.
+    let each_jump = |sg: &Suggestion, f: &mut dyn FnMut(Vec2, f32)| {
+        for (tap, bw) in taps(sg.jump_at) {
+            if bw <= 0.0 {
+                continue;
+            }
+            let st = stored_of(tap);
+            let sub = sg.jump_at - tap + sg.jump_shift;
+            jumps.for_each_jump(st.x as u32, st.y as u32, |dx, dy, jw| {
+                f(
+                    Vec2::new(dx as f32, dy as f32) + sub,
+                    jw * bw * sg.jump_scale,
+                );
+            });
+        }
+    };
     let mut suggestions: Vec<Suggestion> = Vec::with_capacity(32);
+    // The matched choice's buffers (no allocation per vertex).
+    let mut nb_buf: Vec<(Vec2, [f32; 4])> = Vec::with_capacity(64);
+    let mut cands: Vec<(Vec2, Option<u32>)> = Vec::with_capacity(64);
+    // A random start: uniform over the addresses that keep the one-ring
+    // (`bmin..=bmax`) inside the exemplar, at a pixel centre when aligned.
+    let random_start = |rng: &mut rand_pcg::Pcg64Mcg, bmin: Vec2, bmax: Vec2| {
+        let free = if settings.tileable {
+            Vec2::new(rng.random::<f32>() * size.x, rng.random::<f32>() * size.y)
+        } else {
+            let lo = -bmin;
+            let hi = max - bmax;
+            if hi.cmpge(lo).all() {
+                lo + (hi - lo) * Vec2::new(rng.random::<f32>(), rng.random::<f32>())
+            } else {
+                (lo + hi) * 0.5
+            }
+        };
+        let snapped = free.round();
+        let inside = settings.tileable
+            || ((snapped + bmin).cmpge(Vec2::ZERO).all() && (snapped + bmax).cmple(max).all());
+        if settings.pixel_aligned && inside {
+            snapped
+        } else {
+            free
+        }
+    };
+    // Per vertex its patch, per patch its texel area (max_patch_area).
+    let cap = settings.max_patch_area * w as f32 * h as f32;
+    let capped = cap > 0.0;
+    let mut patch_of: Vec<u32> = vec![0; n];
+    let mut patch_area: Vec<f32> = Vec::new();
     for (step, &v) in order.iter().enumerate() {
         if step % 65536 == 0 {
             progress.inc(step.min(65536) as u64);
@@ -257,9 +432,12 @@ pub fn synthesize_surface<J: JumpLookup>(
                 k_scale = 1.0 / sum;
             }
             let copy_mass = (1.0 - sum * k_scale).max(0.0);
+            let patch = patch_of[ui];
+            let open = !capped || patch_area[patch as usize] < cap;
             suggestions.push(Suggestion {
+                patch,
                 copy,
-                copy_mass: if valid(copy) { copy_mass } else { 0.0 },
+                copy_mass: if valid(copy) && open { copy_mass } else { 0.0 },
                 jump_at,
                 jump_shift,
                 jump_scale: k_scale,
@@ -278,7 +456,7 @@ pub fn synthesize_surface<J: JumpLookup>(
                 let mut x = rng.random::<f32>() * total;
                 for sg in &suggestions {
                     if x < sg.copy_mass {
-                        chosen = Some((sg.copy, false));
+                        chosen = Some((sg.copy, Some(sg.patch)));
                         break 'draw;
                     }
                     x -= sg.copy_mass;
@@ -306,7 +484,7 @@ pub fn synthesize_surface<J: JumpLookup>(
                         }
                         match hit {
                             Some(p) if valid(p) => {
-                                chosen = Some((p, true));
+                                chosen = Some((p, None));
                                 break 'draw;
                             }
                             _ => continue 'draw,
@@ -317,24 +495,16 @@ pub fn synthesize_surface<J: JumpLookup>(
             }
             if chosen.is_none() {
                 // 64 rejections in a row: draw from the exact table.
-                let mut table: Vec<(Vec2, f32, bool)> = Vec::new();
+                let mut table: Vec<(Vec2, f32, Option<u32>)> = Vec::new();
                 for sg in &suggestions {
                     if sg.copy_mass > 0.0 {
-                        table.push((sg.copy, sg.copy_mass, false));
+                        table.push((sg.copy, sg.copy_mass, Some(sg.patch)));
                     }
-                    for (tap, bw) in taps(sg.jump_at) {
-                        if bw <= 0.0 {
-                            continue;
+                    each_jump(sg, &mut |p, mass| {
+                        if valid(p) {
+                            table.push((p, mass, None));
                         }
-                        let st = stored_of(tap);
-                        let sub = sg.jump_at - tap + sg.jump_shift;
-                        jumps.for_each_jump(st.x as u32, st.y as u32, |dx, dy, jw| {
-                            let p = Vec2::new(dx as f32, dy as f32) + sub;
-                            if valid(p) {
-                                table.push((p, jw * bw * sg.jump_scale, true));
-                            }
-                        });
-                    }
+                    });
                 }
                 let t: f32 = table.iter().map(|e| e.1).sum();
                 if t > 0.0 {
@@ -351,30 +521,106 @@ pub fn synthesize_surface<J: JumpLookup>(
                 }
             }
         }
+        // The matched choice: where the paper's draw leaves a choice (copies
+        // that disagree, which jump, where a random start goes), the
+        // candidate whose exemplar neighbourhood best matches the
+        // synthesised neighbours wins.
+        if let Some(m) = matcher
+            && !suggestions.is_empty()
+        {
+            let copies_disagree = || {
+                let mut first = None;
+                suggestions
+                    .iter()
+                    .filter(|sg| sg.copy_mass > 0.0)
+                    .any(|sg| {
+                        let f = *first.get_or_insert(sg.copy);
+                        (sg.copy - f).abs().max_element() > 0.5
+                    })
+            };
+            let decide = match chosen {
+                Some((_, Some(_))) => copies_disagree(),
+                _ => true,
+            };
+            if decide {
+                m.gather(topo, offsets, &texel, &done, v, &mut nb_buf);
+                if !nb_buf.is_empty() {
+                    cands.clear();
+                    match chosen {
+                        Some((_, Some(_))) => {
+                            for sg in suggestions.iter().filter(|sg| sg.copy_mass > 0.0) {
+                                cands.push((sg.copy, Some(sg.patch)));
+                            }
+                        }
+                        _ => {
+                            // Every valid jump of every neighbour, except
+                            // those that continue a neighbour's copy.
+                            for sg in suggestions.iter().filter(|sg| sg.jump_mass > 0.0) {
+                                each_jump(sg, &mut |p, _| {
+                                    let continues = suggestions
+                                        .iter()
+                                        .any(|c| (c.copy - p).abs().max_element() <= 0.5);
+                                    if valid(p) && !continues {
+                                        cands.push((p, None));
+                                    }
+                                });
+                            }
+                            if chosen.is_none() {
+                                for _ in 0..RANDOM_CANDIDATES {
+                                    cands.push((random_start(&mut rng, bmin, bmax), None));
+                                }
+                            }
+                        }
+                    }
+                    let best = cands
+                        .iter()
+                        .map(|&(p, patch)| (m.error(p, &nb_buf), p, patch))
+                        .min_by(|a, b| a.0.total_cmp(&b.0));
+                    if let Some((_, p, patch)) = best {
+                        if chosen.is_none() {
+                            // Counted as a jump below, not as random.
+                            out.matched_starts += 1;
+                        }
+                        chosen = Some((p, patch));
+                    }
+                }
+            }
+        }
+        // The texel area of v: its mean squared edge offset.
+        let step = if hi_i > lo_i {
+            offsets[lo_i..hi_i]
+                .iter()
+                .map(|o| o.length_squared())
+                .sum::<f32>()
+                / (hi_i - lo_i) as f32
+        } else {
+            0.0
+        };
+        let mut from_patch = None;
         let chosen = match chosen {
-            Some((p, is_jump)) => {
-                if is_jump {
+            Some((p, copied)) => {
+                if copied.is_none() {
                     out.jumps += 1;
                 }
+                from_patch = copied;
                 p
             }
             None => {
                 out.random_assignments += 1;
-                if settings.tileable {
-                    Vec2::new(rng.random::<f32>() * size.x, rng.random::<f32>() * size.y)
-                } else {
-                    // Uniform over the valid range -bmin ..= max - bmax.
-                    let lo = -bmin;
-                    let hi = max - bmax;
-                    if hi.cmpge(lo).all() {
-                        lo + (hi - lo) * Vec2::new(rng.random::<f32>(), rng.random::<f32>())
-                    } else {
-                        out.unfit += 1;
-                        (lo + hi) * 0.5
-                    }
+                let lo = -bmin;
+                let hi = max - bmax;
+                if !settings.tileable && !hi.cmpge(lo).all() {
+                    out.unfit += 1;
                 }
+                random_start(&mut rng, bmin, bmax)
             }
         };
+        let patch = from_patch.unwrap_or_else(|| {
+            patch_area.push(0.0);
+            (patch_area.len() - 1) as u32
+        });
+        patch_of[vi] = patch;
+        patch_area[patch as usize] += step;
         texel[vi] = if settings.tileable {
             wrap(chosen)
         } else {
@@ -383,7 +629,35 @@ pub fn synthesize_surface<J: JumpLookup>(
         done[vi] = true;
     }
     out.texel = texel;
+    out.patch = patch_of;
     out
+}
+
+/// The vertices within `rings` edges of a seam: an edge whose endpoints
+/// belong to different patches ([`SurfaceSynthOutput::patch`]).
+pub fn seam_band(topo: &Topology, patch: &[u32], rings: u32) -> Vec<bool> {
+    let n = topo.vertex_count();
+    let mut band: Vec<bool> = (0..n as u32)
+        .into_par_iter()
+        .map(|v| {
+            let p = patch[v as usize];
+            topo.neighbours(v).iter().any(|&w| patch[w as usize] != p)
+        })
+        .collect();
+    let mut frontier: Vec<u32> = (0..n as u32).filter(|&v| band[v as usize]).collect();
+    for _ in 0..rings {
+        let mut next = Vec::new();
+        for &v in &frontier {
+            for &w in topo.neighbours(v) {
+                if !band[w as usize] {
+                    band[w as usize] = true;
+                    next.push(w);
+                }
+            }
+        }
+        frontier = next;
+    }
+    band
 }
 
 /// The texture-space offset of every face side: entry `c` is the offset of
@@ -706,6 +980,78 @@ mod tests {
             let d = Vec2::new(d.x.min(32.0 - d.x), d.y.min(32.0 - d.y));
             assert!(d.max_element() < 1e-3, "vertex {v}: {p} vs {expect}");
         }
+    }
+
+    /// A unit grid plane at one pixel per edge and its offsets.
+    fn unit_plane(n: usize) -> (PolyMesh, Topology, Vec<Vec2>) {
+        let m = plane(n);
+        let t = Topology::build(&m);
+        let frames = vec![TangentFrame::from_up(Vec3::Z, Vec3::Y); m.vertex_count()];
+        let off = edge_offsets(&m.positions, &frames, &vec![1.0; m.vertex_count()], &t);
+        (m, t, off)
+    }
+
+    #[test]
+    fn pixel_aligned_starts_keep_every_address_on_a_pixel_centre() {
+        let (_, t, off) = unit_plane(24);
+        for aligned in [false, true] {
+            let s = SurfaceSynthSettings {
+                pixel_aligned: aligned,
+                seed: 5,
+                ..Default::default()
+            };
+            let out = synthesize_surface(&t, &off, &NoJumps(16, 16), &s, &Default::default());
+            // A 24² plane in a 16² exemplar: copies run out, so starts recur.
+            assert!(out.random_assignments > 1);
+            let on_centres = out
+                .texel
+                .iter()
+                .all(|p| (*p - p.round()).abs().max_element() < 1e-4);
+            assert_eq!(on_centres, aligned, "pixel_aligned {aligned}");
+        }
+    }
+
+    #[test]
+    fn patches_stop_copying_at_the_area_cap() {
+        let (_, t, off) = unit_plane(40);
+        let area = |cap: f32| {
+            let s = SurfaceSynthSettings {
+                tileable: true,
+                max_patch_area: cap,
+                ..Default::default()
+            };
+            let out = synthesize_surface(&t, &off, &NoJumps(32, 32), &s, &Default::default());
+            let mut count = vec![0usize; out.patch.iter().max().map_or(0, |&p| p as usize + 1)];
+            for &p in &out.patch {
+                count[p as usize] += 1;
+            }
+            count.into_iter().max().unwrap_or(0)
+        };
+        // Without a cap one start covers the whole 40² plane. With a cap of
+        // a quarter of the 32² exemplar (256 pixels), each vertex counting
+        // its mean squared edge offset (4/3 of a pixel on this triangulated
+        // grid: four unit edges and two diagonals), a patch stops at 192
+        // vertices plus the front that completes it.
+        assert_eq!(area(0.0), 1600);
+        let capped = area(0.25);
+        assert!((192..=192 + 40).contains(&capped), "largest patch {capped}");
+    }
+
+    #[test]
+    fn seam_band_holds_the_vertices_next_to_another_patch() {
+        let (m, t, _) = unit_plane(10);
+        // Two patches split at x = 5.
+        let patch: Vec<u32> = (0..m.vertex_count())
+            .map(|v| u32::from(v % 10 >= 5))
+            .collect();
+        let band = seam_band(&t, &patch, 0);
+        for (v, &b) in band.iter().enumerate() {
+            let x = v % 10;
+            // The grid's diagonals reach one column across.
+            assert_eq!(b, x == 4 || x == 5, "vertex {v}");
+        }
+        let wider = seam_band(&t, &patch, 1);
+        assert!((0..m.vertex_count()).all(|v| wider[v] == (3..=6).contains(&(v % 10))));
     }
 
     #[test]

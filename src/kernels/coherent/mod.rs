@@ -55,7 +55,7 @@ use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appeara
 use super::flatten::{TriangleAdjacency, template_spacing};
 use super::frames::TangentFrame;
 use super::wl_match::parents::TriangleBvh;
-use super::wl_match::schedule::{dependency_batches, random_order};
+use super::wl_match::schedule::{dependency_batches_of, random_order};
 use super::wl_match::{SynthesisLevel, WlError, validate_levels};
 use crate::image::{Image, pyramid::gaussian_stack, sample::Wrap};
 use crate::mesh::Topology;
@@ -100,21 +100,26 @@ pub struct CoherentSettings {
     pub wrap: Wrap,
 }
 
+impl CoherentSettings {
+    /// The defaults, usable in constants.
+    pub const DEFAULT: Self = Self {
+        passes: 3,
+        k: 4,
+        dims: 8,
+        window: 5,
+        ring: 3,
+        jitter: 0.0,
+        spread: 0.5,
+        coherence: 2.0,
+        scale: 0.0,
+        seed: 0,
+        wrap: Wrap::Repeat,
+    };
+}
+
 impl Default for CoherentSettings {
     fn default() -> Self {
-        Self {
-            passes: 3,
-            k: 4,
-            dims: 8,
-            window: 5,
-            ring: 3,
-            jitter: 0.0,
-            spread: 0.5,
-            coherence: 2.0,
-            scale: 0.0,
-            seed: 0,
-            wrap: Wrap::Repeat,
-        }
+        Self::DEFAULT
     }
 }
 
@@ -141,6 +146,8 @@ pub struct CoherentLevelReport {
     pub picks: [f32; 3],
     /// Batches per pass.
     pub batches: Vec<usize>,
+    /// Vertices visited per pass (the others could not change).
+    pub visited: Vec<usize>,
     /// Wall time of the level (appearance space included), seconds.
     pub seconds: f64,
 }
@@ -154,45 +161,60 @@ pub struct CoherentLevel {
     pub report: CoherentLevelReport,
 }
 
-/// Neighbours of every vertex of a level with their pixel offsets, CSR.
+/// Neighbours of some vertices of a level with their pixel offsets, CSR.
 struct Neighbourhoods {
+    /// Per vertex of the level, its entry in `start` (`u32::MAX`: none).
+    slot: Vec<u32>,
     start: Vec<u32>,
     vertex: Vec<u32>,
     offset: Vec<Vec2>,
 }
 
 impl Neighbourhoods {
+    /// `v`'s neighbours and offsets (none when `v` was not listed).
     #[inline]
     fn of(&self, v: u32) -> (&[u32], &[Vec2]) {
+        let s = self.slot[v as usize];
+        if s == u32::MAX {
+            return (&[], &[]);
+        }
         let (a, b) = (
-            self.start[v as usize] as usize,
-            self.start[v as usize + 1] as usize,
+            self.start[s as usize] as usize,
+            self.start[s as usize + 1] as usize,
         );
         (&self.vertex[a..b], &self.offset[a..b])
     }
 }
 
-/// The `ring`-ring of every vertex (at most [`MAX_NEIGHBOURS`], nearest
-/// first, ties by id) with offsets in the vertex's frame at `scale`.
+/// Vertices per chunk of a masked refinement: a larger mask's
+/// neighbourhoods are found a chunk at a time (for every pass), so its
+/// memory does not grow with the mask; a smaller one's once.
+const REFINE_CHUNK: usize = 1 << 15;
+
+/// The `ring`-ring (at most [`MAX_NEIGHBOURS`], nearest first, ties by
+/// id) with offsets in the vertex's frame at `scale` of each vertex in
+/// `list` (`None`: every vertex).
 fn neighbourhoods(
     topology: &Topology,
     positions: &[Vec3],
     frames: &[TangentFrame],
     ring: u32,
     scale: f32,
+    list: Option<&[u32]>,
 ) -> Neighbourhoods {
-    let n = positions.len();
+    let n = list.map_or(positions.len(), <[u32]>::len);
+    let vertex_of = |i: usize| list.map_or(i as u32, |l| l[i]);
     // Per fixed chunk of vertices, flat lists with reused buffers (no
     // allocation per vertex); concatenated in vertex order.
     let chunks: Vec<(Vec<u32>, Vec<Vec2>, Vec<u32>)> = (0..n.div_ceil(NEIGHBOURHOOD_CHUNK))
         .into_par_iter()
         .map(|c| {
             let vs =
-                (c * NEIGHBOURHOOD_CHUNK) as u32..((c + 1) * NEIGHBOURHOOD_CHUNK).min(n) as u32;
+                (c * NEIGHBOURHOOD_CHUNK..((c + 1) * NEIGHBOURHOOD_CHUNK).min(n)).map(vertex_of);
             let mut found: Vec<u32> = Vec::new();
             let mut near: Vec<(f32, u32)> = Vec::new();
-            let mut vertex = Vec::with_capacity(vs.len() * MAX_NEIGHBOURS);
-            let mut offset = Vec::with_capacity(vs.len() * MAX_NEIGHBOURS);
+            let mut vertex = Vec::new();
+            let mut offset = Vec::new();
             let mut counts = Vec::with_capacity(vs.len());
             for v in vs {
                 found.clear();
@@ -240,7 +262,18 @@ fn neighbourhoods(
             start.push(start[start.len() - 1] + c);
         }
     }
+    let slot = match list {
+        None => (0..n as u32).collect(),
+        Some(l) => {
+            let mut slot = vec![u32::MAX; positions.len()];
+            for (i, &v) in l.iter().enumerate() {
+                slot[v as usize] = i as u32;
+            }
+            slot
+        }
+    };
     Neighbourhoods {
+        slot,
         start,
         vertex,
         offset,
@@ -469,23 +502,47 @@ fn correct(v: u32, coords: &[Vec2], k: &Corrector) -> (Vec2, u8) {
     (best.1, best.2)
 }
 
+/// `v`'s neighbourhood cost `E(u(v))` at the current coordinates.
+#[inline]
+fn own_cost(
+    v: u32,
+    coords: &[Vec2],
+    nbs: &Neighbourhoods,
+    app: &AppearanceLevel,
+    domain: &Domain,
+) -> f64 {
+    let (ws, offsets) = nbs.of(v);
+    let c = coords[v as usize];
+    ws.iter()
+        .zip(offsets)
+        .map(|(&w, d)| {
+            let t = &app.vectors[domain.pixel(coords[w as usize]) as usize];
+            dist2(&app.vectors[domain.pixel(c + *d) as usize], t) as f64
+        })
+        .sum()
+}
+
 /// Mean per-neighbour cost of the current coordinates.
 fn energy(coords: &[Vec2], nbs: &Neighbourhoods, app: &AppearanceLevel, domain: &Domain) -> f32 {
-    let (sum, count) = (0..coords.len() as u32)
-        .into_par_iter()
-        .map(|v| {
-            let (ws, offsets) = nbs.of(v);
-            let c = coords[v as usize];
-            ws.iter()
-                .zip(offsets)
-                .map(|(&w, d)| {
-                    let t = &app.vectors[domain.pixel(coords[w as usize]) as usize];
-                    dist2(&app.vectors[domain.pixel(c + *d) as usize], t) as f64
-                })
-                .fold((0.0f64, 0usize), |(s, n), e| (s + e, n + 1))
-        })
-        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let (sum, count) = energy_sum(coords, nbs, None, app, domain);
     (sum / count.max(1) as f64) as f32
+}
+
+/// Sum of the listed vertices' costs, and of their neighbourhoods' sizes.
+/// (`list`: the vertices `nbs` was found for; `None`: every vertex.)
+fn energy_sum(
+    coords: &[Vec2],
+    nbs: &Neighbourhoods,
+    list: Option<&[u32]>,
+    app: &AppearanceLevel,
+    domain: &Domain,
+) -> (f64, usize) {
+    let cost = |v: u32| own_cost(v, coords, nbs, app, domain);
+    let sum: f64 = match list {
+        None => (0..coords.len() as u32).into_par_iter().map(cost).sum(),
+        Some(l) => l.par_iter().map(|&v| cost(v)).sum(),
+    };
+    (sum, nbs.vertex.len())
 }
 
 /// Per-level geometry.
@@ -510,6 +567,56 @@ pub fn coherent_synthesis(
     exemplar: &Image,
     settings: &CoherentSettings,
     start: Option<&[Vec2]>,
+    progress: &Progress,
+) -> Result<Vec<CoherentLevel>, WlError> {
+    synthesis(levels, exemplar, settings, start, None, progress)
+}
+
+/// Refines another method's coordinates `start` on one level (as
+/// [`coherent_synthesis`] with a start) where `mask` allows: only vertices
+/// in `mask` are corrected; the others keep their coordinates and serve as
+/// context. Neighbourhoods are found for the masked vertices alone, so a
+/// thin mask (the band around another method's seams) costs in proportion
+/// to its size.
+///
+/// # Errors
+/// As [`coherent_synthesis`]; a mask of the wrong length is
+/// [`WlError::StartCount`].
+pub fn coherent_refine(
+    level: &SynthesisLevel,
+    exemplar: &Image,
+    settings: &CoherentSettings,
+    start: &[Vec2],
+    mask: &[bool],
+    progress: &Progress,
+) -> Result<CoherentLevel, WlError> {
+    if mask.len() != level.mesh.vertex_count() {
+        return Err(WlError::StartCount {
+            given: mask.len(),
+            vertices: level.mesh.vertex_count(),
+        });
+    }
+    let levels = [SynthesisLevel {
+        mesh: level.mesh,
+        frames: level.frames,
+    }];
+    let mut out = synthesis(
+        &levels,
+        exemplar,
+        settings,
+        Some(start),
+        Some(mask),
+        progress,
+    )?;
+    Ok(out.swap_remove(0))
+}
+
+fn synthesis(
+    levels: &[SynthesisLevel],
+    exemplar: &Image,
+    settings: &CoherentSettings,
+    start: Option<&[Vec2]>,
+    mask: Option<&[bool]>,
     progress: &Progress,
 ) -> Result<Vec<CoherentLevel>, WlError> {
     if levels.is_empty() {
@@ -592,7 +699,42 @@ pub fn coherent_synthesis(
             },
         );
         let topology = Topology::build(lv.mesh);
-        let nbs = neighbourhoods(&topology, positions, lv.frames, settings.ring.max(1), scale);
+        let ring = settings.ring.max(1);
+        // A masked refinement finds neighbourhoods a chunk at a time; every
+        // other run finds them all once.
+        let band: Option<Vec<u32>> =
+            mask.map(|m| (0..nv as u32).filter(|&v| m[v as usize]).collect());
+        let found = |list: Option<&[u32]>| {
+            neighbourhoods(&topology, positions, lv.frames, ring, scale, list)
+        };
+        let whole = match &band {
+            None => Some(found(None)),
+            Some(b) if b.len() <= REFINE_CHUNK => Some(found(Some(b))),
+            Some(_) => None,
+        };
+        // Mean per-neighbour cost of the band (masked) or of every vertex.
+        let level_energy = |coords: &[Vec2]| -> (f32, f32) {
+            match (&whole, &band) {
+                (Some(nbs), _) => (
+                    energy(coords, nbs, &app, &domain),
+                    nbs.vertex.len() as f32 / band.as_ref().map_or(nv, Vec::len).max(1) as f32,
+                ),
+                (None, Some(band)) => {
+                    let (mut sum, mut count) = (0.0f64, 0usize);
+                    for chunk in band.chunks(REFINE_CHUNK) {
+                        let nbs = found(Some(chunk));
+                        let (s, c) = energy_sum(coords, &nbs, Some(chunk), &app, &domain);
+                        sum += s;
+                        count += c;
+                    }
+                    (
+                        (sum / count.max(1) as f64) as f32,
+                        count as f32 / band.len().max(1) as f32,
+                    )
+                }
+                (None, None) => (0.0, 0.0),
+            }
+        };
         let mut rng =
             rand_pcg::Pcg64Mcg::seed_from_u64(crate::kernels::mix(settings.seed, l as u64, 1));
         // 1. Initialise.
@@ -647,47 +789,100 @@ pub fn coherent_synthesis(
             spacing: geometry[l].spacing,
             texels_per_spacing: ratio,
             stack_level,
-            mean_neighbours: nbs.vertex.len() as f32 / nv.max(1) as f32,
             ..Default::default()
         };
-        report.energy.push(energy(&coords, &nbs, &app, &domain));
+        let (e0, mean_neighbours) = level_energy(&coords);
+        report.energy.push(e0);
+        report.mean_neighbours = mean_neighbours;
         let cell = (4.0 * ratio).min(w.min(h) as f32 / 2.0);
         let mut occ = Occupancy::new(&coords, &domain, cell);
+        // Which vertices a pass visits. A synthesis: all, every pass. A
+        // refinement (`start`), in its first pass: those in `mask`, or
+        // without one, those whose neighbourhood does not already match
+        // exactly (inside a copied patch a vertex has nothing to correct);
+        // in later passes: those with a compared neighbour, or themselves,
+        // changed by the previous pass (an active set: the others would see
+        // nearly what they saw).
+        let mut visit: Vec<bool> = match (mask, &whole) {
+            (Some(m), _) => m.to_vec(),
+            (None, Some(nbs)) if start.is_some() => (0..nv as u32)
+                .into_par_iter()
+                .map(|v| own_cost(v, &coords, nbs, &app, &domain) > 0.0)
+                .collect(),
+            _ => vec![true; nv],
+        };
         for pass in 0..settings.passes {
             let mean_error = report.energy.last().copied().unwrap_or(0.0);
             let (weight, jump) = (
                 settings.spread * mean_error,
                 settings.coherence * mean_error,
             );
-            let order = random_order(
+            let mut order = random_order(
                 nv,
                 crate::kernels::mix(settings.seed, l as u64, 2 + pass as u64),
             );
-            let batches = dependency_batches(&order, |v| nbs.of(v).0);
-            report.batches.push(batches.len());
-            let mut picks = [0usize; 3];
-            for batch in &batches {
-                let k = Corrector {
-                    nbs: &nbs,
-                    app: &app,
-                    domain: &domain,
-                    occ: &occ,
-                    weight,
-                    jump,
+            order.retain(|&v| visit[v as usize]);
+            report.visited.push(order.len());
+            let mut next = vec![false; nv];
+            // Unvisited vertices keep their coordinates.
+            let mut picks = [nv - order.len(), 0, 0];
+            let mut batch_count = 0;
+            // The order in consecutive chunks (one when not masked): the
+            // result is the sequential one over the whole order.
+            let chunk_len = if whole.is_some() {
+                order.len().max(1)
+            } else {
+                REFINE_CHUNK
+            };
+            for chunk in order.chunks(chunk_len) {
+                let local;
+                let nbs = match &whole {
+                    Some(nbs) => nbs,
+                    None => {
+                        local = found(Some(chunk));
+                        &local
+                    }
                 };
-                let chosen: Vec<(Vec2, u8)> = batch
-                    .par_iter()
-                    .with_min_len(256)
-                    .map(|&v| correct(v, &coords, &k))
-                    .collect();
-                for (&v, (c, how)) in batch.iter().zip(chosen) {
-                    occ.moved(coords[v as usize], c);
-                    coords[v as usize] = c;
-                    picks[how as usize] += 1;
+                let batches = dependency_batches_of(chunk, nv, |v| nbs.of(v).0);
+                batch_count += batches.len();
+                for batch in &batches {
+                    let k = Corrector {
+                        nbs,
+                        app: &app,
+                        domain: &domain,
+                        occ: &occ,
+                        weight,
+                        jump,
+                    };
+                    let chosen: Vec<(Vec2, u8)> = batch
+                        .par_iter()
+                        .with_min_len(256)
+                        .map(|&v| correct(v, &coords, &k))
+                        .collect();
+                    for (&v, (c, how)) in batch.iter().zip(chosen) {
+                        if c != coords[v as usize] {
+                            next[v as usize] = true;
+                            for &w in nbs.of(v).0 {
+                                if mask.is_none_or(|m| m[w as usize]) {
+                                    next[w as usize] = true;
+                                }
+                            }
+                        }
+                        occ.moved(coords[v as usize], c);
+                        coords[v as usize] = c;
+                        picks[how as usize] += 1;
+                    }
                 }
-                progress.inc(batch.len() as u64);
             }
-            report.energy.push(energy(&coords, &nbs, &app, &domain));
+            report.batches.push(batch_count);
+            progress.inc(nv as u64);
+            // A synthesis revisits every vertex: its occurrence penalty and
+            // jump cost change with every pass, so a vertex whose
+            // neighbourhood did not change may still move.
+            if start.is_some() {
+                visit = next;
+            }
+            report.energy.push(level_energy(&coords).0);
             let total = nv.max(1) as f32;
             report.picks = picks.map(|p| p as f32 / total);
         }

@@ -24,12 +24,29 @@ pub fn random_order(count: usize, seed: u64) -> Vec<u32> {
 /// (`reads(v)`, any order, may contain `v` itself or repeats). Each batch
 /// lists its vertices in their order of `order`. O(total reads).
 pub fn dependency_batches<'a>(order: &[u32], reads: impl Fn(u32) -> &'a [u32]) -> Vec<Vec<u32>> {
-    let n = order.len();
-    // Who reads each vertex: the transpose of `reads`, by counting.
+    dependency_batches_of(order, order.len(), reads)
+}
+
+/// [`dependency_batches`] for an `order` that lists some of
+/// `vertex_count` vertices (the others are not written, so they order
+/// nothing). O(vertex count + reads of the listed vertices).
+pub fn dependency_batches_of<'a>(
+    order: &[u32],
+    vertex_count: usize,
+    reads: impl Fn(u32) -> &'a [u32],
+) -> Vec<Vec<u32>> {
+    let n = vertex_count;
+    const ABSENT: u32 = u32::MAX;
+    let mut position = vec![ABSENT; n];
+    for (i, &v) in order.iter().enumerate() {
+        position[v as usize] = i as u32;
+    }
+    let listed = |u: u32| (u as usize) < n && position[u as usize] != ABSENT;
+    // Who reads each listed vertex: the transpose of `reads`, by counting.
     let mut start = vec![0u32; n + 1];
-    for v in 0..n as u32 {
+    for &v in order {
         for &u in reads(v) {
-            if (u as usize) < n {
+            if listed(u) {
                 start[u as usize + 1] += 1;
             }
         }
@@ -39,17 +56,13 @@ pub fn dependency_batches<'a>(order: &[u32], reads: impl Fn(u32) -> &'a [u32]) -
     }
     let mut fill = start.clone();
     let mut readers = vec![0u32; start[n] as usize];
-    for v in 0..n as u32 {
+    for &v in order {
         for &u in reads(v) {
-            if (u as usize) < n {
+            if listed(u) {
                 readers[fill[u as usize] as usize] = v;
                 fill[u as usize] += 1;
             }
         }
-    }
-    let mut position = vec![0u32; n];
-    for (i, &v) in order.iter().enumerate() {
-        position[v as usize] = i as u32;
     }
     let mut batch = vec![0u32; n];
     let mut batches: Vec<Vec<u32>> = Vec::new();
@@ -58,7 +71,7 @@ pub fn dependency_batches<'a>(order: &[u32], reads: impl Fn(u32) -> &'a [u32]) -
         let mut b = 0u32;
         let read_by = &readers[start[v as usize] as usize..start[v as usize + 1] as usize];
         for &u in reads(v).iter().chain(read_by) {
-            if (u as usize) < n && position[u as usize] < pv {
+            if listed(u) && position[u as usize] < pv {
                 b = b.max(batch[u as usize] + 1);
             }
         }
