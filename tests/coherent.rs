@@ -464,6 +464,7 @@ fn masked_refinement_moves_only_the_masked_vertices_and_lowers_the_energy() {
             .install(|| {
                 coherent_refine(
                     &level,
+                    None,
                     &exemplar,
                     &settings,
                     &start,

@@ -569,7 +569,7 @@ pub fn coherent_synthesis(
     start: Option<&[Vec2]>,
     progress: &Progress,
 ) -> Result<Vec<CoherentLevel>, WlError> {
-    synthesis(levels, exemplar, settings, start, None, progress)
+    synthesis(levels, exemplar, settings, start, None, None, progress)
 }
 
 /// Refines another method's coordinates `start` on one level (as
@@ -577,13 +577,14 @@ pub fn coherent_synthesis(
 /// in `mask` are corrected; the others keep their coordinates and serve as
 /// context. Neighbourhoods are found for the masked vertices alone, so a
 /// thin mask (the band around another method's seams) costs in proportion
-/// to its size.
+/// to its size. `topology` is the level mesh's, when the caller has it.
 ///
 /// # Errors
 /// As [`coherent_synthesis`]; a mask of the wrong length is
 /// [`WlError::StartCount`].
 pub fn coherent_refine(
     level: &SynthesisLevel,
+    topology: Option<&Topology>,
     exemplar: &Image,
     settings: &CoherentSettings,
     start: &[Vec2],
@@ -606,6 +607,7 @@ pub fn coherent_refine(
         settings,
         Some(start),
         Some(mask),
+        topology,
         progress,
     )?;
     Ok(out.swap_remove(0))
@@ -617,6 +619,7 @@ fn synthesis(
     settings: &CoherentSettings,
     start: Option<&[Vec2]>,
     mask: Option<&[bool]>,
+    finest_topology: Option<&Topology>,
     progress: &Progress,
 ) -> Result<Vec<CoherentLevel>, WlError> {
     if levels.is_empty() {
@@ -698,14 +701,21 @@ fn synthesis(
                 wrap: settings.wrap,
             },
         );
-        let topology = Topology::build(lv.mesh);
+        let built;
+        let topology = match finest_topology {
+            Some(t) if l == 0 => t,
+            _ => {
+                built = Topology::build(lv.mesh);
+                &built
+            }
+        };
         let ring = settings.ring.max(1);
         // A masked refinement finds neighbourhoods a chunk at a time; every
         // other run finds them all once.
         let band: Option<Vec<u32>> =
             mask.map(|m| (0..nv as u32).filter(|&v| m[v as usize]).collect());
         let found = |list: Option<&[u32]>| {
-            neighbourhoods(&topology, positions, lv.frames, ring, scale, list)
+            neighbourhoods(topology, positions, lv.frames, ring, scale, list)
         };
         let whole = match &band {
             None => Some(found(None)),

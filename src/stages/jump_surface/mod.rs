@@ -313,10 +313,11 @@ impl Stage for JumpSurface {
                     ),
                 );
             }
-            // The topology and the per-edge offsets (some 180 bytes per
-            // vertex) go before the texture coordinates are made.
+            // The per-edge offsets and, after the refinement, the topology
+            // (some 180 bytes per vertex together) go before the texture
+            // coordinates are made.
             let sides = corner_side_offsets(mesh, &topo, &offsets);
-            drop((topo, offsets));
+            drop(offsets);
             let mut out = out;
             if let Some(band) = band {
                 let _s = tracing::info_span!("refine_seams").entered();
@@ -334,6 +335,7 @@ impl Stage for JumpSurface {
                 };
                 match coherent_refine(
                     &level,
+                    Some(&topo),
                     &exemplar.image,
                     &kernel,
                     &start,
@@ -370,6 +372,7 @@ impl Stage for JumpSurface {
                     refine_started.elapsed().as_secs_f64(),
                 );
             }
+            drop(topo);
             let (single, blend) = {
                 let _s = tracing::info_span!("corner_uvs").entered();
                 // The side offsets move into the compact blend layers.
