@@ -320,6 +320,18 @@ impl TexturePatch {
         )
     }
 
+    /// The patch-unit shift (less than half a pixel per axis) that moves
+    /// `st` onto the nearest pixel centre of the patch image.
+    pub fn pixel_phase_shift(&self, st: Vec2) -> Vec2 {
+        let unit = self.unit_px();
+        let px = Vec2::new(
+            self.centre_px.x + st.x * unit,
+            self.centre_px.y - st.y * unit,
+        ) - Vec2::splat(0.5);
+        let d = px.round() - px;
+        Vec2::new(d.x / unit, -d.y / unit)
+    }
+
     /// Alpha at texture coordinates `uv`, bilinear, transparent outside.
     #[inline]
     pub fn alpha_at(&self, uv: Vec2) -> f32 {

@@ -58,6 +58,14 @@ pub struct PasteSettings {
     pub max_seeds_per_face: u32,
     /// Seed of the random stream.
     pub seed: u64,
+    /// Shift each paste by less than a pixel so that the seed face's first
+    /// vertex maps to a texture pixel centre (an extension; false = the
+    /// paper, which maps the seed point to the patch centre). Where the
+    /// parametrisation has one pixel per texel spacing and no rotation (a
+    /// flat mesh at one pixel per vertex, an aligned field), every vertex
+    /// then samples a pixel centre instead of a bilinear mix of four.
+    /// Default false.
+    pub pixel_aligned: bool,
 }
 
 impl Default for PasteSettings {
@@ -73,6 +81,7 @@ impl Default for PasteSettings {
             max_pastes: 0,
             max_seeds_per_face: 8,
             seed: 0,
+            pixel_aligned: false,
         }
     }
 }
@@ -359,6 +368,14 @@ pub fn paste_until_covered(
             }
         }
 
+        if settings.pixel_aligned
+            && let Some(&v0) = patch.tris.first().map(|t| &t[0])
+        {
+            let shift = patch_tex.pixel_phase_shift(patch.st[v0 as usize]);
+            for st in &mut patch.st {
+                *st += shift;
+            }
+        }
         let uvs: Vec<[Vec2; 3]> = patch
             .tris
             .iter()
