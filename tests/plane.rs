@@ -448,8 +448,9 @@ fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_othe
 /// 0.317 against the peer's 0.133; with pastes between pixel centres,
 /// sharpness was 0.82–0.99 (grass and planks under 0.9). Not gated, because
 /// not met yet (issue 13 open), measured (pipeline metrics): coherence mean
-/// 0.69–1.38 × the peer's (brick 1.38), p90 0.87–1.47 × (brick, planks,
-/// water above 1), completeness 1.15–2.5 ×.
+/// 0.67–1.31 × the peer's (brick 1.31), p90 0.82–1.44 × (brick and planks
+/// above 1), completeness 0.45–1.13 × (brick 1.13; 1.15–2.5 × before
+/// patches could hang over the exemplar's border, `PATCH_OVERHANG`).
 #[test]
 fn lapped_on_the_plane_keeps_the_exemplars_structure_without_large_verbatim_copies() {
     let gate = common::gates::Gate {

@@ -150,6 +150,9 @@ pub struct CoherentLevelReport {
     pub visited: Vec<usize>,
     /// Wall time of the level (appearance space included), seconds.
     pub seconds: f64,
+    /// Of `seconds`, the exemplar's appearance space (analysis: the same
+    /// for every mesh), seconds.
+    pub analysis_seconds: f64,
 }
 
 /// Coordinates of one level.
@@ -701,6 +704,7 @@ fn synthesis(
                 wrap: settings.wrap,
             },
         );
+        let analysis_seconds = started.elapsed().as_secs_f64();
         let built;
         let topology = match finest_topology {
             Some(t) if l == 0 => t,
@@ -900,6 +904,7 @@ fn synthesis(
             progress.inc(nv as u64);
         }
         report.seconds = started.elapsed().as_secs_f64();
+        report.analysis_seconds = analysis_seconds;
         out[l] = CoherentLevel { coords, report };
     }
     Ok(out)

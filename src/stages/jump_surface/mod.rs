@@ -360,12 +360,18 @@ impl Stage for JumpSurface {
                         metrics.record(ctx.index, "refine_moved_vertices", moved);
                         metrics.record(ctx.index, "refine_energy", refined.report.energy);
                         metrics.record(ctx.index, "refine_visited", refined.report.visited);
+                        metrics.record(
+                            ctx.index,
+                            "refine_analysis_seconds",
+                            refined.report.analysis_seconds,
+                        );
                     }
                     Err(e) => {
                         fail(&mut failure, ctx.index, Self::KIND, format!("refine: {e}"));
                         return;
                     }
                 }
+                // With the appearance analysis (exemplar only) included.
                 metrics.record(
                     ctx.index,
                     "refine_seconds",
