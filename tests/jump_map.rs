@@ -1157,3 +1157,70 @@ fn matched_pixel_choice_lowers_the_coherence_error() {
         assert!(matched.coherence_p90 < random.coherence_p90, "{name}: p90");
     }
 }
+
+/// The pixel method's seam refinement (`jump_image.refine = "seams"`, the
+/// default; `kernels::jump_map::refine`) lowers the coherence error, mean
+/// and p90, and the completeness of the paper's random choice on every
+/// shared texture at the planar benchmark's size, and adds no large
+/// verbatim copies (`large_region_repeats` at most the paper's, or 2). Measured (pipeline
+/// metrics, ratio to the peer): coherence mean 1.23–2.58 × → 0.89–1.47 ×,
+/// p90 1.23–3.09 × → 1.00–1.68 ×; issue 13's gate is still unmet on brick
+/// and planks (and p90 on grass and stones by 1–4 %).
+#[test]
+fn seam_refinement_lowers_the_pixel_methods_errors() {
+    use surfsynth::kernels::jump_map::refine::{
+        SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, refine_seams,
+    };
+    for name in ["brick", "grass", "planks", "stones", "water"] {
+        let ex = load(&format!("{name}.png"));
+        let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+        let out = synthesize_pixels(
+            &ex,
+            &map,
+            &PixelSynthesisSettings {
+                seed: 1,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let paper = common::gates::quality_of(&out.image, Some(&metric_sources(&out.sources)), &ex);
+        let mut sources = out.sources.clone();
+        let report = refine_seams(
+            &mut sources,
+            &ex,
+            map.boundary() == Boundary::Toroidal,
+            SEAM_REFINE_PASSES,
+            SEAM_REFINE_RADIUS,
+        );
+        let image = sources.gather(&ex).unwrap();
+        let refined = common::gates::quality_of(&image, Some(&metric_sources(&sources)), &ex);
+        println!(
+            "{name}: coherence mean {:.5} → {:.5}, p90 {:.5} → {:.5}, completeness {:.6} → {:.6}; {report:?}",
+            paper.coherence_mean,
+            refined.coherence_mean,
+            paper.coherence_p90,
+            refined.coherence_p90,
+            paper.completeness,
+            refined.completeness
+        );
+        assert!(
+            refined.coherence_mean < paper.coherence_mean,
+            "{name}: mean"
+        );
+        assert!(refined.coherence_p90 < paper.coherence_p90, "{name}: p90");
+        assert!(
+            refined.completeness < paper.completeness,
+            "{name}: completeness"
+        );
+        let repeats = refined.verbatim.expect("sources").large_region_repeats;
+        let paper_repeats = paper.verbatim.expect("sources").large_region_repeats;
+        println!("{name}: large_region_repeats {paper_repeats} → {repeats}");
+        // Joining patches across seams must not add large verbatim copies:
+        // at most the paper's count (water copies a third of the exemplar 4
+        // times at this seed with the paper's choice; 3 after refining).
+        assert!(
+            repeats <= paper_repeats.max(2),
+            "{name}: large_region_repeats {paper_repeats} → {repeats}"
+        );
+    }
+}

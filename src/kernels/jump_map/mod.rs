@@ -40,6 +40,7 @@ pub mod normalise;
 pub mod order;
 pub mod pca;
 pub mod poisson;
+pub mod refine;
 pub mod settings;
 pub mod sources;
 pub mod synth_patch;

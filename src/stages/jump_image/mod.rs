@@ -7,6 +7,8 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
+use crate::kernels::jump_map::Boundary;
+use crate::kernels::jump_map::refine::{SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, refine_seams};
 use crate::kernels::jump_map::{
     ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelChoice,
     PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
@@ -41,6 +43,8 @@ pub struct JumpImageSettings {
     pub seams: String,
     /// How the pixel method picks a source: `matched` or `random`.
     pub choice: String,
+    /// The pixel method's seam refinement: `seams` or `none` (the paper).
+    pub refine: String,
     /// Boundary-avoidance band.
     pub boundary_fraction: f32,
     /// Control field of the controlled method.
@@ -64,6 +68,7 @@ impl Default for JumpImageSettings {
             patch_side: 0.3,
             seams: "cut".into(),
             choice: "random".into(),
+            refine: "seams".into(),
             boundary_fraction: 0.2,
             field: "perspective".into(),
             field_scale: [1.0, 0.25],
@@ -122,6 +127,12 @@ impl StageSettings for JumpImageSettings {
             unit: "",
             range: ParamRange::OneOf(&["matched", "random"]),
             doc: "pixel: random = a random neighbour and a jump by weight (§5.1, the default); matched = the paper's draw decides whether a pixel jumps, and the jump destination or neighbour continuation whose 5x5 exemplar window best matches the synthesised pixels around wins (an extension: lower coherence error, but larger verbatim copies)",
+        },
+        ParamDoc {
+            name: "refine",
+            unit: "",
+            range: ParamRange::OneOf(&["seams", "none"]),
+            doc: "pixel: seams = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates); none = the paper's result",
         },
         ParamDoc {
             name: "boundary_fraction",
@@ -236,6 +247,7 @@ impl Stage for JumpImage {
             let started = std::time::Instant::now();
             // The kernels set the length: pixels, or patches.
             let progress = Progress::new(0, Self::KIND);
+            let mut refined = None;
             let result = match settings.method.as_str() {
                 "patch" => synthesize_patches_with_progress(
                     ex,
@@ -304,7 +316,20 @@ impl Stage for JumpImage {
                     },
                     &progress,
                 )
-                .map(|o| {
+                .map(|mut o| {
+                    if settings.refine == "seams" {
+                        let report = refine_seams(
+                            &mut o.sources,
+                            ex,
+                            map.boundary() == Boundary::Toroidal,
+                            SEAM_REFINE_PASSES,
+                            SEAM_REFINE_RADIUS,
+                        );
+                        refined = Some(report);
+                        if let Ok(image) = o.sources.gather(ex) {
+                            o.image = image;
+                        }
+                    }
                     let src: Vec<[f32; 2]> = o
                         .sources
                         .texels
@@ -323,6 +348,10 @@ impl Stage for JumpImage {
                 }
             };
             let secs = started.elapsed().as_secs_f64();
+            if let Some(r) = refined {
+                metrics.record(ctx.index, "refine_visited", r.visited);
+                metrics.record(ctx.index, "refine_moved", r.moved);
+            }
             let px = image.pixel_count() as f64;
             metrics.record(ctx.index, "pixels", px);
             metrics.record(ctx.index, "pixels_per_second", px / secs.max(1e-9));
