@@ -887,9 +887,11 @@ fn synthesis(
                         picks[how as usize] += 1;
                     }
                 }
+                progress.inc(chunk.len() as u64);
             }
             report.batches.push(batch_count);
-            progress.inc(nv as u64);
+            // The vertices this pass did not visit.
+            progress.inc((nv - order.len()) as u64);
             // A synthesis revisits every vertex: its occurrence penalty and
             // jump cost change with every pass, so a vertex whose
             // neighbourhood did not change may still move.

@@ -329,6 +329,9 @@ impl Stage for JumpSurface {
                     ..REFINE_SETTINGS
                 };
                 let start: Vec<Vec2> = out.texel.iter().map(|&t| t + Vec2::splat(0.5)).collect();
+                // Its own bar: on a large fine mesh the refinement can take
+                // longer than the synthesis.
+                let refine_progress = crate::progress::Progress::new(0, "jump_surface seams");
                 let level = SynthesisLevel {
                     mesh,
                     frames: &frames.0,
@@ -340,7 +343,7 @@ impl Stage for JumpSurface {
                     &kernel,
                     &start,
                     &band,
-                    &crate::progress::Progress::hidden(),
+                    &refine_progress,
                 ) {
                     Ok(refined) => {
                         let moved = refined
@@ -372,6 +375,7 @@ impl Stage for JumpSurface {
                     }
                 }
                 // With the appearance analysis (exemplar only) included.
+                refine_progress.finish();
                 metrics.record(
                     ctx.index,
                     "refine_seconds",
