@@ -1191,6 +1191,7 @@ fn seam_refinement_lowers_the_pixel_methods_errors() {
             map.boundary() == Boundary::Toroidal,
             SEAM_REFINE_PASSES,
             SEAM_REFINE_RADIUS,
+            &surfsynth::progress::Progress::hidden(),
         );
         let image = sources.gather(&ex).unwrap();
         let refined = common::gates::quality_of(&image, Some(&metric_sources(&sources)), &ex);

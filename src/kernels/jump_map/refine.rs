@@ -17,6 +17,7 @@
 use super::map::TexelCoord;
 use super::sources::SourceMap;
 use crate::image::Image;
+use crate::progress::Progress;
 
 /// Passes of `jump_image`'s `refine = "seams"`: most pixels that move do
 /// so in the first (planar benchmark, brick: 6 157, 5 194, 2 626 of
@@ -39,14 +40,16 @@ pub struct SeamRefineReport {
 /// Refines `sources` in place over at most `passes` passes with windows of
 /// `radius` pixels around each visited pixel. `toroidal`: the exemplar
 /// tiles (continuations wrap); otherwise continuations outside it are not
-/// candidates.
+/// candidates. `progress` advances by one per row and pass.
 pub fn refine_seams(
     sources: &mut SourceMap,
     exemplar: &Image,
     toroidal: bool,
     passes: u32,
     radius: u32,
+    progress: &Progress,
 ) -> SeamRefineReport {
+    progress.set_length(u64::from(passes) * u64::from(sources.height));
     let (w, h) = (sources.width as i64, sources.height as i64);
     let (ew, eh) = (exemplar.width as i64, exemplar.height as i64);
     let c = (exemplar.channels as usize).min(4);
@@ -94,6 +97,7 @@ pub fn refine_seams(
         let mut next = vec![false; (w * h) as usize];
         let (mut visited, mut moved) = (0, 0);
         for y in 0..h {
+            progress.inc(1);
             for x in 0..w {
                 if !visit[at(x, y)] {
                     continue;
@@ -254,7 +258,7 @@ mod tests {
             texels,
         };
         let before = window_error(&s, &ex);
-        let report = refine_seams(&mut s, &ex, false, 3, 2);
+        let report = refine_seams(&mut s, &ex, false, 3, 2, &Progress::hidden());
         let after = window_error(&s, &ex);
         assert!(report.visited[0] > 0 && report.moved[0] > 0, "{report:?}");
         assert!(after < before, "window error {before} -> {after}");
@@ -273,7 +277,7 @@ mod tests {
                 y: 2 + i / w,
             })
             .collect();
-        let r = refine_seams(&mut whole, &ex, false, 3, 2);
+        let r = refine_seams(&mut whole, &ex, false, 3, 2, &Progress::hidden());
         assert_eq!(r.visited, vec![0]);
     }
 }

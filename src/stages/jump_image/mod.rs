@@ -318,12 +318,14 @@ impl Stage for JumpImage {
                 )
                 .map(|mut o| {
                     if settings.refine == "seams" {
+                        progress.start_part("seams", 0);
                         let report = refine_seams(
                             &mut o.sources,
                             ex,
                             map.boundary() == Boundary::Toroidal,
                             SEAM_REFINE_PASSES,
                             SEAM_REFINE_RADIUS,
+                            &progress,
                         );
                         refined = Some(report);
                         if let Ok(image) = o.sources.gather(ex) {
