@@ -187,6 +187,15 @@ impl Neighbourhoods {
         );
         (&self.vertex[a..b], &self.offset[a..b])
     }
+
+    /// The slot array back, all `u32::MAX` again (`list`: the vertices it
+    /// was found for), to find the next chunk's without a new one.
+    fn release(mut self, list: &[u32]) -> Vec<u32> {
+        for &v in list {
+            self.slot[v as usize] = u32::MAX;
+        }
+        self.slot
+    }
 }
 
 /// Vertices per chunk of a masked refinement: a larger mask's
@@ -196,7 +205,8 @@ const REFINE_CHUNK: usize = 1 << 15;
 
 /// The `ring`-ring (at most [`MAX_NEIGHBOURS`], nearest first, ties by
 /// id) with offsets in the vertex's frame at `scale` of each vertex in
-/// `list` (`None`: every vertex).
+/// `list` (`None`: every vertex). `slot` is a released slot array to reuse
+/// (all `u32::MAX`, one per vertex), or empty.
 fn neighbourhoods(
     topology: &Topology,
     positions: &[Vec3],
@@ -204,6 +214,7 @@ fn neighbourhoods(
     ring: u32,
     scale: f32,
     list: Option<&[u32]>,
+    slot: Vec<u32>,
 ) -> Neighbourhoods {
     let n = list.map_or(positions.len(), <[u32]>::len);
     let vertex_of = |i: usize| list.map_or(i as u32, |l| l[i]);
@@ -268,7 +279,11 @@ fn neighbourhoods(
     let slot = match list {
         None => (0..n as u32).collect(),
         Some(l) => {
-            let mut slot = vec![u32::MAX; positions.len()];
+            let mut slot = if slot.len() == positions.len() {
+                slot
+            } else {
+                vec![u32::MAX; positions.len()]
+            };
             for (i, &v) in l.iter().enumerate() {
                 slot[v as usize] = i as u32;
             }
@@ -718,8 +733,14 @@ fn synthesis(
         // other run finds them all once.
         let band: Option<Vec<u32>> =
             mask.map(|m| (0..nv as u32).filter(|&v| m[v as usize]).collect());
+        // One slot array serves every chunk in turn.
+        let pool: std::cell::RefCell<Vec<u32>> = std::cell::RefCell::new(Vec::new());
         let found = |list: Option<&[u32]>| {
-            neighbourhoods(topology, positions, lv.frames, ring, scale, list)
+            let slot = std::mem::take(&mut *pool.borrow_mut());
+            neighbourhoods(topology, positions, lv.frames, ring, scale, list, slot)
+        };
+        let recycle = |nbs: Neighbourhoods, list: &[u32]| {
+            *pool.borrow_mut() = nbs.release(list);
         };
         let whole = match &band {
             None => Some(found(None)),
@@ -740,6 +761,7 @@ fn synthesis(
                         let (s, c) = energy_sum(coords, &nbs, Some(chunk), &app, &domain);
                         sum += s;
                         count += c;
+                        recycle(nbs, chunk);
                     }
                     (
                         (sum / count.max(1) as f64) as f32,
@@ -848,16 +870,32 @@ fn synthesis(
             } else {
                 REFINE_CHUNK
             };
+            // Each vertex's place in the order, when the neighbourhoods were
+            // found once; a chunk's own neighbourhoods index it by place.
+            let mut position = Vec::new();
+            if whole.is_some() {
+                position = vec![u32::MAX; nv];
+                for (i, &v) in order.iter().enumerate() {
+                    position[v as usize] = i as u32;
+                }
+            }
             for chunk in order.chunks(chunk_len) {
-                let local;
-                let nbs = match &whole {
-                    Some(nbs) => nbs,
-                    None => {
-                        local = found(Some(chunk));
-                        &local
-                    }
+                let local = match &whole {
+                    Some(_) => None,
+                    None => Some(found(Some(chunk))),
                 };
-                let batches = dependency_batches_of(chunk, nv, |v| nbs.of(v).0);
+                let Some(nbs) = local.as_ref().or(whole.as_ref()) else {
+                    continue;
+                };
+                let place: &[u32] = match &local {
+                    Some(l) => &l.slot,
+                    None => &position,
+                };
+                let batches = dependency_batches_of(
+                    chunk,
+                    |u| place.get(u as usize).copied().filter(|&p| p != u32::MAX),
+                    |v| nbs.of(v).0,
+                );
                 batch_count += batches.len();
                 for batch in &batches {
                     let k = Corrector {
@@ -888,6 +926,9 @@ fn synthesis(
                     }
                 }
                 progress.inc(chunk.len() as u64);
+                if let Some(l) = local {
+                    recycle(l, chunk);
+                }
             }
             report.batches.push(batch_count);
             // The vertices this pass did not visit.

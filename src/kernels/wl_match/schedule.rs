@@ -24,58 +24,69 @@ pub fn random_order(count: usize, seed: u64) -> Vec<u32> {
 /// (`reads(v)`, any order, may contain `v` itself or repeats). Each batch
 /// lists its vertices in their order of `order`. O(total reads).
 pub fn dependency_batches<'a>(order: &[u32], reads: impl Fn(u32) -> &'a [u32]) -> Vec<Vec<u32>> {
-    dependency_batches_of(order, order.len(), reads)
+    let mut position = vec![u32::MAX; order.len()];
+    for (i, &v) in order.iter().enumerate() {
+        if let Some(p) = position.get_mut(v as usize) {
+            *p = i as u32;
+        }
+    }
+    dependency_batches_of(
+        order,
+        |u| position.get(u as usize).copied().filter(|&p| p != u32::MAX),
+        reads,
+    )
 }
 
-/// [`dependency_batches`] for an `order` that lists some of
-/// `vertex_count` vertices (the others are not written, so they order
-/// nothing). O(vertex count + reads of the listed vertices).
+/// [`dependency_batches`] for an `order` that lists some of the vertices:
+/// `position(u)` is `u`'s index in `order`, `None` for a vertex not listed
+/// (not written, so it orders nothing). O(listed vertices + their reads):
+/// no array the size of the mesh.
 pub fn dependency_batches_of<'a>(
     order: &[u32],
-    vertex_count: usize,
+    position: impl Fn(u32) -> Option<u32>,
     reads: impl Fn(u32) -> &'a [u32],
 ) -> Vec<Vec<u32>> {
-    let n = vertex_count;
-    const ABSENT: u32 = u32::MAX;
-    let mut position = vec![ABSENT; n];
-    for (i, &v) in order.iter().enumerate() {
-        position[v as usize] = i as u32;
-    }
-    let listed = |u: u32| (u as usize) < n && position[u as usize] != ABSENT;
-    // Who reads each listed vertex: the transpose of `reads`, by counting.
-    let mut start = vec![0u32; n + 1];
+    let m = order.len();
+    // Who reads each listed vertex (by position): the transpose of
+    // `reads`, by counting.
+    let mut start = vec![0u32; m + 1];
     for &v in order {
         for &u in reads(v) {
-            if listed(u) {
-                start[u as usize + 1] += 1;
+            if let Some(pu) = position(u) {
+                start[pu as usize + 1] += 1;
             }
         }
     }
-    for i in 0..n {
+    for i in 0..m {
         start[i + 1] += start[i];
     }
     let mut fill = start.clone();
-    let mut readers = vec![0u32; start[n] as usize];
-    for &v in order {
+    let mut readers = vec![0u32; start[m] as usize];
+    for (pv, &v) in order.iter().enumerate() {
         for &u in reads(v) {
-            if listed(u) {
-                readers[fill[u as usize] as usize] = v;
-                fill[u as usize] += 1;
+            if let Some(pu) = position(u) {
+                readers[fill[pu as usize] as usize] = pv as u32;
+                fill[pu as usize] += 1;
             }
         }
     }
-    let mut batch = vec![0u32; n];
+    let mut batch = vec![0u32; m];
     let mut batches: Vec<Vec<u32>> = Vec::new();
-    for &v in order {
-        let pv = position[v as usize];
+    for (pv, &v) in order.iter().enumerate() {
         let mut b = 0u32;
-        let read_by = &readers[start[v as usize] as usize..start[v as usize + 1] as usize];
-        for &u in reads(v).iter().chain(read_by) {
-            if listed(u) && position[u as usize] < pv {
-                b = b.max(batch[u as usize] + 1);
+        for &u in reads(v) {
+            if let Some(pu) = position(u)
+                && (pu as usize) < pv
+            {
+                b = b.max(batch[pu as usize] + 1);
             }
         }
-        batch[v as usize] = b;
+        for &pr in &readers[start[pv] as usize..start[pv + 1] as usize] {
+            if (pr as usize) < pv {
+                b = b.max(batch[pr as usize] + 1);
+            }
+        }
+        batch[pv] = b;
         if batches.len() <= b as usize {
             batches.resize_with(b as usize + 1, Vec::new);
         }
