@@ -190,6 +190,10 @@ pub fn synthesize_surface<J: JumpLookup>(
 /// Random candidates of a matched start ([`synthesize_surface_matched`]).
 pub const RANDOM_CANDIDATES: usize = 32;
 
+/// Synthesised vertices compared per matched choice at most (a regular
+/// mesh has about 9 done vertices within two edges).
+pub const MATCH_NEIGHBOURS: usize = 32;
+
 /// The exemplar's colours for the matched choice.
 #[derive(Clone, Copy)]
 pub struct Matcher<'a> {
@@ -211,7 +215,9 @@ impl Matcher<'_> {
     }
 
     /// The synthesised vertices within two edges of `v`: their offsets from
-    /// `v` (the first edge's plus the second's) and colours, into `out`.
+    /// `v` (the first edge's plus the second's) and colours, into `out`; at
+    /// most [`MATCH_NEIGHBOURS`], so a vertex of high valence (a fan cap's
+    /// centre) costs a bounded amount per neighbour.
     fn gather(
         &self,
         topo: &Topology,
@@ -224,12 +230,18 @@ impl Matcher<'_> {
         out.clear();
         let start = topo.neighbour_start[v as usize] as usize;
         for (k, &u) in topo.neighbours(v).iter().enumerate() {
+            if out.len() >= MATCH_NEIGHBOURS {
+                return;
+            }
             let ou = offsets[start + k];
             if done[u as usize] {
                 out.push((ou, self.colour(texel[u as usize])));
             }
             let su = topo.neighbour_start[u as usize] as usize;
             for (j, &w) in topo.neighbours(u).iter().enumerate() {
+                if out.len() >= MATCH_NEIGHBOURS {
+                    return;
+                }
                 if w == v || !done[w as usize] || topo.neighbours(v).binary_search(&w).is_ok() {
                     continue;
                 }

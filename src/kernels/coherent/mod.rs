@@ -836,9 +836,10 @@ fn synthesis(
         // refinement (`start`), in its first pass: those in `mask`, or
         // without one, those whose neighbourhood does not already match
         // exactly (inside a copied patch a vertex has nothing to correct);
-        // in later passes: those with a compared neighbour, or themselves,
-        // changed by the previous pass (an active set: the others would see
-        // nearly what they saw).
+        // in later passes: the vertices a vertex that moved in the previous
+        // pass compares against, and itself (an active set; neighbourhoods
+        // are nearly symmetric, so these are nearly the vertices whose
+        // neighbourhood changed: the others would see what they saw).
         let mut visit: Vec<bool> = match (mask, &whole) {
             (Some(m), _) => m.to_vec(),
             (None, Some(nbs)) if start.is_some() => (0..nv as u32)
