@@ -317,21 +317,27 @@ fn plane_outputs_are_the_same_bytes_at_one_and_two_threads() {
 const SHARED_TEXTURES: [&str; 5] = ["brick", "grass", "planks", "stones", "water"];
 
 /// Runs `configs/plane/METHOD.toml` at its own (the benchmark's) size on
-/// the shared `texture` into `dir/texture`; returns that folder.
-fn run_at_benchmark_size(method: &str, texture: &str, dir: &Path) -> PathBuf {
+/// the shared `texture` into `dir/texture`, with the `--set` overrides
+/// `sets`; returns that folder.
+fn run_at_benchmark_size(method: &str, texture: &str, dir: &Path, sets: &[&str]) -> PathBuf {
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/plane/{method}.toml"));
     let out = dir.join(texture);
     let exemplar = shared(&format!("textures/{texture}.png"));
-    let (code, _, stderr) = run_cli(&[
+    let input = format!("input.exemplar={}", exemplar.display());
+    let mut args = vec![
         "run",
         config.to_str().unwrap(),
         "--out",
         out.to_str().unwrap(),
         "--set",
-        &format!("input.exemplar={}", exemplar.display()),
+        &input,
         "-q",
-    ]);
-    assert_eq!(code, 0, "{method} on {texture}: {stderr}");
+    ];
+    for set in sets {
+        args.extend(["--set", set]);
+    }
+    let (code, _, stderr) = run_cli(&args);
+    assert_eq!(code, 0, "{method} on {texture} ({sets:?}): {stderr}");
     out
 }
 
@@ -351,7 +357,7 @@ fn run_at_benchmark_size(method: &str, texture: &str, dir: &Path) -> PathBuf {
 fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
     let dir = tempfile::tempdir().unwrap();
     for texture in SHARED_TEXTURES {
-        let out = run_at_benchmark_size("jump_surface", texture, dir.path());
+        let out = run_at_benchmark_size("jump_surface", texture, dir.path(), &[]);
         let m: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap())
                 .unwrap();
@@ -393,29 +399,19 @@ fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_othe
     };
     let results = planar_results_without_large_repeats("jump_surface");
     let dir = tempfile::tempdir().unwrap();
-    let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/jump_surface.toml");
     for (texture, ours, peer) in &results {
-        let out = dir.path().join(texture);
-        let exemplar = shared(&format!("textures/{texture}.png"));
-        let set = format!("input.exemplar={}", exemplar.display());
-        let mut args = vec![
-            "run",
-            config.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        args.extend(["--set", &set, "-q"]);
-        for paper in [
-            "stage.3.choice=random",
-            "stage.3.refine=none",
-            "stage.3.max_patch_area=0",
-            "stage.3.pixel_aligned=false",
-        ] {
-            args.extend(["--set", paper]);
-        }
-        let (code, _, stderr) = run_cli(&args);
-        assert_eq!(code, 0, "paper's jump_surface on {texture}: {stderr}");
-        let ex = surfsynth::image::load_image(&exemplar).unwrap();
+        let out = run_at_benchmark_size(
+            "jump_surface",
+            texture,
+            dir.path(),
+            &[
+                "stage.3.choice=random",
+                "stage.3.refine=none",
+                "stage.3.max_patch_area=0",
+                "stage.3.pixel_aligned=false",
+            ],
+        );
+        let ex = surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
         let (img, sources) = common::gates::plane_result(&out);
         let paper = common::gates::quality_of(&img, Some(&sources), &ex);
         println!(
@@ -479,7 +475,7 @@ fn planar_results_without_large_repeats(
     let dir = tempfile::tempdir().unwrap();
     let mut results = Vec::new();
     for texture in SHARED_TEXTURES {
-        let out = run_at_benchmark_size(method, texture, dir.path());
+        let out = run_at_benchmark_size(method, texture, dir.path(), &[]);
         let exemplar =
             surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
         let (img, sources) = common::gates::plane_result(&out);

@@ -361,8 +361,13 @@ pub fn synthesize_surface_matched<J: JumpLookup>(
     // The matched choice's buffers (no allocation per vertex).
     let mut nb_buf: Vec<(Vec2, [f32; 4])> = Vec::with_capacity(64);
     let mut cands: Vec<(Vec2, Option<u32>)> = Vec::with_capacity(64);
+    // Whether address `p` keeps a one-ring spanning `bmin..=bmax` (§6.5,
+    // Fig. 18) inside the exemplar.
+    let fits = |p: Vec2, bmin: Vec2, bmax: Vec2| {
+        settings.tileable || ((p + bmin).cmpge(Vec2::ZERO).all() && (p + bmax).cmple(max).all())
+    };
     // A random start: uniform over the addresses that keep the one-ring
-    // (`bmin..=bmax`) inside the exemplar, at a pixel centre when aligned.
+    // inside the exemplar, at a pixel centre when aligned.
     let random_start = |rng: &mut rand_pcg::Pcg64Mcg, bmin: Vec2, bmax: Vec2| {
         let free = if settings.tileable {
             Vec2::new(rng.random::<f32>() * size.x, rng.random::<f32>() * size.y)
@@ -376,9 +381,7 @@ pub fn synthesize_surface_matched<J: JumpLookup>(
             }
         };
         let snapped = free.round();
-        let inside = settings.tileable
-            || ((snapped + bmin).cmpge(Vec2::ZERO).all() && (snapped + bmax).cmple(max).all());
-        if settings.pixel_aligned && inside {
+        if settings.pixel_aligned && fits(snapped, bmin, bmax) {
             snapped
         } else {
             free
@@ -402,9 +405,7 @@ pub fn synthesize_surface_matched<J: JumpLookup>(
             bmin = bmin.min(*o);
             bmax = bmax.max(*o);
         }
-        let valid = |p: Vec2| {
-            settings.tileable || ((p + bmin).cmpge(Vec2::ZERO).all() && (p + bmax).cmple(max).all())
-        };
+        let valid = |p: Vec2| fits(p, bmin, bmax);
         suggestions.clear();
         for (k, &u) in topo.neighbours(v).iter().enumerate() {
             let ui = u as usize;
