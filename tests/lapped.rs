@@ -1204,12 +1204,17 @@ fn splotches_fill_the_share_of_their_square_the_patch_count_assumes() {
 #[test]
 fn automatic_patches_copy_under_a_third_of_the_exemplar_and_cover_it() {
     use surfsynth::stages::lapped_paste::{LappedPasteSettings, SPLOTCH_FILL, auto_patches};
-    let auto = LappedPasteSettings::default();
+    let matched = LappedPasteSettings::default();
     assert_eq!(
-        (auto.patch_pixels, auto.patches),
+        (matched.patch_pixels, matched.patches),
         (0, 0),
         "both automatic by default"
     );
+    // The paper's random draw: the cover rule alone.
+    let auto = LappedPasteSettings {
+        choice: "random".into(),
+        ..matched.clone()
+    };
     // A large mesh against a 128² exemplar: the side cap binds.
     let (px, n) = auto_patches(&auto, (128, 128), 1.0, 10_000.0);
     assert_eq!(px, 96);
@@ -1230,7 +1235,22 @@ fn automatic_patches_copy_under_a_third_of_the_exemplar_and_cover_it() {
     let fixed = LappedPasteSettings {
         patch_pixels: 32,
         patches: 3,
-        ..auto
+        ..auto.clone()
     };
     assert_eq!(auto_patches(&fixed, (128, 128), 1.0, 10_000.0), (32, 3));
+    // The matched choice (the default) gets more candidates, within the
+    // pixel budget: 48 of 96², but a large exemplar's large patches are
+    // bounded by the budget (and never fewer than the cover rule's).
+    use surfsynth::stages::lapped_paste::{MATCHED_PATCH_PIXELS, MATCHED_PATCHES};
+    assert_eq!(
+        auto_patches(&matched, (128, 128), 1.0, 10_000.0),
+        (96, MATCHED_PATCHES)
+    );
+    let (px, n) = auto_patches(&matched, (1024, 1024), 1.0, 100_000.0);
+    let (_, cover) = auto_patches(&auto, (1024, 1024), 1.0, 100_000.0);
+    assert_eq!(px, 768);
+    assert_eq!(
+        n,
+        cover.max((MATCHED_PATCH_PIXELS / u64::from(px * px)) as u32)
+    );
 }

@@ -400,28 +400,17 @@ fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_othe
     let results = planar_results_without_large_repeats("jump_surface");
     let dir = tempfile::tempdir().unwrap();
     for (texture, ours, peer) in &results {
-        let out = run_at_benchmark_size(
+        let paper = variant_beside(
             "jump_surface",
-            texture,
-            dir.path(),
+            "paper's",
             &[
                 "stage.3.choice=random",
                 "stage.3.refine=none",
                 "stage.3.max_patch_area=0",
                 "stage.3.pixel_aligned=false",
             ],
-        );
-        let ex = surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
-        let (img, sources) = common::gates::plane_result(&out);
-        let paper = common::gates::quality_of(&img, Some(&sources), &ex);
-        println!(
-            "jump_surface on {texture}: coherence mean {:.6} (paper's {:.6}, peer {:.6}), p90 {:.5} (paper's {:.5}, peer {:.5})",
-            ours.coherence_mean,
-            paper.coherence_mean,
-            peer.coherence_mean,
-            ours.coherence_p90,
-            paper.coherence_p90,
-            peer.coherence_p90
+            (texture, ours, peer),
+            dir.path(),
         );
         assert!(
             ours.coherence_mean < paper.coherence_mean,
@@ -435,30 +424,68 @@ fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_othe
 
 /// Lapped textures on the planar benchmark (256² from the 128² shared
 /// photos, `configs/plane/lapped.toml` with its automatic texture patches:
-/// 3/4 of the exemplar's side, enough of them to cover it; vertices on the
-/// output's pixel centres and pixel-aligned pastes) against the peer, on the
-/// parts of issue 13's gate they meet: sharpness ≥ 0.9 of the exemplar's,
-/// structure ≤ the peer's + 0.05, no verbatim region larger than a third of
-/// the exemplar repeated more than twice; and [`common::gates::NEAR_PEER`]'s
-/// histogram bar. With the former 32-pixel patches, structure on planks was
-/// 0.317 against the peer's 0.133; with pastes between pixel centres,
-/// sharpness was 0.82–0.99 (grass and planks under 0.9). Not gated, because
-/// not met yet (issue 13 open), measured (pipeline metrics): coherence mean
-/// 0.67–1.31 × the peer's (brick 1.31), p90 0.82–1.44 × (brick and planks
-/// above 1), completeness 0.45–1.13 × (brick 1.13; 1.15–2.5 × before
-/// patches could hang over the exemplar's border, `PATCH_OVERHANG`).
+/// 3/4 of the exemplar's side, 48 of them for the matched choice; vertices
+/// on the output's pixel centres and pixel-aligned pastes) against the
+/// peer, on issue 13's whole gate ([`common::gates::ISSUE_13`]): coherence
+/// p90 and completeness at most the peer's, coherence mean ≤ 1.1 ×,
+/// sharpness ≥ 0.9, structure ≤ the peer's + 0.05, and no verbatim region
+/// larger than a third of the exemplar repeated more than twice. Against
+/// the paper's random draw of the texture patch (same seed, same patches,
+/// same measure) the coherence p90 must fall on every texture: with it p90
+/// was 0.82–1.44 × the peer's (brick and planks above 1) and the mean up to
+/// 1.31 ×. Over seeds 1–3 (pipeline metrics) the matched choice meets the
+/// gate in 13 of 15 texture × seed cases (brick completeness 1.37 × and
+/// planks p90 1.07 × at one seed each); the config's seed is 1.
 #[test]
-fn lapped_on_the_plane_keeps_the_exemplars_structure_without_large_verbatim_copies() {
-    let gate = common::gates::Gate {
-        coherence_mean: f32::INFINITY,
-        coherence_p90: f32::INFINITY,
-        completeness: f32::INFINITY,
-        structure_above: 0.05,
-        sharpness_at_least: 0.9,
-        ..common::gates::NEAR_PEER
-    };
+fn lapped_on_the_plane_meets_issue_13s_gate_and_beats_the_random_draw() {
     let results = planar_results_without_large_repeats("lapped");
-    common::gates::assert_all_near_peer(&results, &gate);
+    let dir = tempfile::tempdir().unwrap();
+    for (texture, ours, peer) in &results {
+        let random = variant_beside(
+            "lapped",
+            "random draw",
+            &["stage.2.choice=random"],
+            (texture, ours, peer),
+            dir.path(),
+        );
+        assert!(
+            ours.coherence_p90 < random.coherence_p90,
+            "{texture}: coherence p90 {} vs the random draw's {}",
+            ours.coherence_p90,
+            random.coherence_p90
+        );
+    }
+    common::gates::assert_all_near_peer(&results, &common::gates::ISSUE_13);
+}
+
+/// `configs/plane/METHOD.toml` with the overrides `sets` (a variant, e.g.
+/// the paper's behaviour) on `texture` at the benchmark's size, measured
+/// with the gate's measure and printed beside `ours` and the peer's.
+fn variant_beside(
+    method: &str,
+    label: &str,
+    sets: &[&str],
+    (texture, ours, peer): (
+        &str,
+        &surfsynth::kernels::metrics::ImageQuality,
+        &surfsynth::kernels::metrics::ImageQuality,
+    ),
+    dir: &Path,
+) -> surfsynth::kernels::metrics::ImageQuality {
+    let out = run_at_benchmark_size(method, texture, dir, sets);
+    let ex = surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
+    let (img, sources) = common::gates::plane_result(&out);
+    let variant = common::gates::quality_of(&img, Some(&sources), &ex);
+    println!(
+        "{method} on {texture}: coherence mean {:.6} ({label} {:.6}, peer {:.6}), p90 {:.5} ({label} {:.5}, peer {:.5})",
+        ours.coherence_mean,
+        variant.coherence_mean,
+        peer.coherence_mean,
+        ours.coherence_p90,
+        variant.coherence_p90,
+        peer.coherence_p90
+    );
+    variant
 }
 
 /// `configs/plane/METHOD.toml` at the benchmark's size on every shared

@@ -18,6 +18,8 @@
 //! - [`composite`] — the pastes composited in order at any surface point
 //!   (for quality metrics).
 //! - [`paste`] — the paste loop of §3 (until every face is covered).
+//! - [`choice`] — the matched choice of a paste's texture patch (an
+//!   extension: the one that best continues the pastes under its edge).
 //! - [`atlas`] — the texture atlas representation (§4).
 //!
 //! Conventions: a surface patch is parametrised in *patch units* `(s, t)`:
@@ -29,6 +31,7 @@
 //! row ([`mask::TexturePatch::uv_of`]).
 
 pub mod atlas;
+pub mod choice;
 pub mod coverage;
 pub mod grow;
 pub mod hull;

@@ -17,6 +17,7 @@
 //! depend on the number of threads; the coverage rasteriser inside is
 //! parallel over faces.
 
+use super::choice::{FalloffBand, band_errors, best_texture};
 use super::coverage::{Coverage, CoverageSettings, sample_levels};
 use super::grow::{GrowSettings, Grower};
 use super::mask::TexturePatch;
@@ -66,6 +67,11 @@ pub struct PasteSettings {
     /// then samples a pixel centre instead of a bilinear mix of four.
     /// Default false.
     pub pixel_aligned: bool,
+    /// Choose each paste's texture patch by how well its colours continue
+    /// the pastes under its falloff band ([`super::choice`]; an extension,
+    /// false = the paper's random draw, which is still drawn and kept when
+    /// nothing is pasted under the new patch yet). Default false.
+    pub matched: bool,
 }
 
 impl Default for PasteSettings {
@@ -82,6 +88,7 @@ impl Default for PasteSettings {
             max_seeds_per_face: 8,
             seed: 0,
             pixel_aligned: false,
+            matched: false,
         }
     }
 }
@@ -128,6 +135,9 @@ pub struct PasteReport {
     pub unconverged_solves: usize,
     /// Solves done by sparse Cholesky (large patches).
     pub direct_solves: usize,
+    /// Pastes whose matched choice took another texture patch than the
+    /// random draw ([`PasteSettings::matched`]).
+    pub rechosen_pastes: usize,
 }
 
 /// A lapped texture: the pastes in order and the final coverage.
@@ -285,6 +295,11 @@ pub fn paste_until_covered(
         ..settings.grow
     };
     let mut grower = Grower::new(mesh, field, grow);
+    let bands: Vec<FalloffBand> = if settings.matched && textures.len() > 1 {
+        textures.iter().map(FalloffBand::of).collect()
+    } else {
+        Vec::new()
+    };
     // Per paste its texture patch; the faces and coordinates live in the
     // coverage's layer lists until the end.
     let mut pastes: Vec<u32> = Vec::new();
@@ -345,14 +360,35 @@ pub fn paste_until_covered(
                 [1.0 - r1 - r2, r1, r2]
             }
         };
-        let texture = rng.random_range(0..textures.len()) as u32;
+        let mut texture = rng.random_range(0..textures.len()) as u32;
         let angle = rng.random::<f32>() * std::f32::consts::TAU;
-        let patch_tex = &textures[texture as usize];
+        let mut patch_tex = &textures[texture as usize];
 
-        // Grow, flatten, grow again where the optimisation uncovered the
+        // Each candidate's pixel-phase shift (zero without alignment).
+        let shift_of =
+            |tex: &TexturePatch, patch: &super::grow::SurfacePatch| match patch.tris.first() {
+                Some(t) if settings.pixel_aligned => tex.pixel_phase_shift(patch.st[t[0] as usize]),
+                _ => Vec2::ZERO,
+            };
+        // Grow; with the matched choice, rank the texture patches on the
+        // growth's own parametrisation (good enough to rank, and one
+        // flattening instead of two) and grow on over the chosen one's
+        // hull; flatten, grow again where the optimisation uncovered the
         // texture patch.
         let mut patch = grower.start(face, bary, angle);
         grower.grow(&mut patch, &patch_tex.hull);
+        if settings.matched && textures.len() > 1 {
+            let shifts: Vec<Vec2> = textures.iter().map(|t| shift_of(t, &patch)).collect();
+            let errors = band_errors(&coverage, textures, &bands, &patch, &shifts);
+            if let Some(best) = best_texture(&errors)
+                && best as u32 != texture
+            {
+                texture = best as u32;
+                patch_tex = &textures[best];
+                report.rechosen_pastes += 1;
+                report.regrown_faces += grower.grow(&mut patch, &patch_tex.hull);
+            }
+        }
         for round in 0..=settings.regrow_rounds {
             let r = optimise_parametrisation(mesh, &mut patch, &settings.solve);
             report.cg_iterations += r.iterations;
@@ -368,10 +404,8 @@ pub fn paste_until_covered(
             }
         }
 
-        if settings.pixel_aligned
-            && let Some(&v0) = patch.tris.first().map(|t| &t[0])
-        {
-            let shift = patch_tex.pixel_phase_shift(patch.st[v0 as usize]);
+        if settings.pixel_aligned {
+            let shift = shift_of(patch_tex, &patch);
             for st in &mut patch.st {
                 *st += shift;
             }
