@@ -22,19 +22,30 @@ use rayon::prelude::*;
 /// chunks in order, so the result does not depend on the thread count.
 const CHUNK_FACES: usize = 256;
 
+/// Faces per group whose bounding box is tested against every candidate
+/// first: a face is then tested only against the candidates whose band
+/// meets its group's box.
+const GROUP_FACES: usize = 16;
+
 /// A candidate must see at least this share of the best-seen candidate's
 /// band weight, so a patch that overlaps the old pastes in a sliver does
 /// not win on a few samples.
 pub const MIN_WEIGHT_SHARE: f64 = 0.25;
 
-/// The falloff band of a texture patch: per pixel, whether its alpha is
-/// strictly between 0 and 1, with a summed-area table so that a face whose
-/// bounding box misses the band costs one query, not one per sample.
+/// Side in pixels of the blocks [`FalloffBand`] records.
+const BLOCK: i64 = 4;
+
+/// The falloff band of a texture patch: per block of [`BLOCK`]² pixels,
+/// whether one of its pixels has an alpha strictly between 0 and 1, with a
+/// summed-area table over the blocks, so that a face whose bounding box
+/// misses the band costs one query, not one per sample (a few kilobytes
+/// per patch, which stay in cache for every candidate).
 #[derive(Clone, Debug)]
 pub struct FalloffBand {
-    width: i64,
-    height: i64,
-    /// `sat[(y + 1)·(width + 1) + x + 1]`: band pixels `(x', y')` with
+    /// Blocks per row and per column.
+    columns: i64,
+    rows: i64,
+    /// `sat[(y + 1)·(columns + 1) + x + 1]`: band blocks `(x', y')` with
     /// `x' ≤ x`, `y' ≤ y`.
     sat: Vec<u32>,
 }
@@ -42,38 +53,45 @@ pub struct FalloffBand {
 impl FalloffBand {
     /// The band of `texture`.
     pub fn of(texture: &TexturePatch) -> Self {
-        let (w, h) = (texture.image.width as usize, texture.image.height as usize);
-        let mut sat = vec![0u32; (w + 1) * (h + 1)];
+        let (w, h) = (texture.image.width as i64, texture.image.height as i64);
+        let (columns, rows) = ((w + BLOCK - 1) / BLOCK, (h + BLOCK - 1) / BLOCK);
+        let mut band = vec![false; (columns * rows) as usize];
         for y in 0..h {
-            let mut row = 0u32;
             for x in 0..w {
-                let a = texture.alpha[y * w + x];
-                row += u32::from(a > 0.0 && a < 1.0);
-                sat[(y + 1) * (w + 1) + x + 1] = sat[y * (w + 1) + x + 1] + row;
+                let a = texture.alpha[(y * w + x) as usize];
+                if a > 0.0 && a < 1.0 {
+                    band[((y / BLOCK) * columns + x / BLOCK) as usize] = true;
+                }
             }
         }
-        Self {
-            width: w as i64,
-            height: h as i64,
-            sat,
+        let (c, r) = (columns as usize, rows as usize);
+        let mut sat = vec![0u32; (c + 1) * (r + 1)];
+        for y in 0..r {
+            let mut row = 0u32;
+            for x in 0..c {
+                row += u32::from(band[y * c + x]);
+                sat[(y + 1) * (c + 1) + x + 1] = sat[y * (c + 1) + x + 1] + row;
+            }
         }
+        Self { columns, rows, sat }
     }
 
     /// Whether any pixel whose square meets the pixel-coordinate box
-    /// `lo..=hi` (a triangle's bounding box) is in the band.
+    /// `lo..=hi` (a triangle's bounding box) may be in the band (its block
+    /// is).
     #[inline]
     fn box_meets(&self, lo: Vec2, hi: Vec2) -> bool {
         if !(lo.is_finite() && hi.is_finite()) {
             return true;
         }
-        let x0 = floor(lo.x).max(0);
-        let y0 = floor(lo.y).max(0);
-        let x1 = floor(hi.x).min(self.width - 1);
-        let y1 = floor(hi.y).min(self.height - 1);
+        let x0 = floor(lo.x).div_euclid(BLOCK).max(0);
+        let y0 = floor(lo.y).div_euclid(BLOCK).max(0);
+        let x1 = floor(hi.x).div_euclid(BLOCK).min(self.columns - 1);
+        let y1 = floor(hi.y).div_euclid(BLOCK).min(self.rows - 1);
         if x0 > x1 || y0 > y1 {
             return false;
         }
-        let stride = self.width + 1;
+        let stride = self.columns + 1;
         let s = |x: i64, y: i64| self.sat[(y * stride + x) as usize];
         s(x1 + 1, y1 + 1) + s(x0, y0) != s(x0, y1 + 1) + s(x1 + 1, y0)
     }
@@ -99,8 +117,9 @@ fn pixel_at(tex: &TexturePatch, p: Vec2) -> Option<&[f32]> {
 }
 
 /// Per texture patch, `(Σ w · |new − old|², Σ w)` over the coverage
-/// samples of `patch`'s faces (at half the coverage test's subdivision
-/// level), with the texture laid at `patch.st + shifts[t]` (patch units;
+/// samples of `patch`'s faces (at a third of the coverage test's
+/// subdivision level, rounded up: one sample per face at up to 9 pixels
+/// a face), with the texture laid at `patch.st + shifts[t]` (patch units;
 /// the pixel-phase shift of each candidate). Colours and alphas are the
 /// nearest pixel's: this ranks candidates, it does not render them.
 pub fn band_errors(
@@ -133,64 +152,91 @@ pub fn band_errors(
             // The candidates whose band meets the face, with the pixel
             // coordinates of its corners.
             let mut near: Vec<(usize, [Vec2; 3])> = Vec::with_capacity(n);
-            for (i, &f) in faces.iter().enumerate() {
-                let f = f as usize;
-                if coverage.layers(f).next().is_none() {
-                    continue;
-                }
-                let st = patch.tris[ci * CHUNK_FACES + i].map(|v| {
+            let mut group_near: Vec<usize> = Vec::with_capacity(n);
+            // The patch's corners in pixel orientation (`t` up, rows down).
+            let corners = |i: usize| {
+                patch.tris[ci * CHUNK_FACES + i].map(|v| {
                     let p = patch.st[v as usize];
                     Vec2::new(p.x, -p.y)
-                });
-                let (lo, hi) = (st[0].min(st[1]).min(st[2]), st[0].max(st[1]).max(st[2]));
-                near.clear();
+                })
+            };
+            let bounds =
+                |st: &[Vec2; 3]| (st[0].min(st[1]).min(st[2]), st[0].max(st[1]).max(st[2]));
+            for (g, group) in faces.chunks(GROUP_FACES).enumerate() {
+                // The candidates whose band meets the group's bounding box
+                // (faces grow in rings, so a group is a compact strip).
+                let (mut lo, mut hi) = (Vec2::splat(f32::INFINITY), Vec2::splat(f32::NEG_INFINITY));
+                for i in 0..group.len() {
+                    let (l, h) = bounds(&corners(g * GROUP_FACES + i));
+                    (lo, hi) = (lo.min(l), hi.max(h));
+                }
+                group_near.clear();
                 for (t, &(origin, unit)) in place.iter().enumerate() {
                     if bands[t].box_meets(origin + lo * unit, origin + hi * unit) {
-                        near.push((t, st.map(|p| origin + p * unit)));
+                        group_near.push(t);
                     }
                 }
-                if near.is_empty() {
+                if group_near.is_empty() {
                     continue;
                 }
-                let level = (coverage.levels[f] as usize).div_ceil(3);
-                if samples.len() <= level {
-                    samples.resize(level + 1, Vec::new());
-                }
-                if samples[level].is_empty() {
-                    samples[level] = lattice_samples(level as u16);
-                }
-                for &b in &samples[level] {
-                    // What the pastes so far show here (premultiplied).
-                    let (mut c, mut a_old) = ([0.0f32; 3], 0.0f32);
-                    for l in coverage.layers(f) {
-                        let tex = &textures[l.texture as usize];
-                        let uv = l.uv[0] * b[0] + l.uv[1] * b[1] + l.uv[2] * b[2];
-                        let size = Vec2::new(tex.image.width as f32, tex.image.height as f32);
-                        if let Some(px) = pixel_at(tex, uv * size) {
-                            let a = px[3];
-                            for k in 0..3 {
-                                c[k] = c[k] * (1.0 - a) + px[k] * a;
-                            }
-                            a_old = a_old * (1.0 - a) + a;
-                        }
-                    }
-                    if a_old <= 0.0 {
+                for (k, &f) in group.iter().enumerate() {
+                    let i = g * GROUP_FACES + k;
+                    let f = f as usize;
+                    if coverage.layers(f).next().is_none() {
                         continue;
                     }
-                    let old = c.map(|x| x / a_old);
-                    for &(t, corner) in &near {
-                        let p = corner[0] * b[0] + corner[1] * b[1] + corner[2] * b[2];
-                        let Some(px) = pixel_at(&textures[t], p) else {
-                            continue;
-                        };
-                        let a = px[3];
-                        let w = a_old * a * (1.0 - a);
-                        if w <= 0.0 {
+                    let st = corners(i);
+                    let (lo, hi) = bounds(&st);
+                    near.clear();
+                    for &t in &group_near {
+                        let (origin, unit) = place[t];
+                        if bands[t].box_meets(origin + lo * unit, origin + hi * unit) {
+                            near.push((t, st.map(|p| origin + p * unit)));
+                        }
+                    }
+                    if near.is_empty() {
+                        continue;
+                    }
+                    let level = (coverage.levels[f] as usize).div_ceil(3);
+                    if samples.len() <= level {
+                        samples.resize(level + 1, Vec::new());
+                    }
+                    if samples[level].is_empty() {
+                        samples[level] = lattice_samples(level as u16);
+                    }
+                    for &b in &samples[level] {
+                        // What the pastes so far show here (premultiplied).
+                        let (mut c, mut a_old) = ([0.0f32; 3], 0.0f32);
+                        for l in coverage.layers(f) {
+                            let tex = &textures[l.texture as usize];
+                            let uv = l.uv[0] * b[0] + l.uv[1] * b[1] + l.uv[2] * b[2];
+                            let size = Vec2::new(tex.image.width as f32, tex.image.height as f32);
+                            if let Some(px) = pixel_at(tex, uv * size) {
+                                let a = px[3];
+                                for k in 0..3 {
+                                    c[k] = c[k] * (1.0 - a) + px[k] * a;
+                                }
+                                a_old = a_old * (1.0 - a) + a;
+                            }
+                        }
+                        if a_old <= 0.0 {
                             continue;
                         }
-                        let e: f32 = (0..3).map(|k| (px[k] - old[k]) * (px[k] - old[k])).sum();
-                        sums[t].0 += f64::from(w * e);
-                        sums[t].1 += f64::from(w);
+                        let old = c.map(|x| x / a_old);
+                        for &(t, corner) in &near {
+                            let p = corner[0] * b[0] + corner[1] * b[1] + corner[2] * b[2];
+                            let Some(px) = pixel_at(&textures[t], p) else {
+                                continue;
+                            };
+                            let a = px[3];
+                            let w = a_old * a * (1.0 - a);
+                            if w <= 0.0 {
+                                continue;
+                            }
+                            let e: f32 = (0..3).map(|k| (px[k] - old[k]) * (px[k] - old[k])).sum();
+                            sums[t].0 += f64::from(w * e);
+                            sums[t].1 += f64::from(w);
+                        }
                     }
                 }
             }
