@@ -354,20 +354,52 @@ fn collapse_is_simple(p: &[DVec2], i: usize, x: DVec2) -> bool {
 /// first, never self-intersecting. Stops early when no collapse is feasible.
 pub fn simplify_conservative(mut p: Vec<DVec2>, max_vertices: usize) -> Vec<DVec2> {
     let target = max_vertices.max(3);
+    // Each edge's best collapse, kept up to date: a collapse changes only
+    // the four options whose edge windows hold the moved vertex.
+    let mut options: Vec<Option<(f64, DVec2)>> = (0..p.len()).map(|i| collapse(&p, i)).collect();
+    let mut order: Vec<(f64, usize, DVec2)> = Vec::new();
     while p.len() > target {
-        let mut options: Vec<(f64, usize, DVec2)> = (0..p.len())
-            .filter_map(|i| collapse(&p, i).map(|(cost, x)| (cost, i, x)))
-            .collect();
-        options.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
-        let Some(&(_, i, x)) = options
+        // The cheapest option (ties to the lower index); the others in
+        // order only when it would make the polygon self-intersect.
+        let first = options
             .iter()
-            .find(|&&(_, i, x)| collapse_is_simple(&p, i, x))
-        else {
+            .enumerate()
+            .filter_map(|(i, o)| o.map(|(cost, x)| (cost, i, x)))
+            .min_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        let Some(first) = first else {
+            break;
+        };
+        let chosen = if collapse_is_simple(&p, first.1, first.2) {
+            Some(first)
+        } else {
+            order.clear();
+            order.extend(
+                options
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, o)| o.map(|(cost, x)| (cost, i, x))),
+            );
+            order.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+            order
+                .iter()
+                .skip(1)
+                .find(|&&(_, i, x)| collapse_is_simple(&p, i, x))
+                .copied()
+        };
+        let Some((_, i, x)) = chosen else {
             break;
         };
         let n = p.len();
+        let removed = (i + 1) % n;
         p[i] = x;
-        p.remove((i + 1) % n);
+        p.remove(removed);
+        options.remove(removed);
+        let m = p.len();
+        let moved = if removed < i { i - 1 } else { i };
+        for d in 0..4 {
+            let j = (moved + m + d - 2) % m;
+            options[j] = collapse(&p, j);
+        }
     }
     p
 }

@@ -197,7 +197,11 @@ fn edt_1d(f: &[f32], d: &mut [f32]) {
 /// Alpha of each mask pixel: distance to the outside over `falloff` pixels,
 /// clamped to `[0, 1]`; a falloff of 0 gives a hard mask.
 pub fn alpha_from_mask(mask: &Mask, falloff: f32) -> Vec<f32> {
-    let d2 = distance_to_outside_sq(mask);
+    alpha_from_distances(mask, &distance_to_outside_sq(mask), falloff)
+}
+
+/// [`alpha_from_mask`] from the mask's [`distance_to_outside_sq`].
+fn alpha_from_distances(mask: &Mask, d2: &[f32], falloff: f32) -> Vec<f32> {
     d2.iter()
         .zip(&mask.inside)
         .map(|(&d2, &inside)| {
@@ -253,7 +257,8 @@ impl TexturePatch {
             return Err(LappedError::EmptyMask { what: what.into() });
         }
         let (w, h) = (mask.width, mask.height);
-        let alpha = alpha_from_mask(mask, falloff);
+        let d2 = distance_to_outside_sq(mask);
+        let alpha = alpha_from_distances(mask, &d2, falloff);
         let mut image = Image::new(w, h, 4);
         let c = exemplar.channels as usize;
         for y in 0..h {
@@ -270,7 +275,6 @@ impl TexturePatch {
             }
         }
         // The centre: the mean of the pixels farthest from the outside.
-        let d2 = distance_to_outside_sq(mask);
         let best = d2.iter().copied().fold(0.0f32, f32::max);
         let (mut sum, mut n) = (Vec2::ZERO, 0.0f32);
         for (i, &d) in d2.iter().enumerate() {
