@@ -52,7 +52,7 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
 use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appearance_level};
-use super::flatten::{TriangleAdjacency, template_spacing};
+use super::flatten::{TriangleAdjacency, mean_fan_triangle_area, template_spacing};
 use super::frames::TangentFrame;
 use super::wl_match::parents::TriangleBvh;
 use super::wl_match::schedule::{dependency_batches_of, random_order};
@@ -563,12 +563,6 @@ fn energy_sum(
     (sum, nbs.vertex.len())
 }
 
-/// Per-level geometry.
-struct LevelGeometry {
-    adjacency: TriangleAdjacency,
-    spacing: f32,
-}
-
 /// Synthesises exemplar coordinates on every level of `levels` (finest
 /// first), coarse to fine. Returns one [`CoherentLevel`] per level.
 ///
@@ -668,19 +662,17 @@ fn synthesis(
             .map(|lv| lv.mesh.vertex_count() as u64 * passes)
             .sum(),
     );
-    let geometry: Vec<LevelGeometry> = levels
+    // Each level's template spacing; a coarse level's triangle adjacency is
+    // built only when the next finer level is upsampled from it (never for
+    // the finest, e.g. a refinement's only level).
+    let spacings: Vec<f32> = levels
         .iter()
-        .map(|lv| {
-            let adjacency = TriangleAdjacency::new(lv.mesh);
-            let spacing = template_spacing(adjacency.mean_triangle_area(&lv.mesh.positions))
-                .max(f32::MIN_POSITIVE);
-            LevelGeometry { adjacency, spacing }
-        })
+        .map(|lv| template_spacing(mean_fan_triangle_area(lv.mesh)).max(f32::MIN_POSITIVE))
         .collect();
     let scale = if settings.scale > 0.0 {
         settings.scale
     } else {
-        1.0 / geometry[0].spacing
+        1.0 / spacings[0]
     };
     let (w, h) = (exemplar.width, exemplar.height);
     let domain = Domain {
@@ -693,7 +685,7 @@ fn synthesis(
     // Stack levels up to where the window spans the exemplar.
     let max_stack = (w.min(h) as f32).log2().floor().max(0.0) as usize;
     let stack_of = |r: f32| (r.max(1.0).log2().round() as usize).min(max_stack);
-    let ratios: Vec<f32> = geometry.iter().map(|g| g.spacing * scale).collect();
+    let ratios: Vec<f32> = spacings.iter().map(|s| s * scale).collect();
     let stack_count = ratios.iter().map(|&r| stack_of(r)).max().unwrap_or(0) + 1;
     let stack = gaussian_stack(exemplar, stack_count, settings.wrap);
     let window_cap = w.min(h) as f32 / settings.window.max(1) as f32;
@@ -788,16 +780,16 @@ fn synthesis(
                 .collect()
         } else {
             let coarse = &levels[l + 1];
-            let cgeo = &geometry[l + 1];
+            let adjacency = TriangleAdjacency::new(coarse.mesh);
             let parent_coords = &out[l + 1].coords;
-            let bvh = TriangleBvh::new(&cgeo.adjacency, &coarse.mesh.positions);
+            let bvh = TriangleBvh::new(&adjacency, &coarse.mesh.positions);
             positions
                 .par_iter()
                 .map(|&x| {
                     let Some(hit) = bvh.nearest_point(x) else {
                         return Vec2::splat(0.5);
                     };
-                    let tri = cgeo.adjacency.tris[hit.tri as usize];
+                    let tri = adjacency.tris[hit.tri as usize];
                     let k = (0..3)
                         .max_by(|&a, &b| hit.weights[a].total_cmp(&hit.weights[b]).then(b.cmp(&a)))
                         .unwrap_or(0);
@@ -822,7 +814,7 @@ fn synthesis(
         let mut report = CoherentLevelReport {
             level: l,
             vertices: nv,
-            spacing: geometry[l].spacing,
+            spacing: spacings[l],
             texels_per_spacing: ratio,
             stack_level,
             ..Default::default()
