@@ -281,3 +281,69 @@ pub fn best_texture(errors: &[(f64, f64)]) -> Option<usize> {
     }
     best.map(|b| b.1)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+    use crate::image::sample::Wrap;
+    use crate::kernels::lapped::mask::splotch_mask;
+
+    fn patch() -> TexturePatch {
+        let mut ex = Image::new(64, 64, 3);
+        for y in 0..64 {
+            for x in 0..64 {
+                ex.pixel_mut(x, y)
+                    .copy_from_slice(&[x as f32 / 63.0, y as f32 / 63.0, 0.5]);
+            }
+        }
+        TexturePatch::cut(
+            &ex,
+            Wrap::Clamp,
+            [8, 8],
+            &splotch_mask(48, 7),
+            3.0,
+            16,
+            "test",
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn the_band_test_never_misses_a_falloff_pixel_and_skips_the_core() {
+        let tex = patch();
+        let band = FalloffBand::of(&tex);
+        let (w, h) = (tex.image.width as i64, tex.image.height as i64);
+        // Every pixel whose alpha mixes is found by any box around it.
+        let mut mixing = 0;
+        for y in 0..h {
+            for x in 0..w {
+                let a = tex.alpha[(y * w + x) as usize];
+                if a > 0.0 && a < 1.0 {
+                    mixing += 1;
+                    let p = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                    assert!(band.box_meets(p, p), "pixel ({x}, {y}), alpha {a}");
+                    assert!(band.box_meets(p - Vec2::splat(2.7), p + Vec2::splat(0.3)));
+                }
+            }
+        }
+        assert!(mixing > 0);
+        // The opaque core (the centre's block and its neighbours) and the
+        // space far outside the patch are skipped.
+        let c = tex.centre_px;
+        assert!(!band.box_meets(c - Vec2::splat(4.0), c + Vec2::splat(4.0)));
+        assert!(!band.box_meets(Vec2::splat(-40.0), Vec2::splat(-20.0)));
+        assert!(!band.box_meets(Vec2::splat(100.0), Vec2::splat(120.0)));
+    }
+
+    #[test]
+    fn the_least_mean_error_wins_among_candidates_that_see_enough_band() {
+        // Index 1 has the least mean but a sliver of weight: not eligible.
+        let errors = [(4.0, 2.0), (0.01, 0.1), (3.0, 2.0), (5.0, 4.0)];
+        assert_eq!(best_texture(&errors), Some(3));
+        // A tie goes to the lower index.
+        assert_eq!(best_texture(&[(2.0, 1.0), (4.0, 2.0)]), Some(0));
+        // Nothing under the patch: no choice.
+        assert_eq!(best_texture(&[(0.0, 0.0), (0.0, 0.0)]), None);
+    }
+}
