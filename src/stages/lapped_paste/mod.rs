@@ -156,7 +156,7 @@ impl StageSettings for LappedPasteSettings {
             name: "patches",
             unit: "",
             range: ParamRange::Int(0, 64),
-            doc: "number of texture patches (each paste picks one at random); extra ones are cut at random places with their own splotch, and from a clamped exemplar may hang over its border by a third of their side (the outside masked out) so that the exemplar's corners and edges appear; 0 = 1 with an explicit tangent_field patch_size, else enough that their splotches (about 47 % of their squares) cover 95 % of the exemplar at random places, at most 16",
+            doc: "number of texture patches (each paste draws one at random, or with choice = \"matched\" takes the best-matching one); extra ones are cut at random places with their own splotch, and from a clamped exemplar may hang over its border by a third of their side (the outside masked out) so that the exemplar's corners and edges appear; 0 = 1 with an explicit tangent_field patch_size, else enough that their splotches (about 47 % of their squares) cover 95 % of the exemplar at random places, at most 16, and with choice = \"matched\" at least 48 while all patches together hold at most 4 M pixels",
         },
         ParamDoc {
             name: "patch_pixels",
@@ -240,7 +240,7 @@ impl StageSettings for LappedPasteSettings {
             name: "choice",
             unit: "",
             range: ParamRange::OneOf(&["random", "matched"]),
-            doc: "how a paste's texture patch is chosen: \"random\" = the paper's draw; \"matched\" (an extension, image quilting's choice step on the surface) = after growing and flattening the surface patch, each texture patch is laid on it and the one whose colours best continue the pastes already under its falloff band wins (the random draw is kept where nothing is pasted under it yet); only differs with more than one texture patch",
+            doc: "how a paste's texture patch is chosen: \"random\" = the paper's draw; \"matched\" (an extension, image quilting's choice step on the surface) = after growing the surface patch, each texture patch is laid on it and the one whose colours best continue the pastes already under its falloff band (mean squared difference weighted by alpha·(1 − alpha)) wins, and the patch grows on over its hull before flattening (the random draw is kept where nothing is pasted under it yet); with automatic patches 48 candidates (fewer for very large patches); only differs with more than one texture patch. Planar benchmark: coherence p90 on brick 1.44 → 0.68 × the peer's, planks 1.36 → 0.91 ×",
         },
         ParamDoc {
             name: "atlas_size",
