@@ -8,7 +8,9 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::jump_map::Boundary;
-use crate::kernels::jump_map::refine::{SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, refine_seams};
+use crate::kernels::jump_map::refine::{
+    SEAM_REFINE_LEVELS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, refine_seams_pyramid,
+};
 use crate::kernels::jump_map::{
     ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelChoice,
     PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
@@ -132,7 +134,7 @@ impl StageSettings for JumpImageSettings {
             name: "refine",
             unit: "",
             range: ParamRange::OneOf(&["seams", "none"]),
-            doc: "pixel: seams = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates); none = the paper's result",
+            doc: "pixel: seams = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates), first on the source map and exemplar halved (windows then see twice the structure; a moved coarse pixel sets its 2x2 block to its donor's fine continuation), then at full size; none = the paper's result",
         },
         ParamDoc {
             name: "boundary_fraction",
@@ -319,12 +321,13 @@ impl Stage for JumpImage {
                 .map(|mut o| {
                     if settings.refine == "seams" {
                         progress.start_part("seams", 0);
-                        let report = refine_seams(
+                        let report = refine_seams_pyramid(
                             &mut o.sources,
                             ex,
                             map.boundary() == Boundary::Toroidal,
                             SEAM_REFINE_PASSES,
                             SEAM_REFINE_RADIUS,
+                            SEAM_REFINE_LEVELS,
                             &progress,
                         );
                         refined = Some(report);
@@ -353,6 +356,7 @@ impl Stage for JumpImage {
             if let Some(r) = refined {
                 metrics.record(ctx.index, "refine_visited", r.visited);
                 metrics.record(ctx.index, "refine_moved", r.moved);
+                metrics.record(ctx.index, "refine_levels", SEAM_REFINE_LEVELS);
             }
             let px = image.pixel_count() as f64;
             metrics.record(ctx.index, "pixels", px);
