@@ -1,9 +1,10 @@
 //! Matched texture choice for a paste (an extension of Praun et al. 2000,
-//! whose paste loop draws the texture patch at random): the grown and
-//! flattened surface patch is laid with each texture patch in turn, and
-//! the one whose colours best continue what the pastes so far show under
-//! its edge wins — the choice step of image quilting (Efros & Freeman
-//! 2001), on the surface.
+//! whose paste loop draws the texture patch at random): the grown surface
+//! patch, on its growth's parametrisation (before the least-squares
+//! flattening, which then runs once for the chosen patch), is laid with
+//! each texture patch in turn, and the one whose colours best continue what
+//! the pastes so far show under its edge wins — the choice step of image
+//! quilting (Efros & Freeman 2001), on the surface.
 //!
 //! The comparison runs where a seam can be seen: at the coverage samples of
 //! the patch's faces, weighted by `A · α (1 − α)`, with `α` the candidate's
