@@ -142,37 +142,9 @@ impl TriangleAdjacency {
     }
 
     /// Mean triangle area over `positions` (0 without triangles): the `A` of
-    /// The mean area of `mesh`'s fan triangles, exactly
-    /// [`TriangleAdjacency::mean_triangle_area`] of its adjacency (same
-    /// triangles, same order) without building the adjacency (about 200 bytes
-    /// per vertex at its peak, for one number).
-    pub fn mean_fan_triangle_area(mesh: &PolyMesh) -> f32 {
-        let p = &mesh.positions;
-        let (mut sum, mut n) = (0.0f64, 0usize);
-        for face in mesh.faces() {
-            for k in 1..face.len().saturating_sub(1) {
-                let [a, b, c] = [face[0], face[k], face[k + 1]].map(|v| p[v as usize]);
-                sum += 0.5 * (b - a).cross(c - a).length() as f64;
-                n += 1;
-            }
-        }
-        if n == 0 { 0.0 } else { (sum / n as f64) as f32 }
-    }
-
     /// Wei & Levoy's template spacing `d = √(2A)`.
     pub fn mean_triangle_area(&self, positions: &[Vec3]) -> f32 {
-        if self.tris.is_empty() {
-            return 0.0;
-        }
-        let sum: f64 = self
-            .tris
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|v| positions[v as usize]);
-                0.5 * (b - a).cross(c - a).length() as f64
-            })
-            .sum();
-        (sum / self.tris.len() as f64) as f32
+        mean_area(self.tris.iter().copied(), positions)
     }
 }
 
@@ -181,14 +153,20 @@ impl TriangleAdjacency {
 /// triangles, same order) without building the adjacency (about 200 bytes
 /// per vertex at its peak, for one number).
 pub fn mean_fan_triangle_area(mesh: &PolyMesh) -> f32 {
-    let p = &mesh.positions;
+    let fans = mesh.faces().flat_map(|face| {
+        (1..face.len().saturating_sub(1)).map(move |k| [face[0], face[k], face[k + 1]])
+    });
+    mean_area(fans, &mesh.positions)
+}
+
+/// Mean area of `tris` over `positions` (0 without triangles), summed in
+/// order in f64.
+fn mean_area(tris: impl Iterator<Item = [u32; 3]>, positions: &[Vec3]) -> f32 {
     let (mut sum, mut n) = (0.0f64, 0usize);
-    for face in mesh.faces() {
-        for k in 1..face.len().saturating_sub(1) {
-            let [a, b, c] = [face[0], face[k], face[k + 1]].map(|v| p[v as usize]);
-            sum += 0.5 * (b - a).cross(c - a).length() as f64;
-            n += 1;
-        }
+    for t in tris {
+        let [a, b, c] = t.map(|v| positions[v as usize]);
+        sum += 0.5 * (b - a).cross(c - a).length() as f64;
+        n += 1;
     }
     if n == 0 { 0.0 } else { (sum / n as f64) as f32 }
 }
@@ -687,6 +665,28 @@ pub fn resample_stencil(
 mod tests {
     use super::*;
     use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
+
+    #[test]
+    fn the_fan_mean_area_is_the_adjacencys_bit_for_bit() {
+        // Triangles, a quad and a pentagon (fan-triangulated), and a sphere.
+        let mut m = PolyMesh::new();
+        m.positions = vec![
+            Vec3::ZERO,
+            Vec3::new(1.0, 0.1, 0.0),
+            Vec3::new(1.3, 1.0, 0.2),
+            Vec3::new(0.0, 1.2, 0.0),
+            Vec3::new(-0.7, 0.5, 0.3),
+        ];
+        m.push_face(&[0, 1, 2]);
+        m.push_face(&[0, 2, 3, 4]);
+        m.push_face(&[0, 1, 2, 3, 4]);
+        let sphere = builtin_mesh("icosphere", &BuiltinOptions::default()).unwrap();
+        for mesh in [&m, &sphere] {
+            let adj = TriangleAdjacency::new(mesh).mean_triangle_area(&mesh.positions);
+            assert_eq!(mean_fan_triangle_area(mesh).to_bits(), adj.to_bits());
+        }
+        assert_eq!(mean_fan_triangle_area(&PolyMesh::new()), 0.0);
+    }
 
     /// A planar grid with vertex `(x, y)` at `(x·h, −y·h, 0)` (rows run down
     /// like an image), counter-clockwise about +Z; quads or split triangles.

@@ -6,7 +6,7 @@
 //! benches. The input mesh is left as it is; level 0 becomes the active mesh.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::flatten::{TriangleAdjacency, template_spacing};
+use crate::kernels::flatten::{mean_fan_triangle_area, template_spacing};
 use crate::mesh::PolyMesh;
 use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
@@ -211,7 +211,7 @@ impl Stage for BuiltinPyramid {
             let counts: Vec<usize> = meshes.iter().map(PolyMesh::vertex_count).collect();
             metrics.record(ctx.index, "vertices_per_level", &counts);
             if let Some(m) = meshes.first() {
-                let a = TriangleAdjacency::new(m).mean_triangle_area(&m.positions);
+                let a = mean_fan_triangle_area(m);
                 spacing.0 = template_spacing(a).max(f32::MIN_POSITIVE);
             }
             let mut finest = None;
