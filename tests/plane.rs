@@ -458,6 +458,57 @@ fn lapped_on_the_plane_meets_issue_13s_gate_and_beats_the_random_draw() {
     common::gates::assert_all_near_peer(&results, &common::gates::ISSUE_13);
 }
 
+/// Jump-map pixels on the planar benchmark (`configs/plane/jump_pixel.toml`
+/// with the stage's defaults: the matched choice over every synthesised
+/// neighbour's jumps, then the seam refinement) against the peer. Brick,
+/// grass, stones and water meet issue 13's whole gate
+/// ([`common::gates::ISSUE_13`]); planks meets all but the coherence mean
+/// and p90, which are printed, not gated (issue 13 open: over seeds 1–3,
+/// pipeline metrics, 1.06–1.33 × and 1.18–1.33 × the peer's; lines that
+/// step where a jump lands at another plank phase). Against the paper's
+/// random choice with the same refinement (same seed, same measure) the
+/// coherence p90 must fall on brick and planks, where the random choice
+/// tears courses and lines (p90 1.25 × and 1.69 × the peer's, pipeline
+/// metrics), and stay within 5 % on the stochastic photos (grass: 0.00868
+/// vs 0.00865, both under the peer's 0.00930).
+#[test]
+fn jump_pixel_on_the_plane_meets_issue_13s_gate_but_planks_coherence_and_beats_the_random_choice() {
+    let results = planar_results_without_large_repeats("jump_pixel");
+    let dir = tempfile::tempdir().unwrap();
+    for (texture, ours, peer) in &results {
+        let random = variant_beside(
+            "jump_pixel",
+            "random choice",
+            &["stage.2.choice=random"],
+            (texture, ours, peer),
+            dir.path(),
+        );
+        // Structured photos (courses, plank lines) are where the random
+        // choice tears; on the stochastic ones both are within noise.
+        let bound = if matches!(texture.as_str(), "brick" | "planks") {
+            random.coherence_p90
+        } else {
+            1.05 * random.coherence_p90
+        };
+        assert!(
+            ours.coherence_p90 < bound,
+            "{texture}: coherence p90 {} vs the random choice's {}",
+            ours.coherence_p90,
+            random.coherence_p90
+        );
+    }
+    let (planks, others): (Vec<_>, Vec<_>) = results.into_iter().partition(|r| r.0 == "planks");
+    common::gates::assert_all_near_peer(&others, &common::gates::ISSUE_13);
+    common::gates::assert_all_near_peer(
+        &planks,
+        &common::gates::Gate {
+            coherence_mean: f32::INFINITY,
+            coherence_p90: f32::INFINITY,
+            ..common::gates::ISSUE_13
+        },
+    );
+}
+
 /// `configs/plane/METHOD.toml` with the overrides `sets` (a variant, e.g.
 /// the paper's behaviour) on `texture` at the benchmark's size, measured
 /// with the gate's measure and printed beside `ours` and the peer's.
