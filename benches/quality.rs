@@ -678,7 +678,8 @@ fn main() {
         out.display(),
         s = knobs.size
     );
-    let settings = EnergySettings::default();
+    // The gates' measure: every window of a 256² result.
+    let settings = gates::gate_settings();
     let mut rows = Vec::new();
     for (texture, path) in &knobs.textures {
         let exemplar = match load_image(path) {

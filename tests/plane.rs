@@ -386,10 +386,12 @@ fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
 /// the exemplar repeated more than twice. Against the paper's behaviour
 /// (the four options off, same seed, same measure) the coherence mean must
 /// fall on every texture. Coherence mean and p90 against the peer are
-/// printed, not gated (issue 13 open): measured 0.66–1.30 × and 0.81–1.07 ×
-/// here (brick mean 1.30 ×, water p90 1.07 ×); with the paper's behaviour
-/// 1.19–1.62 × and 0.80–1.64 ×, and sharpness 0.87–0.89 on grass, planks
-/// and water (every patch resampled at its start's sub-pixel phase).
+/// printed, not gated (issue 13 open): over every window (the gates'
+/// measure since stop 29) 0.68–0.99 × and 0.60–1.002 × (water p90 0.00523
+/// vs the peer's 0.00522; with 1000 sampled windows brick's mean read
+/// 1.30 ×); with the paper's behaviour 1.19–1.62 × and 0.80–1.64 × (1000
+/// windows), and sharpness 0.87–0.89 on grass, planks and water (every
+/// patch resampled at its start's sub-pixel phase).
 #[test]
 fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_other_gates() {
     let gate = common::gates::Gate {
@@ -462,17 +464,17 @@ fn lapped_on_the_plane_meets_issue_13s_gate_and_beats_the_random_draw() {
 /// with the stage's defaults: the matched choice over every synthesised
 /// neighbour's jumps, then the seam refinement) against the peer. Brick,
 /// grass, stones and water meet issue 13's whole gate
-/// ([`common::gates::ISSUE_13`]); planks meets all but the coherence mean
-/// and p90, which are printed, not gated (issue 13 open: over seeds 1–3,
-/// pipeline metrics, 1.06–1.33 × and 1.18–1.33 × the peer's; lines that
-/// step where a jump lands at another plank phase). Against the paper's
+/// ([`common::gates::ISSUE_13`]); planks meets all but the coherence p90,
+/// which is printed, not gated (issue 13 open: 0.00220 vs the peer's
+/// 0.00195, 1.13 ×, over every window; lines that step where a jump lands
+/// at another plank's phase). Against the paper's
 /// random choice with the same refinement (same seed, same measure) the
 /// coherence p90 must fall on brick and planks, where the random choice
 /// tears courses and lines (p90 1.25 × and 1.69 × the peer's, pipeline
 /// metrics), and stay within 5 % on the stochastic photos (grass: 0.00868
 /// vs 0.00865, both under the peer's 0.00930).
 #[test]
-fn jump_pixel_on_the_plane_meets_issue_13s_gate_but_planks_coherence_and_beats_the_random_choice() {
+fn jump_pixel_on_the_plane_meets_issue_13s_gate_but_planks_p90_and_beats_the_random_choice() {
     let results = planar_results_without_large_repeats("jump_pixel");
     let dir = tempfile::tempdir().unwrap();
     for (texture, ours, peer) in &results {
@@ -502,7 +504,6 @@ fn jump_pixel_on_the_plane_meets_issue_13s_gate_but_planks_coherence_and_beats_t
     common::gates::assert_all_near_peer(
         &planks,
         &common::gates::Gate {
-            coherence_mean: f32::INFINITY,
             coherence_p90: f32::INFINITY,
             ..common::gates::ISSUE_13
         },
