@@ -57,7 +57,7 @@ use std::time::Instant;
 
 use surfsynth::config::ConfigSource;
 use surfsynth::image::{Image, load_image};
-use surfsynth::kernels::metrics::{EnergySettings, ImageQuality, SourceMap, image_quality};
+use surfsynth::kernels::metrics::{ImageQuality, SourceMap, image_quality};
 use surfsynth::output::contact_sheet::{SheetLayout, SheetTile, contact_sheet};
 use surfsynth::output::{write_bytes_atomic, write_png};
 use surfsynth::pipeline::{Pipeline, RunOptions};
