@@ -179,20 +179,14 @@ impl EdgeSides {
         let mut corners = vec![[u32::MAX; 2]; ne];
         let mut count = vec![0u32; ne];
         let mut forward = vec![false; mesh.corner_count()];
-        for f in 0..mesh.face_count() {
-            let r = mesh.face_corners(f);
-            let n = r.len();
-            for (i, c) in r.clone().enumerate() {
-                let a = mesh.corner_vertex[c];
-                let b = mesh.corner_vertex[r.start + (i + 1) % n];
-                forward[c] = a < b;
-                let e = topo.corner_edge[c] as usize;
-                if count[e] < 2 {
-                    corners[e][count[e] as usize] = c as u32;
-                }
-                count[e] += 1;
+        crate::mesh::topology::for_each_side(mesh, |a, b, c, _| {
+            forward[c] = a < b;
+            let e = topo.corner_edge[c] as usize;
+            if count[e] < 2 {
+                corners[e][count[e] as usize] = c as u32;
             }
-        }
+            count[e] += 1;
+        });
         Self {
             corners,
             count,

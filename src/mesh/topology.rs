@@ -33,6 +33,24 @@ pub fn edge_key(a: u32, b: u32) -> u64 {
     ((a.min(b) as u64) << 32) | a.max(b) as u64
 }
 
+/// Calls `visit(a, b, corner, face)` for every side of every face in
+/// order: the side from corner `corner` (vertex `a`) to the next corner of
+/// its face (vertex `b`).
+pub fn for_each_side(mesh: &PolyMesh, mut visit: impl FnMut(u32, u32, usize, usize)) {
+    for f in 0..mesh.face_count() {
+        let r = mesh.face_corners(f);
+        let n = r.len();
+        for (i, c) in r.clone().enumerate() {
+            visit(
+                mesh.corner_vertex[c],
+                mesh.corner_vertex[r.start + (i + 1) % n],
+                c,
+                f,
+            );
+        }
+    }
+}
+
 /// The root of `x` in a union–find forest stored as parent links, with
 /// path halving (each visited link is pointed at its grandparent).
 #[inline]
@@ -109,31 +127,17 @@ impl Topology {
         // lower vertex, then each vertex's few sides sorted (linear time;
         // a comparison sort of every side took most of the build).
         let mut bucket_start = vec![0u32; nv + 1];
-        for f in 0..mesh.face_count() {
-            let r = mesh.face_corners(f);
-            let n = r.len();
-            for (i, c) in r.clone().enumerate() {
-                let a = mesh.corner_vertex[c];
-                let b = mesh.corner_vertex[r.start + (i + 1) % n];
-                bucket_start[a.min(b) as usize + 1] += 1;
-            }
-        }
+        for_each_side(mesh, |a, b, _, _| bucket_start[a.min(b) as usize + 1] += 1);
         for i in 0..nv {
             bucket_start[i + 1] += bucket_start[i];
         }
         let mut fill = bucket_start.clone();
         let mut sides: Vec<(u64, u32, u32)> = vec![(0, 0, 0); nc];
-        for f in 0..mesh.face_count() {
-            let r = mesh.face_corners(f);
-            let n = r.len();
-            for (i, c) in r.clone().enumerate() {
-                let a = mesh.corner_vertex[c];
-                let b = mesh.corner_vertex[r.start + (i + 1) % n];
-                let slot = &mut fill[a.min(b) as usize];
-                sides[*slot as usize] = (edge_key(a, b), c as u32, f as u32);
-                *slot += 1;
-            }
-        }
+        for_each_side(mesh, |a, b, c, f| {
+            let slot = &mut fill[a.min(b) as usize];
+            sides[*slot as usize] = (edge_key(a, b), c as u32, f as u32);
+            *slot += 1;
+        });
         drop(fill);
         for v in 0..nv {
             sides[bucket_start[v] as usize..bucket_start[v + 1] as usize].sort_unstable();
