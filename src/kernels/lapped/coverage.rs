@@ -73,9 +73,18 @@ pub fn sample_levels(
 /// The `k²` sample points of a face at level `k`: barycentric coordinates
 /// of the centroids of the sub-triangles of its `k`-fold subdivision.
 pub fn lattice_samples(k: u16) -> Vec<[f32; 3]> {
+    let mut out = Vec::new();
+    lattice_samples_into(k, &mut out);
+    out
+}
+
+/// [`lattice_samples`] into `out` (cleared first), for loops that reuse
+/// one buffer.
+pub fn lattice_samples_into(k: u16, out: &mut Vec<[f32; 3]>) {
+    out.clear();
     let k = k.max(1) as usize;
     let inv = 1.0 / k as f32;
-    let mut out = Vec::with_capacity(k * k);
+    out.reserve(k * k);
     for j in 0..k {
         for i in 0..k - j {
             out.push(lattice_point(i, j, false, inv));
@@ -84,7 +93,6 @@ pub fn lattice_samples(k: u16) -> Vec<[f32; 3]> {
             }
         }
     }
-    out
 }
 
 /// Sample `index` of [`lattice_samples`]`(k)`, the same bits.
@@ -375,25 +383,30 @@ impl Coverage {
             self.added += 1;
         }
         let this = &*self;
+        // Per worker: the face's layers, samples and alphas (no allocation
+        // per face).
+        let scratch = || (Vec::<FaceLayer>::new(), Vec::new(), Vec::new());
         let results: Vec<(f32, Option<u32>, u64)> = faces
             .par_iter()
-            .map(|&f| {
-                let layers: Vec<FaceLayer> = this.layers(f as usize).collect();
+            .map_init(scratch, |(layers, samples, alphas), &f| {
+                layers.clear();
+                layers.extend(this.layers(f as usize));
                 let n = layers.len();
-                let samples = lattice_samples(this.levels[f as usize]);
+                lattice_samples_into(this.levels[f as usize], samples);
                 let mut covered = 0usize;
                 let mut worst: Option<(f32, u32)> = None;
-                let mut alphas = vec![0.0f32; n];
+                alphas.clear();
+                alphas.resize(n, 0.0f32);
                 // Bit k: layer k was seen (not transparent, not hidden) at
                 // some sample; only the first 64 layers are candidates.
                 let m = n.min(64);
                 let all: u64 = if m == 64 { u64::MAX } else { (1u64 << m) - 1 };
                 let mut seen = 0u64;
                 for (index, b) in samples.iter().enumerate() {
-                    for (a, l) in alphas.iter_mut().zip(&layers) {
+                    for (a, l) in alphas.iter_mut().zip(layers.iter()) {
                         *a = textures[l.texture as usize].alpha_at(at(&l.uv, *b));
                     }
-                    let a = accumulated(&alphas);
+                    let a = accumulated(alphas);
                     if a >= settings.opaque {
                         covered += 1;
                     } else if worst.is_none_or(|(w, _)| a < w) {
