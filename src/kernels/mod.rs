@@ -20,6 +20,7 @@ pub mod orientation_field;
 pub mod plane_raster;
 pub mod relax_orientation;
 pub mod retile;
+pub mod simd_state;
 pub mod sqrt2;
 pub mod surface_sample;
 pub mod sweep;

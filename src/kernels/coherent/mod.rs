@@ -216,6 +216,7 @@ fn neighbourhoods(
     list: Option<&[u32]>,
     slot: Vec<u32>,
 ) -> Neighbourhoods {
+    let _s = tracing::info_span!("vertex_neighbourhoods").entered();
     let n = list.map_or(positions.len(), <[u32]>::len);
     let vertex_of = |i: usize| list.map_or(i as u32, |l| l[i]);
     // Per fixed chunk of vertices, flat lists with reused buffers (no
@@ -700,6 +701,7 @@ fn synthesis(
         let nv = positions.len();
         let ratio = ratios[l];
         let stack_level = stack_of(ratio);
+        let app_span = tracing::info_span!("appearance").entered();
         let app = appearance_level(
             &stack[stack_level],
             &AppearanceSpec {
@@ -711,6 +713,7 @@ fn synthesis(
                 wrap: settings.wrap,
             },
         );
+        drop(app_span);
         let analysis_seconds = started.elapsed().as_secs_f64();
         let built;
         let topology = match finest_topology {
@@ -741,6 +744,7 @@ fn synthesis(
         };
         // Mean per-neighbour cost of the band (masked) or of every vertex.
         let level_energy = |coords: &[Vec2]| -> (f32, f32) {
+            let _s = tracing::info_span!("energy").entered();
             match (&whole, &band) {
                 (Some(nbs), _) => (
                     energy(coords, nbs, &app, &domain),
@@ -884,11 +888,14 @@ fn synthesis(
                     Some(l) => &l.slot,
                     None => &position,
                 };
+                let batch_span = tracing::info_span!("dependency_batches").entered();
                 let batches = dependency_batches_of(
                     chunk,
                     |u| place.get(u as usize).copied().filter(|&p| p != u32::MAX),
                     |v| nbs.of(v).0,
                 );
+                drop(batch_span);
+                let _correct_span = tracing::info_span!("correct").entered();
                 batch_count += batches.len();
                 for batch in &batches {
                     let k = Corrector {

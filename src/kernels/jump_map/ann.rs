@@ -173,6 +173,7 @@ fn exhaustive(points: &[f32], dim: usize, m: usize, out: &mut [Neighbour], progr
                     1.0f32,
                     Par::Seq,
                 );
+                crate::kernels::simd_state::after_faer();
                 for (i, (list, thr)) in lists.iter_mut().zip(&mut thrs).enumerate() {
                     let row = &g[i * tn..][..tn];
                     let mut chunks = row.chunks_exact(16);

@@ -91,7 +91,7 @@ pub fn fit(
         par,
         Default::default(),
     );
-    svd::svd(
+    let done = svd::svd(
         a.as_ref(),
         s.as_mut(),
         None,
@@ -99,8 +99,9 @@ pub fn fit(
         par,
         MemStack::new(&mut MemBuffer::new(scratch)),
         Default::default(),
-    )
-    .map_err(|e| JumpMapError::Pca(format!("{e:?}")))?;
+    );
+    crate::kernels::simd_state::after_faer();
+    done.map_err(|e| JumpMapError::Pca(format!("{e:?}")))?;
     let var: Vec<f64> = s.column_vector().iter().map(|x| x * x).collect();
     let total: f64 = var.iter().sum();
     let cap = max_components.clamp(1, size.max(1));
@@ -158,6 +159,7 @@ impl Pca {
                 let lhs = MatRef::from_row_major_slice(&centred, rows, self.dim);
                 let dst = MatMut::from_row_major_slice_mut(o, rows, k);
                 faer::linalg::matmul::matmul(dst, Accum::Replace, lhs, basis, 1.0f32, Par::Seq);
+                crate::kernels::simd_state::after_faer();
             });
         out
     }

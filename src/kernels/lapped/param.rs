@@ -273,13 +273,16 @@ pub fn solve_direct(m: &Csr, bs: &[f64], bt: &[f64]) -> Option<(Vec<f64>, Vec<f6
     triplets.push(Triplet::new(0, 0, 1.0));
     let a = SparseColMat::<u32, f64>::try_new_from_triplets(n, n, &triplets).ok()?;
     drop(triplets);
-    let llt = a.sp_cholesky(faer::Side::Lower).ok()?;
+    let llt = a.sp_cholesky(faer::Side::Lower);
+    crate::kernels::simd_state::after_faer();
+    let llt = llt.ok()?;
     let mut rhs = faer::Mat::<f64>::zeros(n, 2);
     for i in 1..n {
         rhs[(i, 0)] = bs[i];
         rhs[(i, 1)] = bt[i];
     }
     llt.solve_in_place(&mut rhs);
+    crate::kernels::simd_state::after_faer();
     let s: Vec<f64> = (0..n).map(|i| rhs[(i, 0)]).collect();
     let t: Vec<f64> = (0..n).map(|i| rhs[(i, 1)]).collect();
     (s.iter().chain(&t).all(|v| v.is_finite())).then_some((s, t))

@@ -91,6 +91,7 @@ impl NeighbourhoodSearch for Exhaustive {
                     1.0f32,
                     Par::Seq,
                 );
+                crate::kernels::simd_state::after_faer();
                 for (k, best) in keep.iter_mut().enumerate() {
                     let row = &scores[k * tn..(k + 1) * tn];
                     let mut worst = best[KEEP - 1].0;

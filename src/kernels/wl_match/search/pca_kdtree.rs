@@ -115,6 +115,7 @@ pub(crate) fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Ve
         Default::default(),
     )
     .is_ok();
+    crate::kernels::simd_state::after_faer();
     if ok {
         for c in 0..components.min(size) {
             for r in 0..dim {
