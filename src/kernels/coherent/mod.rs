@@ -221,49 +221,57 @@ fn neighbourhoods(
     let vertex_of = |i: usize| list.map_or(i as u32, |l| l[i]);
     // Per fixed chunk of vertices, flat lists with reused buffers (no
     // allocation per vertex); concatenated in vertex order.
+    // `seen[w] == v + 1`: w is already in v's rings (a stamp per searched
+    // vertex, so the per-thread array is never cleared).
     let chunks: Vec<(Vec<u32>, Vec<Vec2>, Vec<u32>)> = (0..n.div_ceil(NEIGHBOURHOOD_CHUNK))
         .into_par_iter()
-        .map(|c| {
-            let vs =
-                (c * NEIGHBOURHOOD_CHUNK..((c + 1) * NEIGHBOURHOOD_CHUNK).min(n)).map(vertex_of);
-            let mut found: Vec<u32> = Vec::new();
-            let mut near: Vec<(f32, u32)> = Vec::new();
-            let mut vertex = Vec::new();
-            let mut offset = Vec::new();
-            let mut counts = Vec::with_capacity(vs.len());
-            for v in vs {
-                found.clear();
-                found.push(v);
-                let mut frontier = 0;
-                for _ in 0..ring {
-                    let end = found.len();
-                    for i in frontier..end {
-                        for &w in topology.neighbours(found[i]) {
-                            if !found.contains(&w) {
-                                found.push(w);
+        .map_init(
+            || vec![0u32; positions.len()],
+            |seen, c| {
+                let vs = (c * NEIGHBOURHOOD_CHUNK..((c + 1) * NEIGHBOURHOOD_CHUNK).min(n))
+                    .map(vertex_of);
+                let mut found: Vec<u32> = Vec::new();
+                let mut near: Vec<(f32, u32)> = Vec::new();
+                let mut vertex = Vec::new();
+                let mut offset = Vec::new();
+                let mut counts = Vec::with_capacity(vs.len());
+                for v in vs {
+                    let stamp = v + 1;
+                    found.clear();
+                    found.push(v);
+                    seen[v as usize] = stamp;
+                    let mut frontier = 0;
+                    for _ in 0..ring {
+                        let end = found.len();
+                        for i in frontier..end {
+                            for &w in topology.neighbours(found[i]) {
+                                if seen[w as usize] != stamp {
+                                    seen[w as usize] = stamp;
+                                    found.push(w);
+                                }
                             }
                         }
+                        frontier = end;
                     }
-                    frontier = end;
+                    let x = positions[v as usize];
+                    near.clear();
+                    near.extend(
+                        found[1..]
+                            .iter()
+                            .map(|&w| ((positions[w as usize] - x).length_squared(), w)),
+                    );
+                    near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                    near.truncate(MAX_NEIGHBOURS);
+                    let f = frames[v as usize];
+                    for &(_, w) in &near {
+                        vertex.push(w);
+                        offset.push(f.texel_offset(positions[w as usize] - x, scale));
+                    }
+                    counts.push(near.len() as u32);
                 }
-                let x = positions[v as usize];
-                near.clear();
-                near.extend(
-                    found[1..]
-                        .iter()
-                        .map(|&w| ((positions[w as usize] - x).length_squared(), w)),
-                );
-                near.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-                near.truncate(MAX_NEIGHBOURS);
-                let f = frames[v as usize];
-                for &(_, w) in &near {
-                    vertex.push(w);
-                    offset.push(f.texel_offset(positions[w as usize] - x, scale));
-                }
-                counts.push(near.len() as u32);
-            }
-            (vertex, offset, counts)
-        })
+                (vertex, offset, counts)
+            },
+        )
         .collect();
     let total: usize = chunks.iter().map(|c| c.0.len()).sum();
     let mut start = Vec::with_capacity(n + 1);
@@ -339,8 +347,8 @@ impl Domain {
     /// The pixel index under a coordinate anywhere (addressed by `wrap`).
     #[inline]
     fn pixel(&self, c: Vec2) -> u32 {
-        let ix = c.x.floor() as i64;
-        let iy = c.y.floor() as i64;
+        let ix = floor_i64(c.x);
+        let iy = floor_i64(c.y);
         let (x, y) = match self.wrap {
             Wrap::Repeat => (
                 ix.rem_euclid(self.w as i64) as u32,
@@ -359,6 +367,16 @@ impl Domain {
     fn centre(&self, p: u32) -> Vec2 {
         Vec2::new((p % self.w) as f32 + 0.5, (p / self.w) as f32 + 0.5)
     }
+}
+
+/// `⌊x⌋` by a truncating cast (the same value as `x.floor() as i64` for
+/// every `f32`, NaN included): without SSE4.1 in the baseline target,
+/// `floor` is a library call, and [`Domain::pixel`] runs for every compared
+/// neighbour.
+#[inline]
+fn floor_i64(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) > x { t - 1 } else { t }
 }
 
 #[inline]

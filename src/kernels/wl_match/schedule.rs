@@ -46,47 +46,32 @@ pub fn dependency_batches_of<'a>(
     position: impl Fn(u32) -> Option<u32>,
     reads: impl Fn(u32) -> &'a [u32],
 ) -> Vec<Vec<u32>> {
-    let m = order.len();
-    // Who reads each listed vertex (by position): the transpose of
-    // `reads`, by counting.
-    let mut start = vec![0u32; m + 1];
-    for &v in order {
-        for &u in reads(v) {
-            if let Some(pu) = position(u) {
-                start[pu as usize + 1] += 1;
-            }
-        }
-    }
-    for i in 0..m {
-        start[i + 1] += start[i];
-    }
-    let mut fill = start.clone();
-    let mut readers = vec![0u32; start[m] as usize];
-    for (pv, &v) in order.iter().enumerate() {
-        for &u in reads(v) {
-            if let Some(pu) = position(u) {
-                readers[fill[pu as usize] as usize] = pv as u32;
-                fill[pu as usize] += 1;
-            }
-        }
-    }
-    let mut batch = vec![0u32; m];
+    // One pass in order. `level[p]` is the batch of the `p`-th vertex once
+    // it is placed, and before that the least batch the earlier vertices
+    // that read it allow: placing a vertex raises the bound of every later
+    // vertex it reads, so a vertex meets both kinds of conflict (earlier
+    // vertices it reads, earlier vertices that read it) without the
+    // transpose of `reads`.
+    let mut level = vec![0u32; order.len()];
+    let mut later: Vec<usize> = Vec::new();
     let mut batches: Vec<Vec<u32>> = Vec::new();
     for (pv, &v) in order.iter().enumerate() {
-        let mut b = 0u32;
+        let mut b = level[pv];
+        later.clear();
         for &u in reads(v) {
-            if let Some(pu) = position(u)
-                && (pu as usize) < pv
-            {
-                b = b.max(batch[pu as usize] + 1);
+            if let Some(pu) = position(u) {
+                let pu = pu as usize;
+                if pu < pv {
+                    b = b.max(level[pu] + 1);
+                } else if pu > pv {
+                    later.push(pu);
+                }
             }
         }
-        for &pr in &readers[start[pv] as usize..start[pv + 1] as usize] {
-            if (pr as usize) < pv {
-                b = b.max(batch[pr as usize] + 1);
-            }
+        level[pv] = b;
+        for &pu in &later {
+            level[pu] = level[pu].max(b + 1);
         }
-        batch[pv] = b;
         if batches.len() <= b as usize {
             batches.resize_with(b as usize + 1, Vec::new);
         }
