@@ -62,17 +62,34 @@ pub struct AppearanceSpec {
     pub wrap: Wrap,
 }
 
+/// The Gaussian weights of a `window × window` neighbourhood
+/// (σ = half the window), row by row.
+fn window_weights(window: u32) -> Vec<f32> {
+    let h = (window / 2) as i32;
+    let sigma = (h.max(1)) as f32;
+    (-h..=h)
+        .flat_map(|dy| (-h..=h).map(move |dx| (dx, dy)))
+        .map(|(dx, dy)| (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp())
+        .collect()
+}
+
 /// The neighbourhood of pixel `(x, y)`: `window²` bilinear samples of
-/// `image` spaced `spacing` apart, Gaussian weighted (σ = half the window),
-/// written into `out`.
-fn neighbourhood(image: &Image, x: u32, y: u32, spec: &AppearanceSpec, out: &mut [f32]) {
+/// `image` spaced `spacing` apart, each times its weight of `weights`
+/// ([`window_weights`]), written into `out`.
+fn neighbourhood(
+    image: &Image,
+    x: u32,
+    y: u32,
+    spec: &AppearanceSpec,
+    weights: &[f32],
+    out: &mut [f32],
+) {
     let ch = image.channels as usize;
     let h = (spec.window / 2) as i32;
-    let sigma = (h.max(1)) as f32;
     let mut i = 0;
     for dy in -h..=h {
         for dx in -h..=h {
-            let w = (-((dx * dx + dy * dy) as f32) / (2.0 * sigma * sigma)).exp();
+            let w = weights[i];
             let px = x as f32 + 0.5 + dx as f32 * spec.spacing;
             let py = y as f32 + 0.5 + dy as f32 * spec.spacing;
             let o = &mut out[i * ch..(i + 1) * ch];
@@ -91,13 +108,14 @@ pub fn appearance_level(image: &Image, spec: &AppearanceSpec) -> AppearanceLevel
     let window = spec.window.max(1) | 1;
     let spec = AppearanceSpec { window, ..*spec };
     let dim = (window * window) as usize * image.channels as usize;
+    let weights = window_weights(window);
     // Fit on an evenly strided sample (deterministic, spread over the image).
     let stride = pixels.div_ceil(FIT_SAMPLE).max(1);
     let sample: Vec<u32> = (0..pixels as u32).step_by(stride).collect();
     let mut data = vec![0.0f32; sample.len() * dim];
     data.par_chunks_mut(dim)
         .zip(&sample)
-        .for_each(|(row, &p)| neighbourhood(image, p % width, p / width, &spec, row));
+        .for_each(|(row, &p)| neighbourhood(image, p % width, p / width, &spec, &weights, row));
     let fitted = FeatureMatrix { dim, data };
     let components = spec.dims.clamp(1, APPEARANCE_DIMS).min(dim);
     let (mean, basis) = fit(&fitted, components, spec.seed);
@@ -106,7 +124,7 @@ pub fn appearance_level(image: &Image, spec: &AppearanceSpec) -> AppearanceLevel
         .map_init(
             || vec![0.0f32; dim],
             |row, p| {
-                neighbourhood(image, p % width, p / width, &spec, row);
+                neighbourhood(image, p % width, p / width, &spec, &weights, row);
                 project(row, &mean, &basis, components)
             },
         )
@@ -120,6 +138,140 @@ pub fn appearance_level(image: &Image, spec: &AppearanceSpec) -> AppearanceLevel
         k,
         similar,
     }
+}
+
+/// Version of the appearance analysis and of its cache entries: bump it
+/// whenever [`appearance_level`] would compute anything else for the same
+/// image and spec, so that older entries no longer match.
+const CACHE_VERSION: u32 = 1;
+
+/// First bytes of a cache entry.
+const CACHE_MAGIC: [u8; 8] = *b"SSAPPEAR";
+
+/// Cache entry kind (file name prefix in the cache folder).
+const CACHE_KIND: &str = "appearance";
+
+/// The cache key of `image` analysed with `spec`: a BLAKE3 hash of the
+/// version, the image (size, channels, every value's bits) and every field
+/// of the spec.
+pub fn cache_key(image: &Image, spec: &AppearanceSpec) -> [u8; 32] {
+    let mut h = blake3::Hasher::new();
+    h.update(&CACHE_MAGIC);
+    h.update(&CACHE_VERSION.to_le_bytes());
+    for v in [image.width, image.height, image.channels] {
+        h.update(&v.to_le_bytes());
+    }
+    h.update(bytemuck::cast_slice::<f32, u8>(&image.data));
+    h.update(&spec.window.to_le_bytes());
+    h.update(&spec.spacing.to_bits().to_le_bytes());
+    h.update(&(spec.dims as u64).to_le_bytes());
+    h.update(&(spec.k as u64).to_le_bytes());
+    h.update(&spec.seed.to_le_bytes());
+    h.update(&[match spec.wrap {
+        Wrap::Repeat => 0u8,
+        Wrap::Clamp => 1,
+    }]);
+    *h.finalize().as_bytes()
+}
+
+impl AppearanceLevel {
+    /// The level as a cache entry: magic, version, `key`, sizes, the
+    /// vectors' and similar sets' raw little-endian values, and a BLAKE3
+    /// checksum of everything before it.
+    pub fn to_bytes(&self, key: &[u8; 32]) -> Vec<u8> {
+        let mut b = Vec::with_capacity(
+            64 + self.vectors.len() * APPEARANCE_DIMS * 4 + self.similar.len() * 4 + 32,
+        );
+        b.extend_from_slice(&CACHE_MAGIC);
+        b.extend_from_slice(&CACHE_VERSION.to_le_bytes());
+        b.extend_from_slice(key);
+        b.extend_from_slice(&self.width.to_le_bytes());
+        b.extend_from_slice(&self.height.to_le_bytes());
+        b.extend_from_slice(&(self.k as u32).to_le_bytes());
+        for v in self.vectors.iter().flatten() {
+            b.extend_from_slice(&v.to_le_bytes());
+        }
+        for s in &self.similar {
+            b.extend_from_slice(&s.to_le_bytes());
+        }
+        let sum = blake3::hash(&b);
+        b.extend_from_slice(sum.as_bytes());
+        b
+    }
+
+    /// The level of a cache entry written by [`Self::to_bytes`] with `key`;
+    /// `None` for any other bytes (wrong magic, version or key, truncated,
+    /// checksum mismatch, sizes that do not add up).
+    pub fn from_bytes(bytes: &[u8], key: &[u8; 32]) -> Option<Self> {
+        const HEAD: usize = 8 + 4 + 32 + 12;
+        if bytes.len() < HEAD + 32 {
+            return None;
+        }
+        let (body, sum) = bytes.split_at(bytes.len() - 32);
+        if blake3::hash(body).as_bytes() != sum
+            || body[..8] != CACHE_MAGIC
+            || body[8..12] != CACHE_VERSION.to_le_bytes()
+            || &body[12..44] != key
+        {
+            return None;
+        }
+        let u32_at = |i: usize| -> Option<u32> {
+            Some(u32::from_le_bytes(body.get(i..i + 4)?.try_into().ok()?))
+        };
+        let (width, height, k) = (u32_at(44)?, u32_at(48)?, u32_at(52)? as usize);
+        let pixels = (width as usize).checked_mul(height as usize)?;
+        let vector_bytes = pixels.checked_mul(APPEARANCE_DIMS * 4)?;
+        let similar_bytes = pixels.checked_mul(k)?.checked_mul(4)?;
+        if body.len() != HEAD.checked_add(vector_bytes)?.checked_add(similar_bytes)? {
+            return None;
+        }
+        let values = &body[HEAD..HEAD + vector_bytes];
+        let vectors = values
+            .chunks_exact(APPEARANCE_DIMS * 4)
+            .map(|c| {
+                let mut v = [0.0f32; APPEARANCE_DIMS];
+                for (o, b) in v.iter_mut().zip(c.chunks_exact(4)) {
+                    *o = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                }
+                v
+            })
+            .collect();
+        let similar = body[HEAD + vector_bytes..]
+            .chunks_exact(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+            .collect();
+        Some(Self {
+            width,
+            height,
+            vectors,
+            k,
+            similar,
+        })
+    }
+}
+
+/// [`appearance_level`] through the on-disk analysis cache in `dir`
+/// (`crate::cache`; `None`: no cache): a valid entry for the same image and
+/// spec is read instead of analysing (the same values, bit for bit); a
+/// missing, stale or corrupt one is rebuilt and written. Returns the level
+/// and whether it came from the cache.
+pub fn appearance_level_cached(
+    image: &Image,
+    spec: &AppearanceSpec,
+    dir: Option<&std::path::Path>,
+) -> (AppearanceLevel, bool) {
+    let Some(dir) = dir else {
+        return (appearance_level(image, spec), false);
+    };
+    let key = cache_key(image, spec);
+    if let Some(level) = crate::cache::read(dir, CACHE_KIND, &key)
+        .and_then(|bytes| AppearanceLevel::from_bytes(&bytes, &key))
+    {
+        return (level, true);
+    }
+    let level = appearance_level(image, spec);
+    crate::cache::write(dir, CACHE_KIND, &key, &level.to_bytes(&key));
+    (level, false)
 }
 
 /// For every pixel, its `k` nearest pixels in appearance space that lie at
@@ -194,6 +346,41 @@ mod tests {
             seed: 1,
             wrap: Wrap::Repeat,
         }
+    }
+
+    #[test]
+    fn cache_entries_round_trip_and_reject_other_keys_and_damage() {
+        let img = stripes(16, 8);
+        let spec = spec();
+        let level = appearance_level(&img, &spec);
+        let key = cache_key(&img, &spec);
+        let bytes = level.to_bytes(&key);
+        let back = AppearanceLevel::from_bytes(&bytes, &key).expect("round trip");
+        assert_eq!(back.vectors, level.vectors);
+        assert_eq!(back.similar, level.similar);
+        assert_eq!((back.width, back.height, back.k), (16, 8, 3));
+        // Another spec is another key.
+        let other = cache_key(
+            &img,
+            &AppearanceSpec {
+                spacing: 1.5,
+                ..spec
+            },
+        );
+        assert_ne!(other, key);
+        assert!(AppearanceLevel::from_bytes(&bytes, &other).is_none());
+        // A flipped bit or a truncated file is rejected.
+        let mut bad = bytes.clone();
+        bad[70] ^= 1;
+        assert!(AppearanceLevel::from_bytes(&bad, &key).is_none());
+        assert!(AppearanceLevel::from_bytes(&bytes[..bytes.len() - 5], &key).is_none());
+        // Through a cache folder: written on the first call, read on the second.
+        let dir = tempfile::tempdir().expect("temp dir");
+        let (a, hit_a) = appearance_level_cached(&img, &spec, Some(dir.path()));
+        let (b, hit_b) = appearance_level_cached(&img, &spec, Some(dir.path()));
+        assert!(!hit_a && hit_b);
+        assert_eq!(a.vectors, b.vectors);
+        assert_eq!(a.similar, b.similar);
     }
 
     #[test]

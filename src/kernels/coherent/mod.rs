@@ -51,7 +51,7 @@ use glam::{Vec2, Vec3};
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
-use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appearance_level};
+use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appearance_level_cached};
 use super::flatten::{TriangleAdjacency, mean_fan_triangle_area, template_spacing};
 use super::frames::TangentFrame;
 use super::wl_match::parents::TriangleBvh;
@@ -98,6 +98,10 @@ pub struct CoherentSettings {
     pub seed: u64,
     /// Exemplar addressing.
     pub wrap: Wrap,
+    /// Read and write each level's appearance analysis (exemplar only) in
+    /// the on-disk analysis cache (`crate::cache::default_dir`, as the jump
+    /// maps'); results are the same bits either way.
+    pub cache: bool,
 }
 
 impl CoherentSettings {
@@ -114,6 +118,7 @@ impl CoherentSettings {
         scale: 0.0,
         seed: 0,
         wrap: Wrap::Repeat,
+        cache: false,
     };
 }
 
@@ -153,6 +158,8 @@ pub struct CoherentLevelReport {
     /// Of `seconds`, the exemplar's appearance space (analysis: the same
     /// for every mesh), seconds.
     pub analysis_seconds: f64,
+    /// Whether the appearance analysis came from the on-disk cache.
+    pub analysis_cached: bool,
 }
 
 /// Coordinates of one level.
@@ -720,17 +727,17 @@ fn synthesis(
         let ratio = ratios[l];
         let stack_level = stack_of(ratio);
         let app_span = tracing::info_span!("appearance").entered();
-        let app = appearance_level(
-            &stack[stack_level],
-            &AppearanceSpec {
-                window: settings.window,
-                spacing: ratio.clamp(1.0, window_cap.max(1.0)),
-                dims: settings.dims,
-                k: settings.k,
-                seed: settings.seed ^ l as u64,
-                wrap: settings.wrap,
-            },
-        );
+        let spec = AppearanceSpec {
+            window: settings.window,
+            spacing: ratio.clamp(1.0, window_cap.max(1.0)),
+            dims: settings.dims,
+            k: settings.k,
+            seed: settings.seed ^ l as u64,
+            wrap: settings.wrap,
+        };
+        let cache_dir = settings.cache.then(crate::cache::default_dir).flatten();
+        let (app, analysis_cached) =
+            appearance_level_cached(&stack[stack_level], &spec, cache_dir.as_deref());
         drop(app_span);
         let analysis_seconds = started.elapsed().as_secs_f64();
         let built;
@@ -966,6 +973,7 @@ fn synthesis(
         }
         report.seconds = started.elapsed().as_secs_f64();
         report.analysis_seconds = analysis_seconds;
+        report.analysis_cached = analysis_cached;
         out[l] = CoherentLevel { coords, report };
     }
     Ok(out)

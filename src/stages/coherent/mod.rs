@@ -59,6 +59,8 @@ pub struct CoherentStageSettings {
     /// Exemplar pixels per world unit; 0 = `[input] texture_scale` (or, when
     /// refining, the scale of the result refined).
     pub scale: f32,
+    /// Read and write the appearance analyses in the on-disk cache.
+    pub cache: bool,
 }
 
 impl Default for CoherentStageSettings {
@@ -75,6 +77,7 @@ impl Default for CoherentStageSettings {
             spread: k.spread,
             coherence: k.coherence,
             scale: k.scale,
+            cache: true,
         }
     }
 }
@@ -140,6 +143,12 @@ impl StageSettings for CoherentStageSettings {
             unit: "exemplar pixels per world unit",
             range: ParamRange::Float(0.0, 1e9),
             doc: "texture scale; 0 = the run's `[input] texture_scale` (start = random; `retile` / `subdivide_sqrt2` derive their density from the same scale, one exemplar pixel per finest vertex spacing √(2·mean triangle area)), or the scale of the result being refined (start = sources); a value here overrides it for this stage",
+        },
+        ParamDoc {
+            name: "cache",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "read and write each level's appearance analysis (exemplar only) in the analysis cache, as jump_map's ($SURFSYNTH_CACHE, else $XDG_CACHE_HOME/surfsynth, else ~/.cache/surfsynth); results are the same either way",
         },
     ];
 
@@ -224,6 +233,7 @@ impl Stage for Coherent {
                 },
                 seed: seed.derive(ctx.index, 0),
                 wrap: exemplar.wrap,
+                cache: settings.cache,
             };
             // The kernel sets the length: vertices times passes.
             let progress = Progress::new(0, Self::KIND);

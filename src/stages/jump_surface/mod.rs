@@ -48,6 +48,9 @@ pub struct JumpSurfaceSettings {
     /// "none" (the paper) or "seams" (extension): coherent correction
     /// passes over the band around the seams.
     pub refine: String,
+    /// Read and write the seam refinement's appearance analysis in the
+    /// on-disk analysis cache.
+    pub cache: bool,
 }
 
 /// The seam refinement's correction (`refine = "seams"`): the coherent
@@ -105,6 +108,7 @@ impl Default for JumpSurfaceSettings {
             pixel_aligned: true,
             choice: "matched".into(),
             refine: "seams".into(),
+            cache: true,
         }
     }
 }
@@ -164,6 +168,12 @@ impl StageSettings for JumpSurfaceSettings {
             unit: "",
             range: ParamRange::OneOf(&["none", "seams"]),
             doc: "none = the paper's result; seams = an extension (the `coherent` stage's kernel): the vertices next to a seam (an edge between two patches) get up to 3 correction passes that may take any neighbour's shifted address, compared in appearance space over three rings; a vertex that moves puts its neighbours back in the band, so seams move to where the patches agree and the rest of each patch stays as copied. Applies on meshes of 0.5 to 2 exemplar pixels per edge with a uniform scale (scale_by_height [1, 1]); skipped otherwise (metric refine_skipped says why)",
+        },
+        ParamDoc {
+            name: "cache",
+            unit: "",
+            range: ParamRange::Any("true | false"),
+            doc: "read and write the seam refinement's appearance analysis (exemplar only) in the analysis cache, as jump_map's ($SURFSYNTH_CACHE, else $XDG_CACHE_HOME/surfsynth, else ~/.cache/surfsynth); results are the same either way",
         },
         ParamDoc {
             name: "pixel_aligned",
@@ -326,6 +336,7 @@ impl Stage for JumpSurface {
                     scale: scales[0],
                     seed: seed.derive(ctx.index, 1),
                     wrap: exemplar.wrap,
+                    cache: settings.cache,
                     ..REFINE_SETTINGS
                 };
                 let start: Vec<Vec2> = out.texel.iter().map(|&t| t + Vec2::splat(0.5)).collect();
@@ -367,6 +378,11 @@ impl Stage for JumpSurface {
                             ctx.index,
                             "refine_analysis_seconds",
                             refined.report.analysis_seconds,
+                        );
+                        metrics.record(
+                            ctx.index,
+                            "refine_analysis_cached",
+                            refined.report.analysis_cached,
                         );
                     }
                     Err(e) => {

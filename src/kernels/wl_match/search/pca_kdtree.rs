@@ -131,6 +131,10 @@ pub(crate) fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Ve
     (mean.into_iter().map(|x| x as f32).collect(), basis)
 }
 
+/// The leading `components` coordinates of `row` in the basis: each
+/// `Σ_j (row_j − mean_j)·basis_cj`, summed in `j` order from −0 (as
+/// `Iterator::sum`), the components side by side so their sums run in
+/// parallel rather than one dependent chain after another.
 #[inline]
 pub(crate) fn project(
     row: &[f32],
@@ -139,15 +143,24 @@ pub(crate) fn project(
     components: usize,
 ) -> [f32; TREE_DIMS] {
     let dim = row.len();
-    let mut out = [0.0f32; TREE_DIMS];
-    for (c, o) in out.iter_mut().enumerate().take(components) {
-        let b = &basis[c * dim..(c + 1) * dim];
-        *o = row
-            .iter()
-            .zip(mean)
-            .zip(b)
-            .map(|((x, m), w)| (x - m) * w)
-            .sum();
+    let mut out = [-0.0f32; TREE_DIMS];
+    if components == TREE_DIMS {
+        for (j, (x, m)) in row.iter().zip(mean).enumerate() {
+            let d = x - m;
+            for (c, o) in out.iter_mut().enumerate() {
+                *o += d * basis[c * dim + j];
+            }
+        }
+    } else {
+        for (j, (x, m)) in row.iter().zip(mean).enumerate() {
+            let d = x - m;
+            for (c, o) in out.iter_mut().enumerate().take(components) {
+                *o += d * basis[c * dim + j];
+            }
+        }
+    }
+    for o in out.iter_mut().skip(components) {
+        *o = 0.0;
     }
     out
 }
