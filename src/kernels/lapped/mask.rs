@@ -48,11 +48,26 @@ impl Mask {
 /// A star-shaped mask of side `size` whose radius at angle `θ` is
 /// `radius(θ)` pixels around the centre (pixel centres are tested).
 fn star_mask(size: u32, radius: impl Fn(f32) -> f32) -> Mask {
+    star_mask_within(size, (0.0, f32::INFINITY), radius)
+}
+
+/// [`star_mask`] for an outline known to lie within `bounds = (lo, hi)`
+/// pixels of the centre: a pixel nearer than `lo` is inside and one
+/// farther than `hi` outside without evaluating `radius` (its angle and
+/// harmonics are the cost), the same mask as [`star_mask`].
+fn star_mask_within(size: u32, bounds: (f32, f32), radius: impl Fn(f32) -> f32) -> Mask {
     let c = size as f32 / 2.0;
     let inside = (0..size * size)
         .map(|i| {
             let d = Vec2::new((i % size) as f32 + 0.5 - c, (i / size) as f32 + 0.5 - c);
-            d.length() <= radius(d.y.atan2(d.x))
+            let len = d.length();
+            if len < bounds.0 {
+                true
+            } else if len > bounds.1 {
+                false
+            } else {
+                len <= radius(d.y.atan2(d.x))
+            }
         })
         .collect();
     Mask {
@@ -74,6 +89,12 @@ pub fn circle_mask(size: u32) -> Mask {
 /// harmonics, between about 55 % and 100 % of the largest radius that keeps
 /// a one-pixel transparent border.
 pub fn splotch_mask(size: u32, seed: u64) -> Mask {
+    splotch(size, seed, true)
+}
+
+/// [`splotch_mask`], with (`bounded`) or without the radii that spare most
+/// pixels the outline's evaluation (the same mask either way).
+fn splotch(size: u32, seed: u64, bounded: bool) -> Mask {
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
     let harmonics: Vec<(f32, f32, f32)> = (2..=6)
         .map(|k| {
@@ -96,7 +117,20 @@ pub fn splotch_mask(size: u32, seed: u64) -> Mask {
     let hi = samples.iter().copied().fold(f32::NEG_INFINITY, f32::max);
     let span = (hi - lo).max(1e-6);
     let r_max = size as f32 / 2.0 - 1.0;
-    star_mask(size, |theta| {
+    // Between two of the 720 samples the shape moves at most
+    // `Σ k·a_k · (half a step)` from the nearer one, so the outline lies
+    // within these radii (with a margin for rounding).
+    let slope: f32 = harmonics.iter().map(|&(k, a, _)| k * a).sum();
+    let drift = slope * std::f32::consts::TAU / 720.0 / 2.0;
+    let bounds = if bounded {
+        (
+            r_max * (0.55 - 0.45 * drift / span) * (1.0 - 1e-3) - 1e-3,
+            r_max * (1.0 + 0.45 * drift / span) * (1.0 + 1e-3) + 1e-3,
+        )
+    } else {
+        (0.0, f32::INFINITY)
+    };
+    star_mask_within(size, bounds, |theta| {
         r_max * (0.55 + 0.45 * (shape(theta) - lo) / span)
     })
 }
@@ -398,6 +432,19 @@ mod tests {
         assert!((row[first] - 1.0 / 3.0).abs() < 1e-6, "{row:?}");
         assert!((row[first + 1] - 2.0 / 3.0).abs() < 1e-6, "{row:?}");
         assert_eq!(row[first + 2], 1.0, "{row:?}");
+    }
+
+    #[test]
+    fn splotch_bounds_change_no_pixel() {
+        for seed in 0..40u64 {
+            for size in [8u32, 17, 32, 96, 161] {
+                assert_eq!(
+                    splotch(size, seed, true).inside,
+                    splotch(size, seed, false).inside,
+                    "seed {seed}, size {size}"
+                );
+            }
+        }
     }
 
     #[test]

@@ -45,6 +45,7 @@ use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use components::*;
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -474,7 +475,9 @@ pub fn texture_patches(
             "patch_pixels = {side} is too small; use at least 8"
         ));
     }
+    // Each patch from its own seed stream: cut in parallel, in order.
     (0..settings.patches)
+        .into_par_iter()
         .map(|k| {
             let stream = mix(seed, k as u64, 1);
             // Patches after the first may hang over a clamped exemplar's
@@ -721,6 +724,7 @@ impl Stage for LappedPaste {
             } else if settings.patches == 0 {
                 settings.patches = 1;
             }
+            let texture_span = tracing::info_span!("texture_patches").entered();
             let textures = match texture_patches(
                 &exemplar.image,
                 exemplar.wrap,
@@ -734,6 +738,7 @@ impl Stage for LappedPaste {
                     return;
                 }
             };
+            drop(texture_span);
             let paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
             let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
             // A field in world units per pixel is read in patch units
@@ -759,10 +764,12 @@ impl Stage for LappedPaste {
             let progress = Progress::new(tri.face_count() as u64, "lapped_paste");
             let out = paste_until_covered(&tri, view, &textures, &paste_settings, &progress);
             progress.finish();
+            let drawn_span = tracing::info_span!("drawn_faces").entered();
             let sizes: Vec<usize> = out.pastes.iter().map(|p| p.faces.len()).collect();
             let drawn = drawn_faces(&out.coverage, &sizes, &textures, &paste_settings.coverage);
             let draws: usize = drawn.iter().map(|d| d.iter().filter(|&&x| x).count()).sum();
             let draws_per_face = draws as f64 / tri.face_count().max(1) as f64;
+            drop(drawn_span);
             record_metrics(&mut metrics, ctx.index, &out, draws_per_face, &textures);
 
             // World units per exemplar texel, for the quality metrics.
