@@ -132,41 +132,63 @@ pub fn face_coefficients(mesh: &TriMesh, f: usize, t: Vec3) -> ([f64; 3], [f64; 
 /// vertices.
 pub fn alignment_system(mesh: &TriMesh, patch: &SurfacePatch) -> (Csr, Vec<f64>, Vec<f64>) {
     let n = patch.vertices.len();
-    let mut triplets: Vec<(u32, u32, f64)> = Vec::with_capacity(9 * patch.faces.len());
     let mut bs = vec![0.0f64; n];
     let mut bt = vec![0.0f64; n];
+    // Per face its 3 × 3 block, bucketed by row (counting sort, faces in
+    // order), then each row's entries ordered by column (stable: equal
+    // columns are summed in face order) and merged.
+    let mut count = vec![0u32; n + 1];
+    for tri in patch.tris.iter().take(patch.faces.len()) {
+        for &r in tri {
+            count[r as usize + 1] += 3;
+        }
+    }
+    for r in 0..n {
+        count[r + 1] += count[r];
+    }
+    let mut fill = count.clone();
+    let mut entries: Vec<(u32, f64)> = vec![(0, 0.0); count[n] as usize];
     for (lf, &f) in patch.faces.iter().enumerate() {
         let (alpha, beta) = face_coefficients(mesh, f as usize, patch.face_t[lf]);
         let tri = patch.tris[lf];
         for i in 0..3 {
-            bs[tri[i] as usize] += beta[i];
-            bt[tri[i] as usize] += alpha[i];
+            let r = tri[i] as usize;
+            bs[r] += beta[i];
+            bt[r] += alpha[i];
             for j in 0..3 {
-                triplets.push((tri[i], tri[j], alpha[i] * alpha[j] + beta[i] * beta[j]));
+                entries[fill[r] as usize] = (tri[j], alpha[i] * alpha[j] + beta[i] * beta[j]);
+                fill[r] += 1;
             }
         }
     }
-    triplets.sort_unstable_by_key(|&(r, c, _)| (r, c));
     let mut m = Csr {
         start: vec![0; n + 1],
-        col: Vec::with_capacity(triplets.len() / 2),
-        val: Vec::with_capacity(triplets.len() / 2),
+        col: Vec::with_capacity(entries.len() / 2),
+        val: Vec::with_capacity(entries.len() / 2),
     };
-    let mut last: Option<(u32, u32)> = None;
-    for (r, c, v) in triplets {
-        if last == Some((r, c)) {
-            if let Some(x) = m.val.last_mut() {
-                *x += v;
-            }
-        } else {
-            m.col.push(c);
-            m.val.push(v);
-            m.start[r as usize + 1] += 1;
-            last = Some((r, c));
-        }
-    }
     for r in 0..n {
-        m.start[r + 1] += m.start[r];
+        let row = &mut entries[count[r] as usize..count[r + 1] as usize];
+        // Rows hold a few dozen entries: insertion sort, stable.
+        for i in 1..row.len() {
+            let mut k = i;
+            while k > 0 && row[k - 1].0 > row[k].0 {
+                row.swap(k - 1, k);
+                k -= 1;
+            }
+        }
+        let mut last = u32::MAX;
+        for &(c, v) in row.iter() {
+            if c == last {
+                if let Some(x) = m.val.last_mut() {
+                    *x += v;
+                }
+            } else {
+                m.col.push(c);
+                m.val.push(v);
+                last = c;
+            }
+        }
+        m.start[r + 1] = m.col.len() as u32;
     }
     (m, bs, bt)
 }
