@@ -379,26 +379,22 @@ fn jump_surface_on_a_grid_plane_repeats_no_large_region_more_than_twice() {
 /// `jump_surface` on the planar benchmark (256² from the 128² shared
 /// photos, `configs/plane/jump_surface.toml` with the stage's defaults:
 /// pixel-aligned starts, patches capped at a quarter of the exemplar, the
-/// matched choice and the seam refinement) against the peer, on the parts
-/// of issue 13's gate ([`common::gates::ISSUE_13`]) it meets on every
-/// texture: completeness ≤ the peer's, sharpness ≥ 0.9, structure ≤ the
-/// peer's + 0.05, histogram, and no verbatim region larger than a third of
-/// the exemplar repeated more than twice. Against the paper's behaviour
-/// (the four options off, same seed, same measure) the coherence mean must
-/// fall on every texture. Coherence mean and p90 against the peer are
-/// printed, not gated (issue 13 open): over every window (the gates'
-/// measure since stop 29) 0.68–0.99 × and 0.60–1.002 × (water p90 0.00523
-/// vs the peer's 0.00522; with 1000 sampled windows brick's mean read
-/// 1.30 ×); with the paper's behaviour 1.19–1.62 × and 0.80–1.64 × (1000
-/// windows), and sharpness 0.87–0.89 on grass, planks and water (every
-/// patch resampled at its start's sub-pixel phase).
+/// matched choice over four rings and the seam refinement) against the
+/// peer, on issue 13's whole gate ([`common::gates::ISSUE_13`]): coherence
+/// p90 and completeness at most the peer's, coherence mean ≤ 1.1 ×,
+/// sharpness ≥ 0.9, structure ≤ the peer's + 0.05, histogram, and no
+/// verbatim region larger than a third of the exemplar repeated more than
+/// twice. Against the paper's behaviour (the four options off, same seed,
+/// same measure) the coherence mean must fall on every texture. Measured
+/// (every window, stop 30) at seeds 1–3: coherence mean 0.64–0.82 × the
+/// peer's, p90 0.27–0.97 × (15 of 15 cells meet the gate; with the matched
+/// choice over two rings planks p90 at seed 1 was 1.10 × and water at seed
+/// 3 1.001 ×); with the paper's behaviour 1.19–1.62 × and 0.80–1.64 ×
+/// (1000 windows), and sharpness 0.87–0.89 on grass, planks and water
+/// (every patch resampled at its start's sub-pixel phase).
 #[test]
-fn jump_surface_on_the_plane_beats_the_papers_behaviour_and_meets_issue_13s_other_gates() {
-    let gate = common::gates::Gate {
-        coherence_mean: f32::INFINITY,
-        coherence_p90: f32::INFINITY,
-        ..common::gates::ISSUE_13
-    };
+fn jump_surface_on_the_plane_meets_issue_13s_gate_and_beats_the_papers_behaviour() {
+    let gate = common::gates::ISSUE_13;
     let results = planar_results_without_large_repeats("jump_surface");
     let dir = tempfile::tempdir().unwrap();
     for (texture, ours, peer) in &results {

@@ -161,7 +161,7 @@ impl StageSettings for JumpSurfaceSettings {
             name: "choice",
             unit: "",
             range: ParamRange::OneOf(&["random", "matched"]),
-            doc: "random = the paper's selection table (§6.6); matched = an extension: the paper's draw still decides whether a vertex copies or jumps, but where patches meet, which jump, and where a random start goes, the candidate whose exemplar neighbourhood best matches the vertices already synthesised within two edges wins",
+            doc: "random = the paper's selection table (§6.6); matched = an extension: the paper's draw still decides whether a vertex copies or jumps, but where patches meet, which jump, and where a random start goes, the candidate whose exemplar neighbourhood best matches the vertices already synthesised within four edges wins",
         },
         ParamDoc {
             name: "refine",
