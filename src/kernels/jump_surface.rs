@@ -235,7 +235,9 @@ impl Matcher<'_> {
     /// the first path that reaches it; a vertex whose offset lies within
     /// half a pixel of one already taken is left out) with their colours,
     /// into `out`: at most [`MATCH_NEIGHBOURS`], after visiting at most
-    /// [`MATCH_VISITED`] vertices. `seen` is scratch.
+    /// [`MATCH_VISITED`] vertices. `seen` is scratch; `mark` holds one
+    /// entry per vertex, `v + 1` where the search for `v` has been (each
+    /// vertex is searched from once, so it is never cleared).
     #[allow(clippy::too_many_arguments)]
     fn gather(
         &self,
@@ -245,8 +247,11 @@ impl Matcher<'_> {
         done: &[bool],
         v: u32,
         seen: &mut Vec<(u32, Vec2)>,
+        mark: &mut [u32],
         out: &mut Vec<(Vec2, [f32; 4])>,
     ) {
+        let tag = v + 1;
+        mark[v as usize] = tag;
         let (rings, max) = (MATCH_RINGS, MATCH_NEIGHBOURS);
         out.clear();
         seen.clear();
@@ -261,9 +266,10 @@ impl Matcher<'_> {
                     if seen.len() >= MATCH_VISITED {
                         return;
                     }
-                    if seen.iter().any(|e| e.0 == w) {
+                    if mark[w as usize] == tag {
                         continue;
                     }
+                    mark[w as usize] = tag;
                     let o = ou + offsets[su + j];
                     seen.push((w, o));
                     if done[w as usize]
@@ -279,15 +285,20 @@ impl Matcher<'_> {
     }
 
     /// Sum of squared colour differences between the exemplar around `p`
-    /// and the gathered neighbourhood.
+    /// and the gathered neighbourhood, summed in order; once the sum
+    /// exceeds `bound` the sum so far is returned (a candidate that cannot
+    /// win need not be finished).
     #[inline]
-    fn error(&self, p: Vec2, nb: &[(Vec2, [f32; 4])]) -> f32 {
-        nb.iter()
-            .map(|(o, t)| {
-                let c = self.colour(p + *o);
-                (0..4).map(|i| (c[i] - t[i]) * (c[i] - t[i])).sum::<f32>()
-            })
-            .sum()
+    fn error(&self, p: Vec2, nb: &[(Vec2, [f32; 4])], bound: f32) -> f32 {
+        let mut e = 0.0f32;
+        for (o, t) in nb {
+            let c = self.colour(p + *o);
+            e += (0..4).map(|i| (c[i] - t[i]) * (c[i] - t[i])).sum::<f32>();
+            if e > bound {
+                break;
+            }
+        }
+        e
     }
 }
 
@@ -385,6 +396,11 @@ pub fn synthesize_surface_matched<J: JumpLookup>(
     // The matched choice's buffers (no allocation per vertex).
     let mut nb_buf: Vec<(Vec2, [f32; 4])> = Vec::with_capacity(64);
     let mut seen_buf: Vec<(u32, Vec2)> = Vec::with_capacity(128);
+    let mut mark = if matcher.is_some() {
+        vec![0u32; n]
+    } else {
+        Vec::new()
+    };
     let mut cands: Vec<(Vec2, Option<u32>)> = Vec::with_capacity(64);
     // Whether address `p` keeps a one-ring spanning `bmin..=bmax` (§6.5,
     // Fig. 18) inside the exemplar.
@@ -581,7 +597,16 @@ pub fn synthesize_surface_matched<J: JumpLookup>(
                 _ => true,
             };
             if decide {
-                m.gather(topo, offsets, &texel, &done, v, &mut seen_buf, &mut nb_buf);
+                m.gather(
+                    topo,
+                    offsets,
+                    &texel,
+                    &done,
+                    v,
+                    &mut seen_buf,
+                    &mut mark,
+                    &mut nb_buf,
+                );
                 if !nb_buf.is_empty() {
                     cands.clear();
                     match chosen {
@@ -610,10 +635,16 @@ pub fn synthesize_surface_matched<J: JumpLookup>(
                             }
                         }
                     }
-                    let best = cands
-                        .iter()
-                        .map(|&(p, patch)| (m.error(p, &nb_buf), p, patch))
-                        .min_by(|a, b| a.0.total_cmp(&b.0));
+                    // The first least error (a candidate that cannot beat
+                    // the best so far stops early and is not taken).
+                    let mut best = None;
+                    for &(p, patch) in &cands {
+                        let bound = best.map_or(f32::INFINITY, |b: (f32, Vec2, _)| b.0);
+                        let e = m.error(p, &nb_buf, bound);
+                        if e < bound {
+                            best = Some((e, p, patch));
+                        }
+                    }
                     if let Some((_, p, patch)) = best {
                         if chosen.is_none() {
                             // Counted as a jump below, not as random.
