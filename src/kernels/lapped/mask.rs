@@ -269,6 +269,35 @@ pub struct TexturePatch {
     pub origin: [i64; 2],
 }
 
+/// The RGBA image of a `w × h` texture patch whose top-left pixel is
+/// exemplar texel `origin` (addressed with `wrap`; grey repeated), with
+/// `alpha` (row-major, `w · h`) as its alpha channel.
+pub fn patch_image(
+    exemplar: &Image,
+    wrap: Wrap,
+    origin: [i64; 2],
+    w: u32,
+    h: u32,
+    alpha: &[f32],
+) -> Image {
+    let mut image = Image::new(w, h, 4);
+    let c = exemplar.channels as usize;
+    for y in 0..h {
+        for x in 0..w {
+            let src = exemplar.texel(origin[0] + x as i64, origin[1] + y as i64, wrap);
+            let rgb = match c {
+                1 | 2 => [src[0]; 3],
+                _ => [src[0], src[1], src[2]],
+            };
+            let a = alpha[(y * w + x) as usize];
+            image
+                .pixel_mut(x, y)
+                .copy_from_slice(&[rgb[0], rgb[1], rgb[2], a]);
+        }
+    }
+    image
+}
+
 impl TexturePatch {
     /// Cuts a texture patch out of `exemplar`: the `mask.width ×
     /// mask.height` region whose top-left pixel is `origin` (addressed with
@@ -293,21 +322,7 @@ impl TexturePatch {
         let (w, h) = (mask.width, mask.height);
         let d2 = distance_to_outside_sq(mask);
         let alpha = alpha_from_distances(mask, &d2, falloff);
-        let mut image = Image::new(w, h, 4);
-        let c = exemplar.channels as usize;
-        for y in 0..h {
-            for x in 0..w {
-                let src = exemplar.texel(origin[0] + x as i64, origin[1] + y as i64, wrap);
-                let rgb = match c {
-                    1 | 2 => [src[0]; 3],
-                    _ => [src[0], src[1], src[2]],
-                };
-                let a = alpha[(y * w + x) as usize];
-                image
-                    .pixel_mut(x, y)
-                    .copy_from_slice(&[rgb[0], rgb[1], rgb[2], a]);
-            }
-        }
+        let image = patch_image(exemplar, wrap, origin, w, h, &alpha);
         // The centre: the mean of the pixels farthest from the outside.
         let best = d2.iter().copied().fold(0.0f32, f32::max);
         let (mut sum, mut n) = (Vec2::ZERO, 0.0f32);
