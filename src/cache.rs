@@ -38,3 +38,42 @@ pub fn write(dir: &Path, kind: &str, key: &[u8; 32], bytes: &[u8]) {
         tracing::warn!("could not write cache entry {}: {e}", path.display());
     }
 }
+
+/// Length of an entry's header written by [`entry_header`].
+pub const HEADER_LEN: usize = 8 + 4 + 32;
+
+/// The start of an entry: `magic`, the format `version`, the `key`. The
+/// payload follows; [`seal`] appends the checksum.
+pub fn entry_header(magic: &[u8; 8], version: u32, key: &[u8; 32]) -> Vec<u8> {
+    let mut b = Vec::with_capacity(HEADER_LEN);
+    b.extend_from_slice(magic);
+    b.extend_from_slice(&version.to_le_bytes());
+    b.extend_from_slice(key);
+    b
+}
+
+/// Appends the BLAKE3 checksum of everything in `entry` to it.
+pub fn seal(mut entry: Vec<u8>) -> Vec<u8> {
+    let sum = blake3::hash(&entry);
+    entry.extend_from_slice(sum.as_bytes());
+    entry
+}
+
+/// The payload of an entry made by [`entry_header`] and [`seal`], if its
+/// checksum, magic, version and key all match; `None` otherwise.
+pub fn payload<'a>(
+    bytes: &'a [u8],
+    magic: &[u8; 8],
+    version: u32,
+    key: &[u8; 32],
+) -> Option<&'a [u8]> {
+    if bytes.len() < HEADER_LEN + 32 {
+        return None;
+    }
+    let (body, sum) = bytes.split_at(bytes.len() - 32);
+    (blake3::hash(body).as_bytes() == sum
+        && body[..8] == magic[..]
+        && body[8..12] == version.to_le_bytes()
+        && &body[12..HEADER_LEN] == key)
+        .then(|| &body[HEADER_LEN..])
+}

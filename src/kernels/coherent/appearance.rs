@@ -182,9 +182,11 @@ impl AppearanceLevel {
         let mut b = Vec::with_capacity(
             64 + self.vectors.len() * APPEARANCE_DIMS * 4 + self.similar.len() * 4 + 32,
         );
-        b.extend_from_slice(&CACHE_MAGIC);
-        b.extend_from_slice(&CACHE_VERSION.to_le_bytes());
-        b.extend_from_slice(key);
+        b.extend_from_slice(&crate::cache::entry_header(
+            &CACHE_MAGIC,
+            CACHE_VERSION,
+            key,
+        ));
         b.extend_from_slice(&self.width.to_le_bytes());
         b.extend_from_slice(&self.height.to_le_bytes());
         b.extend_from_slice(&(self.k as u32).to_le_bytes());
@@ -194,31 +196,19 @@ impl AppearanceLevel {
         for s in &self.similar {
             b.extend_from_slice(&s.to_le_bytes());
         }
-        let sum = blake3::hash(&b);
-        b.extend_from_slice(sum.as_bytes());
-        b
+        crate::cache::seal(b)
     }
 
     /// The level of a cache entry written by [`Self::to_bytes`] with `key`;
     /// `None` for any other bytes (wrong magic, version or key, truncated,
     /// checksum mismatch, sizes that do not add up).
     pub fn from_bytes(bytes: &[u8], key: &[u8; 32]) -> Option<Self> {
-        const HEAD: usize = 8 + 4 + 32 + 12;
-        if bytes.len() < HEAD + 32 {
-            return None;
-        }
-        let (body, sum) = bytes.split_at(bytes.len() - 32);
-        if blake3::hash(body).as_bytes() != sum
-            || body[..8] != CACHE_MAGIC
-            || body[8..12] != CACHE_VERSION.to_le_bytes()
-            || &body[12..44] != key
-        {
-            return None;
-        }
+        let body = crate::cache::payload(bytes, &CACHE_MAGIC, CACHE_VERSION, key)?;
+        const HEAD: usize = 12;
         let u32_at = |i: usize| -> Option<u32> {
             Some(u32::from_le_bytes(body.get(i..i + 4)?.try_into().ok()?))
         };
-        let (width, height, k) = (u32_at(44)?, u32_at(48)?, u32_at(52)? as usize);
+        let (width, height, k) = (u32_at(0)?, u32_at(4)?, u32_at(8)? as usize);
         let pixels = (width as usize).checked_mul(height as usize)?;
         let vector_bytes = pixels.checked_mul(APPEARANCE_DIMS * 4)?;
         let similar_bytes = pixels.checked_mul(k)?.checked_mul(4)?;

@@ -493,10 +493,7 @@ fn patch_cache_key(
 /// A cache entry of `patches`: what cutting computes (alpha, centre, hull,
 /// origin); the colours are copied from the exemplar again when read.
 fn patches_to_bytes(patches: &[TexturePatch], key: &[u8; 32]) -> Vec<u8> {
-    let mut b = Vec::new();
-    b.extend_from_slice(&PATCH_CACHE_MAGIC);
-    b.extend_from_slice(&PATCH_CACHE_VERSION.to_le_bytes());
-    b.extend_from_slice(key);
+    let mut b = crate::cache::entry_header(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key);
     b.extend_from_slice(&(patches.len() as u32).to_le_bytes());
     let f32s = |b: &mut Vec<u8>, v: &[f32]| {
         for x in v {
@@ -517,9 +514,7 @@ fn patches_to_bytes(patches: &[TexturePatch], key: &[u8; 32]) -> Vec<u8> {
             b.extend_from_slice(&o.to_le_bytes());
         }
     }
-    let sum = blake3::hash(&b);
-    b.extend_from_slice(sum.as_bytes());
-    b
+    crate::cache::seal(b)
 }
 
 /// The patches of an entry written by [`patches_to_bytes`] with `key`, their
@@ -530,18 +525,8 @@ fn patches_from_bytes(
     exemplar: &Image,
     wrap: Wrap,
 ) -> Option<Vec<TexturePatch>> {
-    if bytes.len() < 48 + 32 {
-        return None;
-    }
-    let (body, sum) = bytes.split_at(bytes.len() - 32);
-    if blake3::hash(body).as_bytes() != sum
-        || body[..8] != PATCH_CACHE_MAGIC
-        || body[8..12] != PATCH_CACHE_VERSION.to_le_bytes()
-        || &body[12..44] != key
-    {
-        return None;
-    }
-    let mut at = 44usize;
+    let body = crate::cache::payload(bytes, &PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key)?;
+    let mut at = 0usize;
     let mut take = |n: usize| -> Option<&[u8]> {
         let s = body.get(at..at.checked_add(n)?)?;
         at += n;
