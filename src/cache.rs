@@ -39,6 +39,27 @@ pub fn write(dir: &Path, kind: &str, key: &[u8; 32], bytes: &[u8]) {
     }
 }
 
+/// A key hasher started with `tag`, the analysis `version` and the whole
+/// `image` (size, channels, value count, every value's bits, little-endian):
+/// the part every analysis key shares. The caller adds its settings and
+/// finalises.
+pub fn key_hasher(tag: &[u8], version: u32, image: &crate::image::Image) -> blake3::Hasher {
+    let mut h = blake3::Hasher::new();
+    h.update(tag);
+    h.update(&version.to_le_bytes());
+    for v in [image.width, image.height, image.channels] {
+        h.update(&v.to_le_bytes());
+    }
+    h.update(&(image.data.len() as u64).to_le_bytes());
+    #[cfg(target_endian = "little")]
+    h.update(bytemuck::cast_slice::<f32, u8>(&image.data));
+    #[cfg(not(target_endian = "little"))]
+    for v in &image.data {
+        h.update(&v.to_bits().to_le_bytes());
+    }
+    h
+}
+
 /// Length of an entry's header written by [`entry_header`].
 pub const HEADER_LEN: usize = 8 + 4 + 32;
 

@@ -22,6 +22,7 @@ use std::collections::BinaryHeap;
 use glam::{Vec2, Vec3};
 
 use super::frames::TangentFrame;
+use super::{ceil_i, floor_i};
 use crate::mesh::PolyMesh;
 
 /// "No triangle" in adjacency arrays, and "no vertex" in stencils.
@@ -579,21 +580,6 @@ fn add_triangle(
         }
     }
     report.covered == n * n
-}
-
-/// `⌊x⌋` by a truncating cast, saturating far outside the template (library
-/// calls for `floor`/`ceil` cost more than the rest of a small triangle).
-#[inline]
-fn floor_i(x: f32) -> i32 {
-    let t = x as i32;
-    if (t as f32) > x { t - 1 } else { t }
-}
-
-/// `⌈x⌉`, like [`floor_i`].
-#[inline]
-fn ceil_i(x: f32) -> i32 {
-    let t = x as i32;
-    if (t as f32) < x { t + 1 } else { t }
 }
 
 /// Queues the unvisited triangles across the edges of `t` whose flattened

@@ -39,3 +39,28 @@ pub fn mix(a: u64, b: u64, c: u64) -> u64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
+
+/// `⌊x⌋` by a truncating cast, saturating at the `i32` range: without
+/// SSE4.1 in the baseline target `f32::floor` is a library call, which
+/// costs more than the rest of a small loop body (template rasterisation).
+#[inline]
+pub(crate) fn floor_i(x: f32) -> i32 {
+    let t = x as i32;
+    if (t as f32) > x { t - 1 } else { t }
+}
+
+/// `⌈x⌉`, like [`floor_i`].
+#[inline]
+pub(crate) fn ceil_i(x: f32) -> i32 {
+    let t = x as i32;
+    if (t as f32) < x { t + 1 } else { t }
+}
+
+/// [`floor_i`] in `i64`: the same value as `x.floor() as i64` for every
+/// `f32`, NaN included (the coherent kernel's pixel lookup, run for every
+/// compared neighbour).
+#[inline]
+pub(crate) fn floor_i64(x: f32) -> i64 {
+    let t = x as i64;
+    if (t as f32) > x { t - 1 } else { t }
+}

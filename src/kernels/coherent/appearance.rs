@@ -155,13 +155,7 @@ const CACHE_KIND: &str = "appearance";
 /// version, the image (size, channels, every value's bits) and every field
 /// of the spec.
 pub fn cache_key(image: &Image, spec: &AppearanceSpec) -> [u8; 32] {
-    let mut h = blake3::Hasher::new();
-    h.update(&CACHE_MAGIC);
-    h.update(&CACHE_VERSION.to_le_bytes());
-    for v in [image.width, image.height, image.channels] {
-        h.update(&v.to_le_bytes());
-    }
-    h.update(bytemuck::cast_slice::<f32, u8>(&image.data));
+    let mut h = crate::cache::key_hasher(&CACHE_MAGIC, CACHE_VERSION, image);
     h.update(&spec.window.to_le_bytes());
     h.update(&spec.spacing.to_bits().to_le_bytes());
     h.update(&(spec.dims as u64).to_le_bytes());

@@ -354,8 +354,8 @@ impl Domain {
     /// The pixel index under a coordinate anywhere (addressed by `wrap`).
     #[inline]
     fn pixel(&self, c: Vec2) -> u32 {
-        let ix = floor_i64(c.x);
-        let iy = floor_i64(c.y);
+        let ix = super::floor_i64(c.x);
+        let iy = super::floor_i64(c.y);
         let (x, y) = match self.wrap {
             Wrap::Repeat => (
                 ix.rem_euclid(self.w as i64) as u32,
@@ -374,16 +374,6 @@ impl Domain {
     fn centre(&self, p: u32) -> Vec2 {
         Vec2::new((p % self.w) as f32 + 0.5, (p / self.w) as f32 + 0.5)
     }
-}
-
-/// `⌊x⌋` by a truncating cast (the same value as `x.floor() as i64` for
-/// every `f32`, NaN included): without SSE4.1 in the baseline target,
-/// `floor` is a library call, and [`Domain::pixel`] runs for every compared
-/// neighbour.
-#[inline]
-fn floor_i64(x: f32) -> i64 {
-    let t = x as i64;
-    if (t as f32) > x { t - 1 } else { t }
 }
 
 #[inline]

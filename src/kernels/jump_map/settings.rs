@@ -179,18 +179,7 @@ impl JumpMapSettings {
     /// blake3 over the algorithm version, the exemplar's size, channel count
     /// and pixel bits, and every parameter. Equal keys mean an equal map.
     pub fn cache_key(&self, exemplar: &Image) -> [u8; 32] {
-        let mut h = blake3::Hasher::new();
-        h.update(b"surfsynth jump map");
-        h.update(&ANALYSIS_VERSION.to_le_bytes());
-        h.update(&exemplar.width.to_le_bytes());
-        h.update(&exemplar.height.to_le_bytes());
-        h.update(&exemplar.channels.to_le_bytes());
-        h.update(&(exemplar.data.len() as u64).to_le_bytes());
-        let mut buf = Vec::with_capacity(exemplar.data.len() * 4);
-        for v in &exemplar.data {
-            buf.extend_from_slice(&v.to_bits().to_le_bytes());
-        }
-        h.update(&buf);
+        let mut h = crate::cache::key_hasher(b"surfsynth jump map", ANALYSIS_VERSION, exemplar);
         h.update(&(self.neighbourhood_widths.len() as u32).to_le_bytes());
         for w in &self.neighbourhood_widths {
             h.update(&w.to_le_bytes());

@@ -460,13 +460,7 @@ fn patch_cache_key(
     settings: &LappedPasteSettings,
     seed: u64,
 ) -> [u8; 32] {
-    let mut h = blake3::Hasher::new();
-    h.update(&PATCH_CACHE_MAGIC);
-    h.update(&PATCH_CACHE_VERSION.to_le_bytes());
-    for v in [exemplar.width, exemplar.height, exemplar.channels] {
-        h.update(&v.to_le_bytes());
-    }
-    h.update(bytemuck::cast_slice::<f32, u8>(&exemplar.data));
+    let mut h = crate::cache::key_hasher(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, exemplar);
     h.update(&[
         match wrap {
             Wrap::Repeat => 0u8,

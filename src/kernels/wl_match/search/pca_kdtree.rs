@@ -144,19 +144,11 @@ pub(crate) fn project(
 ) -> [f32; TREE_DIMS] {
     let dim = row.len();
     let mut out = [-0.0f32; TREE_DIMS];
-    if components == TREE_DIMS {
-        for (j, (x, m)) in row.iter().zip(mean).enumerate() {
-            let d = x - m;
-            for (c, o) in out.iter_mut().enumerate() {
-                *o += d * basis[c * dim + j];
-            }
-        }
-    } else {
-        for (j, (x, m)) in row.iter().zip(mean).enumerate() {
-            let d = x - m;
-            for (c, o) in out.iter_mut().enumerate().take(components) {
-                *o += d * basis[c * dim + j];
-            }
+    let kept = &mut out[..components.min(TREE_DIMS)];
+    for (j, (x, m)) in row.iter().zip(mean).enumerate() {
+        let d = x - m;
+        for (c, o) in kept.iter_mut().enumerate() {
+            *o += d * basis[c * dim + j];
         }
     }
     for o in out.iter_mut().skip(components) {
