@@ -85,8 +85,11 @@ fn flat_grid_with_constant_field_is_the_exact_similarity() {
     let mut grower = Grower::new(&m, field, GrowSettings::default());
     let seed = 2 * (9 * 19 + 9);
     let bary = [0.6, 0.3, 0.1];
-    // Both solvers: CG (the paper's) and the sparse Cholesky of large patches.
-    for direct_from in [usize::MAX, 0] {
+    // Both solvers: CG (the paper's) and the sparse Cholesky of large
+    // patches, straight away or after a CG budget (which the growth's
+    // parametrisation of a flat grid, near the optimum, converges within
+    // at this tolerance).
+    for (direct_from, cg_budget) in [(usize::MAX, 0), (0, 0), (0, 5000)] {
         let mut patch = grower.start(seed, bary, 0.0);
         grower.grow(&mut patch, &texture(false).hull);
         assert!(patch.faces.len() > 40, "{} faces", patch.faces.len());
@@ -97,9 +100,11 @@ fn flat_grid_with_constant_field_is_the_exact_similarity() {
                 tolerance: 1e-12,
                 max_iterations: 5000,
                 direct_from,
+                cg_budget,
+                cg_first_below: 1e-3,
             },
         );
-        assert_eq!(report.direct, direct_from == 0);
+        assert_eq!(report.direct, direct_from == 0 && cg_budget == 0);
         assert!(report.energy < 1e-9, "residual {report:?}");
         let centre = m.point(seed as usize, bary);
         let right = up.cross(Vec3::Z);
@@ -154,6 +159,68 @@ fn grown_patches_are_discs_inside_the_hull() {
             }
         }
     }
+}
+
+#[test]
+fn large_patches_iterate_only_from_a_near_optimal_start() {
+    // On curved meshes the growth's parametrisation is far from the
+    // optimum: such a large patch is factored without spending the CG
+    // budget, and lands where the factorisation alone lands.
+    use surfsynth::kernels::lapped::param::{alignment_system, relative_residual};
+    let tex = texture(true);
+    let mut factored = 0;
+    for name in SHARED_CLOSED {
+        let mesh = load(name);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 0.2 * diagonal(&mesh));
+        let field = FaceField {
+            t: &t,
+            isotropic: false,
+            scale: 1.0,
+        };
+        let mut grower = Grower::new(&m, field, GrowSettings::default());
+        for k in 0..6u32 {
+            let seed = (k * 7919) % m.face_count() as u32;
+            let mut patch = grower.start(seed, [0.3, 0.3, 0.4], 0.0);
+            grower.grow(&mut patch, &tex.hull);
+            let (mat, bs, bt) = alignment_system(&m, &patch);
+            let xs: Vec<f64> = patch.st.iter().map(|p| p.x as f64).collect();
+            let xt: Vec<f64> = patch.st.iter().map(|p| p.y as f64).collect();
+            let far = relative_residual(&mat, &bs, &xs).max(relative_residual(&mat, &bt, &xt));
+            let budgeted = SolveSettings {
+                direct_from: 0,
+                ..SolveSettings::default()
+            };
+            let mut a = patch.clone();
+            let ra = optimise_parametrisation(&m, &mut a, &budgeted);
+            let mut b = patch.clone();
+            let rb = optimise_parametrisation(
+                &m,
+                &mut b,
+                &SolveSettings {
+                    cg_budget: 0,
+                    ..budgeted
+                },
+            );
+            assert!(rb.direct, "{name}, seed face {seed}: not factored");
+            if far > budgeted.cg_first_below {
+                factored += 1;
+                assert!(
+                    ra.direct && ra.iterations == 0,
+                    "{name}, seed face {seed}: {ra:?}"
+                );
+                assert_eq!(a, b, "{name}, seed face {seed}");
+            } else {
+                // Near the optimum either way: the same energy to the
+                // solver's tolerance.
+                assert!(
+                    (ra.energy - rb.energy).abs() <= 1e-6 * rb.energy + 1e-9,
+                    "{name}, seed face {seed}: {ra:?} vs {rb:?}"
+                );
+            }
+        }
+    }
+    assert!(factored > 0, "no curved patch started far from the optimum");
 }
 
 #[test]

@@ -34,8 +34,8 @@ impl Image {
     pub fn sample_bilinear(&self, x: f32, y: f32, wrap: Wrap, out: &mut [f32]) {
         let fx = x - 0.5;
         let fy = y - 0.5;
-        let x0 = fx.floor();
-        let y0 = fy.floor();
+        let x0 = crate::kernels::floor_f32(fx);
+        let y0 = crate::kernels::floor_f32(fy);
         let ax = fx - x0;
         let ay = fy - y0;
         let (x0, y0) = (x0 as i64, y0 as i64);

@@ -49,6 +49,21 @@ pub(crate) fn floor_i(x: f32) -> i32 {
     if (t as f32) > x { t - 1 } else { t }
 }
 
+/// `x.floor()` without the library call, exactly: the same value for
+/// every `f32` (signed zeros, NaN and infinities included). Below 2²³ in
+/// magnitude a truncating cast and a correction; beyond, `x` is already
+/// an integer (or not finite). The sign of the result is always `x`'s.
+#[inline]
+pub fn floor_f32(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let t = (x as i32) as f32;
+        let f = if t > x { t - 1.0 } else { t };
+        f.copysign(x)
+    } else {
+        x
+    }
+}
+
 /// `⌈x⌉`, like [`floor_i`].
 #[inline]
 pub(crate) fn ceil_i(x: f32) -> i32 {
@@ -63,4 +78,45 @@ pub(crate) fn ceil_i(x: f32) -> i32 {
 pub(crate) fn floor_i64(x: f32) -> i64 {
     let t = x as i64;
     if (t as f32) > x { t - 1 } else { t }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::floor_f32;
+
+    #[test]
+    fn floor_f32_is_the_library_floor_bit_for_bit() {
+        let check = |x: f32| {
+            let (ours, std) = (floor_f32(x), x.floor());
+            assert!(
+                ours.to_bits() == std.to_bits() || (ours.is_nan() && std.is_nan()),
+                "floor({x:e}) = {ours:e}, library {std:e}"
+            );
+        };
+        for x in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            -1.0,
+            8_388_607.5,
+            -8_388_607.5,
+            8_388_608.0,
+            f32::MIN_POSITIVE,
+            -f32::MIN_POSITIVE,
+            f32::MAX,
+            f32::MIN,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+        ] {
+            check(x);
+        }
+        // Every 977th bit pattern: both signs, every exponent.
+        let mut bits = 0u32;
+        while let Some(next) = bits.checked_add(977) {
+            check(f32::from_bits(bits));
+            bits = next;
+        }
+    }
 }

@@ -41,6 +41,12 @@ const BLOCK: i64 = 4;
 /// summed-area table over the blocks, so that a face whose bounding box
 /// misses the band costs one query, not one per sample (a few kilobytes
 /// per patch, which stay in cache for every candidate).
+///
+/// It also keeps one bit per pixel (set where `0 < α < 1`): a sample on a
+/// pixel outside the band has weight `α (1 − α) ≤ 0` and is skipped, so
+/// only band pixels are fetched from the texture patch's colours (a few
+/// kilobytes of bits for all candidates, instead of 16 bytes per pixel
+/// read from megabytes of images: the matched choice is memory-bound).
 #[derive(Clone, Debug)]
 pub struct FalloffBand {
     /// Blocks per row and per column.
@@ -49,6 +55,14 @@ pub struct FalloffBand {
     /// `sat[(y + 1)·(columns + 1) + x + 1]`: band blocks `(x', y')` with
     /// `x' ≤ x`, `y' ≤ y`.
     sat: Vec<u32>,
+    /// Image size in pixels.
+    width: i64,
+    height: i64,
+    /// Bit `x % 64` of word `y · words + x / 64`: pixel `(x, y)` is in the
+    /// band.
+    bits: Vec<u64>,
+    /// Words per row.
+    words: i64,
 }
 
 impl FalloffBand {
@@ -57,11 +71,14 @@ impl FalloffBand {
         let (w, h) = (texture.image.width as i64, texture.image.height as i64);
         let (columns, rows) = ((w + BLOCK - 1) / BLOCK, (h + BLOCK - 1) / BLOCK);
         let mut band = vec![false; (columns * rows) as usize];
+        let words = (w + 63) / 64;
+        let mut bits = vec![0u64; (words * h) as usize];
         for y in 0..h {
             for x in 0..w {
                 let a = texture.alpha[(y * w + x) as usize];
                 if a > 0.0 && a < 1.0 {
                     band[((y / BLOCK) * columns + x / BLOCK) as usize] = true;
+                    bits[(y * words + x / 64) as usize] |= 1 << (x % 64);
                 }
             }
         }
@@ -74,7 +91,25 @@ impl FalloffBand {
                 sat[(y + 1) * (c + 1) + x + 1] = sat[y * (c + 1) + x + 1] + row;
             }
         }
-        Self { columns, rows, sat }
+        Self {
+            columns,
+            rows,
+            sat,
+            width: w,
+            height: h,
+            bits,
+            words,
+        }
+    }
+
+    /// Whether pixel `(x, y)` is inside the image and in the band.
+    #[inline]
+    fn pixel_in_band(&self, x: i64, y: i64) -> bool {
+        x >= 0
+            && y >= 0
+            && x < self.width
+            && y < self.height
+            && self.bits[(y * self.words + x / 64) as usize] & (1 << (x % 64)) != 0
     }
 
     /// Whether any pixel whose square meets the pixel-coordinate box
@@ -186,18 +221,15 @@ pub fn band_errors(
                     if coverage.layers(f).next().is_none() {
                         continue;
                     }
+                    // Every candidate near the group: a sample whose pixel
+                    // is off the band is skipped below (a bit test is
+                    // cheaper than testing the face's box per candidate).
                     let st = corners(i);
-                    let (lo, hi) = bounds(&st);
                     near.clear();
-                    for &t in &group_near {
+                    near.extend(group_near.iter().map(|&t| {
                         let (origin, unit) = place[t];
-                        if bands[t].box_meets(origin + lo * unit, origin + hi * unit) {
-                            near.push((t, st.map(|p| origin + p * unit)));
-                        }
-                    }
-                    if near.is_empty() {
-                        continue;
-                    }
+                        (t, st.map(|p| origin + p * unit))
+                    }));
                     let level = (coverage.levels[f] as usize).div_ceil(3);
                     if samples.len() <= level {
                         samples.resize(level + 1, Vec::new());
@@ -226,6 +258,10 @@ pub fn band_errors(
                         let old = c.map(|x| x / a_old);
                         for &(t, corner) in &near {
                             let p = corner[0] * b[0] + corner[1] * b[1] + corner[2] * b[2];
+                            // Outside the band the weight is not positive.
+                            if !bands[t].pixel_in_band(floor(p.x), floor(p.y)) {
+                                continue;
+                            }
                             let Some(px) = pixel_at(&textures[t], p) else {
                                 continue;
                             };

@@ -183,6 +183,8 @@ pub struct Grower<'a> {
     /// Per patch face (local id), the filtered Jacobian `J̃` of the texel-
     /// scale distortion measure (empty with the per-face rule).
     smooth: Vec<[Vec2; 2]>,
+    /// The next growth keeps `smooth` ([`Grower::grow_unchanged`]).
+    keep_filter: bool,
 }
 
 impl<'a> Grower<'a> {
@@ -199,6 +201,7 @@ impl<'a> Grower<'a> {
             vertex_local: vec![0; mesh.positions.len()],
             heap: BinaryHeap::new(),
             smooth: Vec::new(),
+            keep_filter: false,
         }
     }
 
@@ -296,6 +299,28 @@ impl<'a> Grower<'a> {
         )
     }
 
+    /// [`Grower::grow`] for a patch whose coordinates have not changed
+    /// since this grower last grew it (no optimisation in between): the
+    /// filtered Jacobians of its faces are still those of its last growth,
+    /// so they are not computed again (same result, bit for bit; checked
+    /// in debug builds). The paste loop's matched choice regrows over the
+    /// chosen texture patch's hull this way.
+    pub fn grow_unchanged(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
+        if self.settings.distortion_radius > 0.0 && self.smooth.len() == patch.faces.len() {
+            #[cfg(debug_assertions)]
+            {
+                let kept = self.smooth.clone();
+                self.refilter(patch);
+                debug_assert!(
+                    kept == self.smooth,
+                    "grow_unchanged: the coordinates changed"
+                );
+            }
+            self.keep_filter = true;
+        }
+        self.grow(patch, hull)
+    }
+
     /// [`Grower::grow`] with the growth distance bounded by `max_dist`
     /// (patch units), the hull test replaced by `reaches(a, b)` (does the
     /// edge with images `a b` still need covering?) and a last veto:
@@ -311,7 +336,7 @@ impl<'a> Grower<'a> {
         admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
     ) -> usize {
         let mesh = self.mesh;
-        if self.settings.distortion_radius > 0.0 {
+        if self.settings.distortion_radius > 0.0 && !std::mem::take(&mut self.keep_filter) {
             self.refilter(patch);
         }
         self.heap.clear();
@@ -558,11 +583,11 @@ impl<'a> Grower<'a> {
 /// its field vector is `t` (the identity when the parametrisation maps
 /// `(S, T)` exactly onto the texture axes); `None` for a degenerate face.
 pub fn face_jacobian(mesh: &TriMesh, f: usize, t: Vec3, st: [Vec2; 3]) -> Option<[Vec2; 2]> {
-    let grad = mesh.barycentric_gradients(f);
+    let (grad, n) = mesh.gradients_and_normal(f);
     if grad[0] == Vec3::ZERO {
         return None;
     }
-    let s = t.cross(mesh.normal(f));
+    let s = t.cross(n);
     let mut phi_t = Vec2::ZERO;
     let mut phi_s = Vec2::ZERO;
     for i in 0..3 {
@@ -660,6 +685,45 @@ mod tests {
                 assert!(p.faces.len() > 500, "{}", p.faces.len());
             }
         }
+    }
+
+    #[test]
+    fn growing_again_unchanged_is_growing_again() {
+        // Two growers, one patch: regrown over a larger hull with the kept
+        // filtered Jacobians, or with them computed again, faces,
+        // coordinates and the next growth's filter are the same bits.
+        let mesh = sphere(4);
+        let m = TriMesh::new(&mesh).unwrap();
+        let t = global_up_field(&m, Vec3::Y, 0.5);
+        let field = FaceField {
+            t: &t,
+            isotropic: false,
+            scale: 1.0,
+        };
+        let settings = GrowSettings {
+            distortion_radius: 0.3,
+            max_distortion: 0.2,
+            ..Default::default()
+        };
+        let square = |r: f32| {
+            Hull::new(vec![
+                Vec2::new(-r, -r),
+                Vec2::new(r, -r),
+                Vec2::new(r, r),
+                Vec2::new(-r, r),
+            ])
+        };
+        let (small, large) = (square(0.3), square(0.7));
+        let mut kept = Grower::new(&m, field, settings);
+        let mut fresh = Grower::new(&m, field, settings);
+        let mut a = kept.start(40, [0.2, 0.3, 0.5], 0.0);
+        let mut b = fresh.start(40, [0.2, 0.3, 0.5], 0.0);
+        assert_eq!(kept.grow(&mut a, &small), fresh.grow(&mut b, &small));
+        let added = kept.grow_unchanged(&mut a, &large);
+        assert!(added > 0, "the larger hull adds faces");
+        assert_eq!(added, fresh.grow(&mut b, &large));
+        assert_eq!(a, b);
+        assert_eq!(kept.smooth, fresh.smooth);
     }
 
     #[test]

@@ -394,7 +394,7 @@ impl TexturePatch {
         if !(fx > -1.0 && fy > -1.0 && fx < w as f32 && fy < h as f32) {
             return 0.0;
         }
-        let (x0, y0) = (fx.floor(), fy.floor());
+        let (x0, y0) = (crate::kernels::floor_f32(fx), crate::kernels::floor_f32(fy));
         let (ax, ay) = (fx - x0, fy - y0);
         let (x0, y0) = (x0 as i64, y0 as i64);
         let a = |x: i64, y: i64| -> f32 {

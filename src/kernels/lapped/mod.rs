@@ -242,13 +242,24 @@ impl TriMesh {
     /// footnote 1).
     #[inline]
     pub fn barycentric_gradients(&self, f: usize) -> [Vec3; 3] {
+        self.gradients_and_normal(f).0
+    }
+
+    /// [`TriMesh::barycentric_gradients`] and [`TriMesh::normal`] of face
+    /// `f` from one area vector (each would compute it again; the grower
+    /// asks for both per face and growth step).
+    #[inline]
+    pub fn gradients_and_normal(&self, f: usize) -> ([Vec3; 3], Vec3) {
         let x = self.corners(f);
-        let n = self.normal(f);
-        let twice_area = 2.0 * self.area(f);
+        let scaled = self.normal_scaled(f);
+        let n = scaled.normalize_or_zero();
+        // The same expression as `2.0 * self.area(f)`: the same bits.
+        let twice_area = 2.0 * (0.5 * scaled.length());
         if twice_area <= f32::MIN_POSITIVE || n == Vec3::ZERO {
-            return [Vec3::ZERO; 3];
+            return ([Vec3::ZERO; 3], n);
         }
-        [0, 1, 2].map(|i| n.cross(x[(i + 2) % 3] - x[(i + 1) % 3]) / twice_area)
+        let grad = [0, 1, 2].map(|i| n.cross(x[(i + 2) % 3] - x[(i + 1) % 3]) / twice_area);
+        (grad, n)
     }
 
     /// The tangent `v` of face `f` carried across its edge to the face `g`

@@ -386,7 +386,7 @@ pub fn paste_until_covered(
                 texture = best as u32;
                 patch_tex = &textures[best];
                 report.rechosen_pastes += 1;
-                report.regrown_faces += grower.grow(&mut patch, &patch_tex.hull);
+                report.regrown_faces += grower.grow_unchanged(&mut patch, &patch_tex.hull);
             }
         }
         for round in 0..=settings.regrow_rounds {
