@@ -110,8 +110,10 @@ fn planar_synthesis_is_at_the_peers_quality_on_every_shared_texture() {
     common::gates::assert_all_near_peer(&results, &common::gates::AT_PEER);
 }
 
-/// Every vertex's colour is the exemplar pixel at its recorded coordinate,
-/// on every level, so normal, roughness and height maps follow exactly.
+/// The kernel's coordinates lie inside the clamped exemplar on every
+/// level, and `pixel_centres` maps each to the centre of the pixel under
+/// it (the stage's colours are checked against what it wrote in
+/// `the_stage_colours_every_vertex_with_the_pixel_at_its_source_texel`).
 #[test]
 fn colours_are_the_exemplar_at_the_recorded_coordinates() {
     let meshes = plane_pyramid(48);
@@ -132,6 +134,77 @@ fn colours_are_the_exemplar_at_the_recorded_coordinates() {
             assert_eq!(&values[v * 3..v * 3 + 3], px);
         }
     }
+}
+
+/// The stage itself (not the kernel): on every level it wrote, each
+/// vertex's `VertexColours` are the exemplar's pixel at its `SourceTexels`,
+/// which sit on pixel centres inside the (clamped) exemplar — what the
+/// bake and the material channels read.
+#[test]
+fn the_stage_colours_every_vertex_with_the_pixel_at_its_source_texel() {
+    use bevy_ecs::prelude::*;
+    use surfsynth::config::ConfigSource;
+    use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
+    use surfsynth::stages::world::{Exemplar, SourceTexels, VertexColours};
+    let text = format!(
+        r#"
+seed = 3
+[input]
+mesh = "builtin:plane"
+exemplar = "{}"
+exemplar_wrap = "clamp"
+texture_scale = 1.0
+texture_scale_unit = "pixels_per_unit"
+
+[[stage]]
+kind = "builtin_pyramid"
+mesh = "plane"
+levels = 3
+resolution = [48, 48]
+size = 47.0
+
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+
+[[stage]]
+kind = "coherent"
+"#,
+        common::shared("textures/brick.png").display()
+    );
+    let mut source = ConfigSource::from_text("coherent.toml", &text);
+    source.base_dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let p = Pipeline::from_source(source).expect("valid config");
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).expect("input loads");
+    let mut world = World::new();
+    run_in_world(&p, &mut world, input).expect("pipeline runs");
+    let exemplar = world.resource::<Exemplar>().image.clone();
+    let ch = exemplar.channels as usize;
+    let mut levels = 0;
+    let mut q = world.query::<(&VertexColours, &SourceTexels)>();
+    for (colours, texels) in q.iter(&world) {
+        levels += 1;
+        assert_eq!(colours.channels, ch);
+        assert_eq!(colours.values.len(), texels.0.len() * ch);
+        for (v, t) in texels.0.iter().enumerate() {
+            let (x, y) = (t.x - 0.5, t.y - 0.5);
+            assert!(
+                x.fract() == 0.0 && y.fract() == 0.0,
+                "vertex {v}: {t} is not a pixel centre"
+            );
+            assert!(
+                x >= 0.0 && y >= 0.0 && x < exemplar.width as f32 && y < exemplar.height as f32,
+                "vertex {v}: {t} is outside the exemplar"
+            );
+            assert_eq!(
+                &colours.values[v * ch..(v + 1) * ch],
+                exemplar.pixel(x as u32, y as u32),
+                "vertex {v} at {t}"
+            );
+        }
+    }
+    assert_eq!(levels, 3, "every pyramid level is coloured");
 }
 
 /// Same seed, same coordinates, bit for bit, at 1 and 2 threads.
