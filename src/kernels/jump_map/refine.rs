@@ -187,6 +187,345 @@ pub fn refine_seams(
     report
 }
 
+/// Largest shift, in exemplar pixels along each axis, [`align_regions`]
+/// tries for a region. Planar benchmark (planks p90 over seeds 1–3, ratio
+/// to the peer, one pass before the pixel passes): 3 → 1.01–1.13, 6 →
+/// 0.98–1.08 (and 0.82–0.99 with a pass after them too).
+pub const ALIGN_SHIFT: i64 = 6;
+
+/// How deep, in pixels, [`align_regions`] compares each border pair's
+/// continuations into the other side. Planks p90 (as above, one pass
+/// before): 1 pixel 1.04–1.21, 3 pixels 0.99–1.13, 5 pixels 0.98–1.13.
+pub const ALIGN_DEPTH: i64 = 5;
+
+/// Border pairs [`align_regions`] compares the shifts of a region on (spread
+/// along its border; the winner is checked on the whole border).
+pub const ALIGN_SEARCH_PAIRS: usize = 48;
+
+/// Sweeps of `jump_image`'s `refine = "aligned_seams"` per alignment.
+pub const ALIGN_SWEEPS: u32 = 8;
+
+/// Regions smaller than this many pixels are left to the pixel passes.
+pub const ALIGN_MIN_PIXELS: usize = 16;
+
+/// What [`align_regions`] did.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct AlignReport {
+    /// Coherent regions (4-connected pixels whose sources continue each
+    /// other) of at least [`ALIGN_MIN_PIXELS`].
+    pub regions: usize,
+    /// Regions shifted, per sweep.
+    pub shifted: Vec<usize>,
+}
+
+/// Aligns whole coherent regions of a source map with their neighbours
+/// (an extension): a region is a 4-connected set of pixels whose sources
+/// continue each other, i.e. one copied piece of the exemplar. Each region
+/// (in order of its first pixel) tries every shift of its sources by up to
+/// [`ALIGN_SHIFT`] pixels along each axis and keeps the one with the least
+/// seam cost along its border, `Σ ‖E[s(p) + (q − p)] − E[s(q)]‖² +
+/// ‖E[s(q) + (p − q)] − E[s(p)]‖²` over 4-adjacent pairs `p` inside, `q`
+/// outside (the colour each side's continuation predicts against what the
+/// other side shows; a continuation outside an inset exemplar counts the
+/// plain colour difference). Shifts that take a source out of an inset
+/// exemplar are not tried. A region keeps its sources unless a shift is
+/// strictly cheaper, so the border cost never grows. Up to `sweeps`
+/// sweeps, until none moves. Sequential and deterministic.
+///
+/// The pixel passes of [`refine_seams`] move one pixel at a time, so a
+/// copied piece that landed a row or two off its neighbours (board edges
+/// of planks, mortar courses) becomes a staircase of single-pixel
+/// choices; moving the whole piece removes the offset where it arises.
+pub fn align_regions(
+    sources: &mut SourceMap,
+    exemplar: &Image,
+    toroidal: bool,
+    sweeps: u32,
+) -> AlignReport {
+    let (w, h) = (sources.width as i64, sources.height as i64);
+    let (ew, eh) = (exemplar.width as i64, exemplar.height as i64);
+    let c = (exemplar.channels as usize).min(4);
+    let n = (w * h) as usize;
+    let (depth, align_shift) = (ALIGN_DEPTH, ALIGN_SHIFT);
+    let mut report = AlignReport::default();
+    if n == 0 || ew == 0 || eh == 0 {
+        return report;
+    }
+    let colour = |x: i64, y: i64| -> &[f32] {
+        let s = (y * ew + x) as usize * exemplar.channels as usize;
+        &exemplar.data[s..s + c]
+    };
+    // The exemplar address `t + d` (wrapped when toroidal), if it exists.
+    let shifted = |tx: i64, ty: i64| -> Option<(i64, i64)> {
+        if toroidal {
+            Some((tx.rem_euclid(ew), ty.rem_euclid(eh)))
+        } else {
+            (tx >= 0 && ty >= 0 && tx < ew && ty < eh).then_some((tx, ty))
+        }
+    };
+    let src = &mut sources.texels;
+    let continues = |a: TexelCoord, b: TexelCoord, dx: i64, dy: i64| {
+        shifted(a.x as i64 + dx, a.y as i64 + dy) == Some((b.x as i64, b.y as i64))
+    };
+    // The seam cost of one pair with `p`'s source moved by `d`.
+    let pair_cost = |sp: TexelCoord, sq: TexelCoord, d: (i64, i64), step: (i64, i64)| -> f32 {
+        let (px, py) = (sp.x as i64 + d.0, sp.y as i64 + d.1);
+        let (px, py) = match shifted(px, py) {
+            Some(t) => t,
+            None => return f32::INFINITY,
+        };
+        let (qx, qy) = (sq.x as i64, sq.y as i64);
+        let diff =
+            |a: &[f32], b: &[f32]| -> f32 { a.iter().zip(b).map(|(u, v)| (u - v) * (u - v)).sum() };
+        let (cp, cq) = (colour(px, py), colour(qx, qy));
+        let mut total = 0.0;
+        for k in 0..depth {
+            // p's continuation k + 1 pixels on against q's source k on, and
+            // the other way round.
+            let ahead = match (
+                shifted(px + (k + 1) * step.0, py + (k + 1) * step.1),
+                shifted(qx + k * step.0, qy + k * step.1),
+            ) {
+                (Some((x, y)), Some((u, v))) => diff(colour(x, y), colour(u, v)),
+                _ => diff(cp, cq),
+            };
+            let behind = match (
+                shifted(qx - (k + 1) * step.0, qy - (k + 1) * step.1),
+                shifted(px - k * step.0, py - k * step.1),
+            ) {
+                (Some((x, y)), Some((u, v))) => diff(colour(x, y), colour(u, v)),
+                _ => diff(cp, cq),
+            };
+            total += ahead + behind;
+        }
+        total
+    };
+    let mut border: Vec<(u32, u32, (i64, i64))> = Vec::new();
+    let mut near: Vec<u32> = Vec::new();
+    // Copied regions of at least this area count as large in the
+    // verbatim-copy measure (`kernels::metrics::quality`): a shift may not
+    // make one by joining its region to its neighbours.
+    let large = ((ew * eh) as usize).div_ceil(3);
+    // An offset moved by `d` (wrapped when toroidal).
+    let moved_by = |o: (i64, i64), d: (i64, i64)| -> (i64, i64) {
+        let (ox, oy) = (o.0 + d.0, o.1 + d.1);
+        if toroidal {
+            (ox.rem_euclid(ew), oy.rem_euclid(eh))
+        } else {
+            (ox, oy)
+        }
+    };
+    let offset_of = |i: usize, t: TexelCoord| -> (i64, i64) {
+        let (x, y) = ((i as i64) % w, (i as i64) / w);
+        let (ox, oy) = (t.x as i64 - x, t.y as i64 - y);
+        if toroidal {
+            (ox.rem_euclid(ew), oy.rem_euclid(eh))
+        } else {
+            (ox, oy)
+        }
+    };
+    let mut sample: Vec<(u32, u32, (i64, i64))> = Vec::new();
+    let mut dirty = vec![true; n];
+    for _ in 0..sweeps {
+        let mut moved = 0;
+        let mut next_dirty = vec![false; n];
+        // Regions by union-find over the right and lower continuations.
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn find(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                let up = parent[parent[i as usize] as usize];
+                parent[i as usize] = up;
+                i = up;
+            }
+            i
+        }
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                for (dx, dy) in [(1i64, 0i64), (0, 1)] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < w && ny < h {
+                        let j = (ny * w + nx) as usize;
+                        if continues(src[i], src[j], dx, dy) {
+                            let (a, b) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
+                            if a != b {
+                                // The smaller index is the root: regions are
+                                // numbered by their first pixel.
+                                let (lo, hi) = (a.min(b), a.max(b));
+                                parent[hi as usize] = lo;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let label: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
+        drop(parent);
+        // Pixels of each region, in raster order (counting sort by label).
+        let mut start = vec![0u32; n + 1];
+        for &l in &label {
+            start[l as usize + 1] += 1;
+        }
+        for i in 0..n {
+            start[i + 1] += start[i];
+        }
+        let mut fill = start.clone();
+        let mut pixels = vec![0u32; n];
+        for (i, &l) in label.iter().enumerate() {
+            pixels[fill[l as usize] as usize] = i as u32;
+            fill[l as usize] += 1;
+        }
+        drop(fill);
+        let roots: Vec<u32> = (0..n as u32)
+            .filter(|&r| (start[r as usize + 1] - start[r as usize]) as usize >= ALIGN_MIN_PIXELS)
+            .collect();
+        report.regions = report.regions.max(roots.len());
+        // Per region (by label) its offset and the group it has joined by
+        // a shift in this sweep (union-find over labels, with areas).
+        let mut group: Vec<u32> = (0..n as u32).collect();
+        let mut area: Vec<u32> = (0..n).map(|l| start[l + 1] - start[l]).collect();
+        let mut offset: Vec<(i64, i64)> = vec![(0, 0); n];
+        for l in 0..n {
+            if start[l + 1] > start[l] {
+                let i = pixels[start[l] as usize] as usize;
+                offset[l] = offset_of(i, src[i]);
+            }
+        }
+        for &root in &roots {
+            let region = &pixels[start[root as usize] as usize..start[root as usize + 1] as usize];
+            // The region's border pairs (inside, outside, step).
+            border.clear();
+            for &i in region {
+                let (x, y) = (i as i64 % w, i as i64 / w);
+                for (dx, dy) in [(1i64, 0i64), (-1, 0), (0, 1), (0, -1)] {
+                    let (qx, qy) = (x + dx, y + dy);
+                    if qx >= 0 && qy >= 0 && qx < w && qy < h {
+                        let j = (qy * w + qx) as u32;
+                        if label[j as usize] != root {
+                            border.push((i, j, (dx, dy)));
+                        }
+                    }
+                }
+            }
+            if border.is_empty() {
+                continue;
+            }
+            // The groups of the regions across the border.
+            near.clear();
+            let own_group = find(&mut group, root);
+            for &(_, j, _) in &border {
+                let g = find(&mut group, label[j as usize]);
+                if g != own_group && !near.contains(&g) {
+                    near.push(g);
+                }
+            }
+            // Only regions that moved, or border a region that moved, in
+            // the previous sweep can find a cheaper shift.
+            if !region.iter().any(|&i| dirty[i as usize])
+                && !border.iter().any(|&(_, j, _)| dirty[j as usize])
+            {
+                continue;
+            }
+            // The search compares shifts on at most `ALIGN_SEARCH_PAIRS`
+            // pairs spread along the border; the winner must then be
+            // cheaper than staying on the whole border.
+            let stride = border.len().div_ceil(ALIGN_SEARCH_PAIRS).max(1);
+            sample.clear();
+            sample.extend(border.iter().step_by(stride).copied());
+            let cost_on = |pairs: &[(u32, u32, (i64, i64))], d: (i64, i64), bound: f32| -> f32 {
+                let mut e = 0.0f32;
+                for &(i, j, step) in pairs {
+                    e += pair_cost(src[i as usize], src[j as usize], d, step);
+                    if e >= bound {
+                        return e;
+                    }
+                }
+                e
+            };
+            let cost = |d: (i64, i64), bound: f32| cost_on(&sample, d, bound);
+            // Shifts that keep every source of the region inside an inset
+            // exemplar.
+            let (mut lo, mut hi) = ((i64::MAX, i64::MAX), (i64::MIN, i64::MIN));
+            for &i in region {
+                let t = src[i as usize];
+                lo = (lo.0.min(t.x as i64), lo.1.min(t.y as i64));
+                hi = (hi.0.max(t.x as i64), hi.1.max(t.y as i64));
+            }
+            let mut best = (cost((0, 0), f32::INFINITY), (0i64, 0i64));
+            for dy in -align_shift..=align_shift {
+                for dx in -align_shift..=align_shift {
+                    if (dx, dy) == (0, 0) {
+                        continue;
+                    }
+                    if !toroidal
+                        && (lo.0 + dx < 0 || lo.1 + dy < 0 || hi.0 + dx >= ew || hi.1 + dy >= eh)
+                    {
+                        continue;
+                    }
+                    let shifted_offset = moved_by(offset[root as usize], (dx, dy));
+                    let own = area[find(&mut group, root) as usize] as usize;
+                    let joined: usize = near
+                        .iter()
+                        .filter(|&&g| offset[g as usize] == shifted_offset)
+                        .map(|&g| area[g as usize] as usize)
+                        .sum();
+                    if joined > 0 && own + joined >= large {
+                        continue;
+                    }
+                    let e = cost((dx, dy), best.0);
+                    if e < best.0 {
+                        best = (e, (dx, dy));
+                    }
+                }
+            }
+            if best.1 != (0, 0)
+                && stride > 1
+                && cost_on(&border, best.1, f32::INFINITY)
+                    >= cost_on(&border, (0, 0), f32::INFINITY)
+            {
+                best.1 = (0, 0);
+            }
+            if best.1 != (0, 0) {
+                moved += 1;
+                for &i in region {
+                    next_dirty[i as usize] = true;
+                }
+                let (dx, dy) = best.1;
+                let new_offset = moved_by(offset[root as usize], (dx, dy));
+                let own_group = find(&mut group, root);
+                offset[root as usize] = new_offset;
+                offset[own_group as usize] = new_offset;
+                for &g in &near {
+                    if offset[g as usize] == new_offset {
+                        let (a, b) = (find(&mut group, own_group), find(&mut group, g));
+                        if a != b {
+                            let (lo, hi) = (a.min(b), a.max(b));
+                            group[hi as usize] = lo;
+                            area[lo as usize] += area[hi as usize];
+                            offset[lo as usize] = new_offset;
+                        }
+                    }
+                }
+                for &i in region {
+                    let t = src[i as usize];
+                    if let Some((x, y)) = shifted(t.x as i64 + dx, t.y as i64 + dy) {
+                        src[i as usize] = TexelCoord {
+                            x: x as u32,
+                            y: y as u32,
+                        };
+                    }
+                }
+            }
+        }
+        report.shifted.push(moved);
+        dirty = next_dirty;
+        if moved == 0 {
+            break;
+        }
+    }
+    report
+}
+
 /// The exemplar halved by 2 × 2 box averaging (odd sizes drop their last
 /// row or column; at least 1 × 1).
 fn halve(ex: &Image) -> Image {
@@ -324,6 +663,84 @@ pub fn refine_seams_pyramid(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A `size`² exemplar of horizontal boards: a dark line every 8 rows,
+    /// grain varying along x and between boards.
+    fn boards(size: u32) -> Image {
+        let mut img = Image::new(size, size, 3);
+        for y in 0..size {
+            for x in 0..size {
+                let line = if y % 8 == 0 { 0.1 } else { 0.6 };
+                let grain = 0.2 * ((x as f32 * 0.37 + (y / 8) as f32 * 1.3).sin());
+                img.pixel_mut(x, y)
+                    .copy_from_slice(&[line + grain, line, 0.5 + 0.01 * y as f32]);
+            }
+        }
+        img
+    }
+
+    /// A `w × h` output: the left half copies the exemplar from `(0, 8)`,
+    /// the right half continues it but two rows down (a board edge off by
+    /// two pixels at the seam).
+    fn misaligned(w: u32, h: u32, ex: &Image) -> SourceMap {
+        let texels = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let dy = if x < w / 2 { 8 } else { 10 };
+                TexelCoord {
+                    x: x + 4,
+                    y: y + dy,
+                }
+            })
+            .collect();
+        SourceMap {
+            width: w,
+            height: h,
+            exemplar_width: ex.width,
+            exemplar_height: ex.height,
+            texels,
+        }
+    }
+
+    #[test]
+    fn a_misaligned_region_is_moved_to_continue_its_neighbour() {
+        let ex = boards(64);
+        let mut s = misaligned(32, 32, &ex);
+        let report = align_regions(&mut s, &ex, false, ALIGN_SWEEPS);
+        assert_eq!(report.regions, 2, "{report:?}");
+        assert!(report.shifted[0] >= 1, "{report:?}");
+        // Every pair across the seam now continues: one copied piece.
+        for y in 0..32usize {
+            let (a, b) = (s.texels[y * 32 + 15], s.texels[y * 32 + 16]);
+            assert_eq!((b.x, b.y), (a.x + 1, a.y), "row {y}");
+        }
+    }
+
+    #[test]
+    fn alignment_never_joins_a_copy_of_a_third_of_the_exemplar() {
+        // The same two halves (512 pixels each) over a 36² exemplar: joined
+        // they would copy 1 024 pixels, more than a third of its 1 296.
+        let ex = boards(36);
+        let mut s = misaligned(32, 16, &ex);
+        let before = s.texels.clone();
+        let report = align_regions(&mut s, &ex, false, ALIGN_SWEEPS);
+        assert_eq!(report.regions, 2, "{report:?}");
+        let seam_continues = (0..16usize).all(|y| {
+            let (a, b) = (s.texels[y * 32 + 15], s.texels[y * 32 + 16]);
+            (b.x, b.y) == (a.x + 1, a.y)
+        });
+        assert!(!seam_continues, "the halves were joined: {report:?}");
+        // Any shift it made still lowered the border cost, so the output
+        // differs from the start only where a half moved as a whole.
+        let moved: Vec<bool> = s.texels.iter().zip(&before).map(|(a, b)| a != b).collect();
+        for half in [0usize, 16] {
+            let m: Vec<bool> = (0..16)
+                .flat_map(|y| (half..half + 16).map(move |x| y * 32 + x))
+                .map(|i| moved[i])
+                .collect();
+            assert!(m.iter().all(|&v| v == m[0]), "a half moved in part");
+        }
+    }
 
     /// A 32² exemplar of smooth, position-dependent colour (every window
     /// unique).

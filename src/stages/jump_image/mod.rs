@@ -11,7 +11,8 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::kernels::jump_map::Boundary;
 use crate::kernels::jump_map::refine::{
-    SEAM_REFINE_LEVELS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, refine_seams_pyramid,
+    ALIGN_SWEEPS, SEAM_REFINE_LEVELS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, align_regions,
+    refine_seams_pyramid,
 };
 use crate::kernels::jump_map::{
     ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelChoice,
@@ -134,8 +135,8 @@ impl StageSettings for JumpImageSettings {
         ParamDoc {
             name: "refine",
             unit: "",
-            range: ParamRange::OneOf(&["seams", "none"]),
-            doc: "pixel: seams = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates), first on the source map and exemplar halved (windows then see twice the structure; a moved coarse pixel sets its 2x2 block to its donor's fine continuation), then at full size; none = the paper's result",
+            range: ParamRange::OneOf(&["aligned_seams", "seams", "none"]),
+            doc: "pixel: aligned_seams = an extension (an option: slower) = seams between two passes that move whole copied regions (4-connected pixels whose sources continue each other) by up to 6 exemplar pixels per axis where that lowers the seam cost along their border (continuations 5 pixels deep), never joining regions into a copied region of a third of the exemplar or more (planar benchmark, seeds 1-3: issue 13's failing cells 3 -> 1 of 15, planks p90 1.13-1.27 -> 0.82-0.94x the peer's, but the stage takes 0.19-0.29 s instead of 0.03 s at 256x256); seams (default) = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates), first on the source map and exemplar halved (windows then see twice the structure; a moved coarse pixel sets its 2x2 block to its donor's fine continuation), then at full size; none = the paper's result",
         },
         ParamDoc {
             name: "boundary_fraction",
@@ -237,6 +238,7 @@ impl Stage for JumpImage {
             // The kernels set the length: pixels, or patches.
             let progress = Progress::new(0, Self::KIND);
             let mut refined = None;
+            let mut aligned = Vec::new();
             let result = match settings.method.as_str() {
                 "patch" => synthesize_patches_with_progress(
                     ex,
@@ -306,17 +308,25 @@ impl Stage for JumpImage {
                     &progress,
                 )
                 .map(|mut o| {
-                    if settings.refine == "seams" {
+                    let align = settings.refine == "aligned_seams";
+                    let toroidal = map.boundary() == Boundary::Toroidal;
+                    if settings.refine == "seams" || align {
+                        if align {
+                            aligned.push(align_regions(&mut o.sources, ex, toroidal, ALIGN_SWEEPS));
+                        }
                         progress.start_part("seams", 0);
                         let report = refine_seams_pyramid(
                             &mut o.sources,
                             ex,
-                            map.boundary() == Boundary::Toroidal,
+                            toroidal,
                             SEAM_REFINE_PASSES,
                             SEAM_REFINE_RADIUS,
                             SEAM_REFINE_LEVELS,
                             &progress,
                         );
+                        if align {
+                            aligned.push(align_regions(&mut o.sources, ex, toroidal, ALIGN_SWEEPS));
+                        }
                         refined = Some(report);
                         if let Ok(image) = o.sources.gather(ex) {
                             o.image = image;
@@ -344,6 +354,9 @@ impl Stage for JumpImage {
                 metrics.record(ctx.index, "refine_visited", r.visited);
                 metrics.record(ctx.index, "refine_moved", r.moved);
                 metrics.record(ctx.index, "refine_levels", SEAM_REFINE_LEVELS);
+            }
+            if !aligned.is_empty() {
+                metrics.record(ctx.index, "align", &aligned);
             }
             let px = image.pixel_count() as f64;
             metrics.record(ctx.index, "pixels", px);
