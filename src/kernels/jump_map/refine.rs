@@ -202,6 +202,16 @@ pub const ALIGN_DEPTH: i64 = 5;
 /// along its border; the winner is checked on the whole border).
 pub const ALIGN_SEARCH_PAIRS: usize = 48;
 
+/// Deepest continuation [`align_regions`] can compare.
+const MAX_ALIGN_DEPTH: usize = 8;
+
+/// The outside half of a border pair in [`align_regions`].
+struct OutsideHalf {
+    cq: [f32; 4],
+    ahead: [Option<[f32; 4]>; MAX_ALIGN_DEPTH],
+    behind: [Option<[f32; 4]>; MAX_ALIGN_DEPTH],
+}
+
 /// Sweeps of `jump_image`'s `refine = "aligned_seams"` per alignment.
 pub const ALIGN_SWEEPS: u32 = 8;
 
@@ -247,14 +257,27 @@ pub fn align_regions(
     let c = (exemplar.channels as usize).min(4);
     let n = (w * h) as usize;
     let (depth, align_shift) = (ALIGN_DEPTH, ALIGN_SHIFT);
+    // Every shift but none, row by row.
+    let shifts: Vec<(i64, i64)> = (-align_shift..=align_shift)
+        .flat_map(|dy| (-align_shift..=align_shift).map(move |dx| (dx, dy)))
+        .filter(|&d| d != (0, 0))
+        .collect();
     let mut report = AlignReport::default();
     if n == 0 || ew == 0 || eh == 0 {
         return report;
     }
-    let colour = |x: i64, y: i64| -> &[f32] {
-        let s = (y * ew + x) as usize * exemplar.channels as usize;
-        &exemplar.data[s..s + c]
-    };
+    // The exemplar's colours padded to four channels: fixed-size
+    // differences in the shift search.
+    let padded: Vec<[f32; 4]> = exemplar
+        .data
+        .chunks_exact(exemplar.channels.max(1) as usize)
+        .map(|px| {
+            let mut out = [0.0; 4];
+            out[..c].copy_from_slice(&px[..c]);
+            out
+        })
+        .collect();
+    let colour = |x: i64, y: i64| -> [f32; 4] { padded[(y * ew + x) as usize] };
     // The exemplar address `t + d` (wrapped when toroidal), if it exists.
     let shifted = |tx: i64, ty: i64| -> Option<(i64, i64)> {
         if toroidal {
@@ -268,39 +291,62 @@ pub fn align_regions(
         shifted(a.x as i64 + dx, a.y as i64 + dy) == Some((b.x as i64, b.y as i64))
     };
     // The seam cost of one pair with `p`'s source moved by `d`.
-    let pair_cost = |sp: TexelCoord, sq: TexelCoord, d: (i64, i64), step: (i64, i64)| -> f32 {
+    let diff = |a: [f32; 4], b: [f32; 4]| -> f32 {
+        (a[0] - b[0]) * (a[0] - b[0])
+            + (a[1] - b[1]) * (a[1] - b[1])
+            + (a[2] - b[2]) * (a[2] - b[2])
+            + (a[3] - b[3]) * (a[3] - b[3])
+    };
+    // A border pair's outside half, which no shift of the region changes:
+    // q's colour, and the colours k pixels on (ahead) and k + 1 back
+    // (behind) from q's source, `None` outside an inset exemplar.
+    let depth_n = depth.clamp(1, MAX_ALIGN_DEPTH as i64) as usize;
+    let outside = |sq: TexelCoord, step: (i64, i64)| -> OutsideHalf {
+        let (qx, qy) = (sq.x as i64, sq.y as i64);
+        let mut half = OutsideHalf {
+            cq: colour(qx, qy),
+            ahead: [None; MAX_ALIGN_DEPTH],
+            behind: [None; MAX_ALIGN_DEPTH],
+        };
+        for k in 0..depth_n {
+            let k1 = k as i64;
+            half.ahead[k] = shifted(qx + k1 * step.0, qy + k1 * step.1).map(|(x, y)| colour(x, y));
+            half.behind[k] =
+                shifted(qx - (k1 + 1) * step.0, qy - (k1 + 1) * step.1).map(|(x, y)| colour(x, y));
+        }
+        half
+    };
+    // The seam cost of one pair with `p`'s source moved by `d`: p's
+    // continuation k + 1 pixels on against q's source k on, and the other
+    // way round, k < depth; the plain colour difference where a
+    // continuation leaves an inset exemplar.
+    let pair_cost = |sp: TexelCoord, q: &OutsideHalf, d: (i64, i64), step: (i64, i64)| -> f32 {
         let (px, py) = (sp.x as i64 + d.0, sp.y as i64 + d.1);
         let (px, py) = match shifted(px, py) {
             Some(t) => t,
             None => return f32::INFINITY,
         };
-        let (qx, qy) = (sq.x as i64, sq.y as i64);
-        let diff =
-            |a: &[f32], b: &[f32]| -> f32 { a.iter().zip(b).map(|(u, v)| (u - v) * (u - v)).sum() };
-        let (cp, cq) = (colour(px, py), colour(qx, qy));
+        let cp = colour(px, py);
         let mut total = 0.0;
-        for k in 0..depth {
-            // p's continuation k + 1 pixels on against q's source k on, and
-            // the other way round.
+        for k in 0..depth_n {
+            let k1 = k as i64;
             let ahead = match (
-                shifted(px + (k + 1) * step.0, py + (k + 1) * step.1),
-                shifted(qx + k * step.0, qy + k * step.1),
+                shifted(px + (k1 + 1) * step.0, py + (k1 + 1) * step.1),
+                q.ahead[k],
             ) {
-                (Some((x, y)), Some((u, v))) => diff(colour(x, y), colour(u, v)),
-                _ => diff(cp, cq),
+                (Some((x, y)), Some(b)) => diff(colour(x, y), b),
+                _ => diff(cp, q.cq),
             };
-            let behind = match (
-                shifted(qx - (k + 1) * step.0, qy - (k + 1) * step.1),
-                shifted(px - k * step.0, py - k * step.1),
-            ) {
-                (Some((x, y)), Some((u, v))) => diff(colour(x, y), colour(u, v)),
-                _ => diff(cp, cq),
+            let behind = match (q.behind[k], shifted(px - k1 * step.0, py - k1 * step.1)) {
+                (Some(a), Some((u, v))) => diff(a, colour(u, v)),
+                _ => diff(cp, q.cq),
             };
             total += ahead + behind;
         }
         total
     };
     let mut border: Vec<(u32, u32, (i64, i64))> = Vec::new();
+    let mut halves: Vec<OutsideHalf> = Vec::new();
     let mut near: Vec<u32> = Vec::new();
     // Copied regions of at least this area count as large in the
     // verbatim-copy measure (`kernels::metrics::quality`): a shift may not
@@ -324,7 +370,6 @@ pub fn align_regions(
             (ox, oy)
         }
     };
-    let mut sample: Vec<(u32, u32, (i64, i64))> = Vec::new();
     let mut dirty = vec![true; n];
     for _ in 0..sweeps {
         let mut moved = 0;
@@ -430,19 +475,23 @@ pub fn align_regions(
             // pairs spread along the border; the winner must then be
             // cheaper than staying on the whole border.
             let stride = border.len().div_ceil(ALIGN_SEARCH_PAIRS).max(1);
-            sample.clear();
-            sample.extend(border.iter().step_by(stride).copied());
-            let cost_on = |pairs: &[(u32, u32, (i64, i64))], d: (i64, i64), bound: f32| -> f32 {
+            halves.clear();
+            halves.extend(
+                border
+                    .iter()
+                    .map(|&(_, j, step)| outside(src[j as usize], step)),
+            );
+            let cost_on = |every: usize, d: (i64, i64), bound: f32| -> f32 {
                 let mut e = 0.0f32;
-                for &(i, j, step) in pairs {
-                    e += pair_cost(src[i as usize], src[j as usize], d, step);
+                for (&(i, _, step), q) in border.iter().zip(&halves).step_by(every) {
+                    e += pair_cost(src[i as usize], q, d, step);
                     if e >= bound {
                         return e;
                     }
                 }
                 e
             };
-            let cost = |d: (i64, i64), bound: f32| cost_on(&sample, d, bound);
+            let cost = |d: (i64, i64), bound: f32| cost_on(stride, d, bound);
             // Shifts that keep every source of the region inside an inset
             // exemplar.
             let (mut lo, mut hi) = ((i64::MAX, i64::MAX), (i64::MIN, i64::MIN));
@@ -452,11 +501,8 @@ pub fn align_regions(
                 hi = (hi.0.max(t.x as i64), hi.1.max(t.y as i64));
             }
             let mut best = (cost((0, 0), f32::INFINITY), (0i64, 0i64));
-            for dy in -align_shift..=align_shift {
-                for dx in -align_shift..=align_shift {
-                    if (dx, dy) == (0, 0) {
-                        continue;
-                    }
+            for &(dx, dy) in &shifts {
+                {
                     if !toroidal
                         && (lo.0 + dx < 0 || lo.1 + dy < 0 || hi.0 + dx >= ew || hi.1 + dy >= eh)
                     {
@@ -480,8 +526,7 @@ pub fn align_regions(
             }
             if best.1 != (0, 0)
                 && stride > 1
-                && cost_on(&border, best.1, f32::INFINITY)
-                    >= cost_on(&border, (0, 0), f32::INFINITY)
+                && cost_on(1, best.1, f32::INFINITY) >= cost_on(1, (0, 0), f32::INFINITY)
             {
                 best.1 = (0, 0);
             }
