@@ -17,6 +17,7 @@
 use super::map::TexelCoord;
 use super::sources::SourceMap;
 use crate::image::Image;
+use crate::mesh::union_find_root as find;
 use crate::progress::Progress;
 
 /// Passes of `jump_image`'s `refine = "seams"`: most pixels that move do
@@ -196,20 +197,17 @@ pub const ALIGN_SHIFT: i64 = 6;
 /// How deep, in pixels, [`align_regions`] compares each border pair's
 /// continuations into the other side. Planks p90 (as above, one pass
 /// before): 1 pixel 1.04–1.21, 3 pixels 0.99–1.13, 5 pixels 0.98–1.13.
-pub const ALIGN_DEPTH: i64 = 5;
+pub const ALIGN_DEPTH: usize = 5;
 
 /// Border pairs [`align_regions`] compares the shifts of a region on (spread
 /// along its border; the winner is checked on the whole border).
 pub const ALIGN_SEARCH_PAIRS: usize = 48;
 
-/// Deepest continuation [`align_regions`] can compare.
-const MAX_ALIGN_DEPTH: usize = 8;
-
 /// The outside half of a border pair in [`align_regions`].
 struct OutsideHalf {
     cq: [f32; 4],
-    ahead: [Option<[f32; 4]>; MAX_ALIGN_DEPTH],
-    behind: [Option<[f32; 4]>; MAX_ALIGN_DEPTH],
+    ahead: [Option<[f32; 4]>; ALIGN_DEPTH],
+    behind: [Option<[f32; 4]>; ALIGN_DEPTH],
 }
 
 /// Sweeps of `jump_image`'s `refine = "aligned_seams"` per alignment.
@@ -233,11 +231,12 @@ pub struct AlignReport {
 /// continue each other, i.e. one copied piece of the exemplar. Each region
 /// (in order of its first pixel) tries every shift of its sources by up to
 /// [`ALIGN_SHIFT`] pixels along each axis and keeps the one with the least
-/// seam cost along its border, `Σ ‖E[s(p) + (q − p)] − E[s(q)]‖² +
-/// ‖E[s(q) + (p − q)] − E[s(p)]‖²` over 4-adjacent pairs `p` inside, `q`
-/// outside (the colour each side's continuation predicts against what the
-/// other side shows; a continuation outside an inset exemplar counts the
-/// plain colour difference). Shifts that take a source out of an inset
+/// seam cost along its border, `Σ_k ‖E[s(p) + (k + 1)(q − p)] −
+/// E[s(q) + k(q − p)]‖² + ‖E[s(q) − (k + 1)(q − p)] − E[s(p) − k(q − p)]‖²`
+/// over 4-adjacent pairs `p` inside, `q` outside and `k <` [`ALIGN_DEPTH`]
+/// (each side's continuation into the other against what that side shows;
+/// a continuation outside an inset exemplar counts the plain colour
+/// difference of `p` and `q`). Shifts that take a source out of an inset
 /// exemplar are not tried. A region keeps its sources unless a shift is
 /// strictly cheaper, so the border cost never grows. Up to `sweeps`
 /// sweeps, until none moves. Sequential and deterministic.
@@ -256,10 +255,9 @@ pub fn align_regions(
     let (ew, eh) = (exemplar.width as i64, exemplar.height as i64);
     let c = (exemplar.channels as usize).min(4);
     let n = (w * h) as usize;
-    let (depth, align_shift) = (ALIGN_DEPTH, ALIGN_SHIFT);
     // Every shift but none, row by row.
-    let shifts: Vec<(i64, i64)> = (-align_shift..=align_shift)
-        .flat_map(|dy| (-align_shift..=align_shift).map(move |dx| (dx, dy)))
+    let shifts: Vec<(i64, i64)> = (-ALIGN_SHIFT..=ALIGN_SHIFT)
+        .flat_map(|dy| (-ALIGN_SHIFT..=ALIGN_SHIFT).map(move |dx| (dx, dy)))
         .filter(|&d| d != (0, 0))
         .collect();
     let mut report = AlignReport::default();
@@ -290,7 +288,6 @@ pub fn align_regions(
     let continues = |a: TexelCoord, b: TexelCoord, dx: i64, dy: i64| {
         shifted(a.x as i64 + dx, a.y as i64 + dy) == Some((b.x as i64, b.y as i64))
     };
-    // The seam cost of one pair with `p`'s source moved by `d`.
     let diff = |a: [f32; 4], b: [f32; 4]| -> f32 {
         (a[0] - b[0]) * (a[0] - b[0])
             + (a[1] - b[1]) * (a[1] - b[1])
@@ -300,15 +297,14 @@ pub fn align_regions(
     // A border pair's outside half, which no shift of the region changes:
     // q's colour, and the colours k pixels on (ahead) and k + 1 back
     // (behind) from q's source, `None` outside an inset exemplar.
-    let depth_n = depth.clamp(1, MAX_ALIGN_DEPTH as i64) as usize;
     let outside = |sq: TexelCoord, step: (i64, i64)| -> OutsideHalf {
         let (qx, qy) = (sq.x as i64, sq.y as i64);
         let mut half = OutsideHalf {
             cq: colour(qx, qy),
-            ahead: [None; MAX_ALIGN_DEPTH],
-            behind: [None; MAX_ALIGN_DEPTH],
+            ahead: [None; ALIGN_DEPTH],
+            behind: [None; ALIGN_DEPTH],
         };
-        for k in 0..depth_n {
+        for k in 0..ALIGN_DEPTH {
             let k1 = k as i64;
             half.ahead[k] = shifted(qx + k1 * step.0, qy + k1 * step.1).map(|(x, y)| colour(x, y));
             half.behind[k] =
@@ -328,7 +324,7 @@ pub fn align_regions(
         };
         let cp = colour(px, py);
         let mut total = 0.0;
-        for k in 0..depth_n {
+        for k in 0..ALIGN_DEPTH {
             let k1 = k as i64;
             let ahead = match (
                 shifted(px + (k1 + 1) * step.0, py + (k1 + 1) * step.1),
@@ -352,7 +348,7 @@ pub fn align_regions(
     // verbatim-copy measure (`kernels::metrics::quality`): a shift may not
     // make one by joining its region to its neighbours.
     let large = ((ew * eh) as usize).div_ceil(3);
-    // An offset moved by `d` (wrapped when toroidal).
+    // An offset (source minus pixel) moved by `d`, wrapped when toroidal.
     let moved_by = |o: (i64, i64), d: (i64, i64)| -> (i64, i64) {
         let (ox, oy) = (o.0 + d.0, o.1 + d.1);
         if toroidal {
@@ -363,12 +359,7 @@ pub fn align_regions(
     };
     let offset_of = |i: usize, t: TexelCoord| -> (i64, i64) {
         let (x, y) = ((i as i64) % w, (i as i64) / w);
-        let (ox, oy) = (t.x as i64 - x, t.y as i64 - y);
-        if toroidal {
-            (ox.rem_euclid(ew), oy.rem_euclid(eh))
-        } else {
-            (ox, oy)
-        }
+        moved_by((t.x as i64 - x, t.y as i64 - y), (0, 0))
     };
     let mut dirty = vec![true; n];
     for _ in 0..sweeps {
@@ -376,14 +367,6 @@ pub fn align_regions(
         let mut next_dirty = vec![false; n];
         // Regions by union-find over the right and lower continuations.
         let mut parent: Vec<u32> = (0..n as u32).collect();
-        fn find(parent: &mut [u32], mut i: u32) -> u32 {
-            while parent[i as usize] != i {
-                let up = parent[parent[i as usize] as usize];
-                parent[i as usize] = up;
-                i = up;
-            }
-            i
-        }
         for y in 0..h {
             for x in 0..w {
                 let i = (y * w + x) as usize;
@@ -455,6 +438,13 @@ pub fn align_regions(
             if border.is_empty() {
                 continue;
             }
+            // Only regions that moved, or border a region that moved, in
+            // the previous sweep can find a cheaper shift.
+            if !region.iter().any(|&i| dirty[i as usize])
+                && !border.iter().any(|&(_, j, _)| dirty[j as usize])
+            {
+                continue;
+            }
             // The groups of the regions across the border.
             near.clear();
             let own_group = find(&mut group, root);
@@ -463,13 +453,6 @@ pub fn align_regions(
                 if g != own_group && !near.contains(&g) {
                     near.push(g);
                 }
-            }
-            // Only regions that moved, or border a region that moved, in
-            // the previous sweep can find a cheaper shift.
-            if !region.iter().any(|&i| dirty[i as usize])
-                && !border.iter().any(|&(_, j, _)| dirty[j as usize])
-            {
-                continue;
             }
             // The search compares shifts on at most `ALIGN_SEARCH_PAIRS`
             // pairs spread along the border; the winner must then be
@@ -501,27 +484,25 @@ pub fn align_regions(
                 hi = (hi.0.max(t.x as i64), hi.1.max(t.y as i64));
             }
             let mut best = (cost((0, 0), f32::INFINITY), (0i64, 0i64));
+            let own = area[own_group as usize] as usize;
             for &(dx, dy) in &shifts {
+                if !toroidal
+                    && (lo.0 + dx < 0 || lo.1 + dy < 0 || hi.0 + dx >= ew || hi.1 + dy >= eh)
                 {
-                    if !toroidal
-                        && (lo.0 + dx < 0 || lo.1 + dy < 0 || hi.0 + dx >= ew || hi.1 + dy >= eh)
-                    {
-                        continue;
-                    }
-                    let shifted_offset = moved_by(offset[root as usize], (dx, dy));
-                    let own = area[find(&mut group, root) as usize] as usize;
-                    let joined: usize = near
-                        .iter()
-                        .filter(|&&g| offset[g as usize] == shifted_offset)
-                        .map(|&g| area[g as usize] as usize)
-                        .sum();
-                    if joined > 0 && own + joined >= large {
-                        continue;
-                    }
-                    let e = cost((dx, dy), best.0);
-                    if e < best.0 {
-                        best = (e, (dx, dy));
-                    }
+                    continue;
+                }
+                let shifted_offset = moved_by(offset[root as usize], (dx, dy));
+                let joined: usize = near
+                    .iter()
+                    .filter(|&&g| offset[g as usize] == shifted_offset)
+                    .map(|&g| area[g as usize] as usize)
+                    .sum();
+                if joined > 0 && own + joined >= large {
+                    continue;
+                }
+                let e = cost((dx, dy), best.0);
+                if e < best.0 {
+                    best = (e, (dx, dy));
                 }
             }
             if best.1 != (0, 0)
@@ -537,7 +518,6 @@ pub fn align_regions(
                 }
                 let (dx, dy) = best.1;
                 let new_offset = moved_by(offset[root as usize], (dx, dy));
-                let own_group = find(&mut group, root);
                 offset[root as usize] = new_offset;
                 offset[own_group as usize] = new_offset;
                 for &g in &near {

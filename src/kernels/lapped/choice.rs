@@ -16,6 +16,7 @@
 use super::coverage::{Coverage, lattice_samples};
 use super::grow::SurfacePatch;
 use super::mask::TexturePatch;
+use crate::kernels::floor_i64 as floor;
 use glam::Vec2;
 use rayon::prelude::*;
 
@@ -131,13 +132,6 @@ impl FalloffBand {
         let s = |x: i64, y: i64| self.sat[(y * stride + x) as usize];
         s(x1 + 1, y1 + 1) + s(x0, y0) != s(x0, y1 + 1) + s(x1 + 1, y0)
     }
-}
-
-/// `v.floor()` without the library call (exact for `|v| < 2⁶³`).
-#[inline]
-fn floor(v: f32) -> i64 {
-    let i = v as i64;
-    if i as f32 > v { i - 1 } else { i }
 }
 
 /// The RGBA pixel of `tex` whose square holds the pixel-coordinate point

@@ -183,8 +183,6 @@ pub struct Grower<'a> {
     /// Per patch face (local id), the filtered Jacobian `J̃` of the texel-
     /// scale distortion measure (empty with the per-face rule).
     smooth: Vec<[Vec2; 2]>,
-    /// The next growth keeps `smooth` ([`Grower::grow_unchanged`]).
-    keep_filter: bool,
 }
 
 impl<'a> Grower<'a> {
@@ -201,7 +199,6 @@ impl<'a> Grower<'a> {
             vertex_local: vec![0; mesh.positions.len()],
             heap: BinaryHeap::new(),
             smooth: Vec::new(),
-            keep_filter: false,
         }
     }
 
@@ -286,16 +283,22 @@ impl<'a> Grower<'a> {
     /// faces added. Call again after the parametrisation changed (§3.4: the
     /// optimisation may uncover parts of the texture patch).
     pub fn grow(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
+        self.grow_over(patch, hull, true)
+    }
+
+    /// [`Grower::grow`], refiltering the patch's Jacobians first or not.
+    fn grow_over(&mut self, patch: &mut SurfacePatch, hull: &Hull, refilter: bool) -> usize {
         let radius = hull
             .vertices
             .iter()
             .map(|v| v.length())
             .fold(0.0f32, f32::max);
-        self.grow_with(
+        self.grow_filtered(
             patch,
             self.settings.max_reach * radius,
             &|a: Vec2, b: Vec2| hull.segment_intersects(a, b),
             &mut |_: u32, _: [Vec2; 3]| true,
+            refilter,
         )
     }
 
@@ -306,19 +309,17 @@ impl<'a> Grower<'a> {
     /// in debug builds). The paste loop's matched choice regrows over the
     /// chosen texture patch's hull this way.
     pub fn grow_unchanged(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
-        if self.settings.distortion_radius > 0.0 && self.smooth.len() == patch.faces.len() {
-            #[cfg(debug_assertions)]
-            {
-                let kept = self.smooth.clone();
-                self.refilter(patch);
-                debug_assert!(
-                    kept == self.smooth,
-                    "grow_unchanged: the coordinates changed"
-                );
-            }
-            self.keep_filter = true;
+        let keep = self.settings.distortion_radius > 0.0 && self.smooth.len() == patch.faces.len();
+        #[cfg(debug_assertions)]
+        if keep {
+            let kept = self.smooth.clone();
+            self.refilter(patch);
+            debug_assert!(
+                kept == self.smooth,
+                "grow_unchanged: the coordinates changed"
+            );
         }
-        self.grow(patch, hull)
+        self.grow_over(patch, hull, !keep)
     }
 
     /// [`Grower::grow`] with the growth distance bounded by `max_dist`
@@ -335,8 +336,21 @@ impl<'a> Grower<'a> {
         reaches: &dyn Fn(Vec2, Vec2) -> bool,
         admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
     ) -> usize {
+        self.grow_filtered(patch, max_dist, reaches, admit, true)
+    }
+
+    /// [`Grower::grow_with`]; `refilter: false` keeps the filtered
+    /// Jacobians of the last growth ([`Grower::grow_unchanged`]).
+    fn grow_filtered(
+        &mut self,
+        patch: &mut SurfacePatch,
+        max_dist: f32,
+        reaches: &dyn Fn(Vec2, Vec2) -> bool,
+        admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
+        refilter: bool,
+    ) -> usize {
         let mesh = self.mesh;
-        if self.settings.distortion_radius > 0.0 && !std::mem::take(&mut self.keep_filter) {
+        if self.settings.distortion_radius > 0.0 && refilter {
             self.refilter(patch);
         }
         self.heap.clear();

@@ -105,15 +105,21 @@ impl Csr {
         self.start.len().saturating_sub(1)
     }
 
+    /// Row `r` of `A x`.
+    #[inline]
+    pub fn row_dot(&self, r: usize, x: &[f64]) -> f64 {
+        let (a, b) = (self.start[r] as usize, self.start[r + 1] as usize);
+        self.col[a..b]
+            .iter()
+            .zip(&self.val[a..b])
+            .map(|(&c, &v)| v * x[c as usize])
+            .sum()
+    }
+
     /// `y = A x`.
     pub fn mul(&self, x: &[f64], y: &mut [f64]) {
         for (r, out) in y.iter_mut().enumerate() {
-            let (a, b) = (self.start[r] as usize, self.start[r + 1] as usize);
-            *out = self.col[a..b]
-                .iter()
-                .zip(&self.val[a..b])
-                .map(|(&c, &v)| v * x[c as usize])
-                .sum();
+            *out = self.row_dot(r, x);
         }
     }
 
@@ -278,12 +284,7 @@ pub fn conjugate_gradient(
 pub fn relative_residual(a: &Csr, b: &[f64], x: &[f64]) -> f64 {
     let (mut rr, mut bb) = (0.0f64, 0.0f64);
     for (r, &br) in b.iter().enumerate() {
-        let (lo, hi) = (a.start[r] as usize, a.start[r + 1] as usize);
-        let ax: f64 = a.col[lo..hi]
-            .iter()
-            .zip(&a.val[lo..hi])
-            .map(|(&c, &v)| v * x[c as usize])
-            .sum();
+        let ax = a.row_dot(r, x);
         rr += (br - ax) * (br - ax);
         bb += br * br;
     }
