@@ -1174,8 +1174,8 @@ fn matched_pixel_choice_lowers_the_coherence_error() {
     }
 }
 
-/// The pixel method's seam refinement (`jump_image.refine = "seams"`, the
-/// default; `kernels::jump_map::refine`) lowers the coherence error, mean
+/// The pixel method's seam refinement (`jump_image.refine = "seams"`, also
+/// the middle of the default `aligned_seams`; `kernels::jump_map::refine`) lowers the coherence error, mean
 /// and p90, and the completeness of the paper's random choice on every
 /// shared texture at the planar benchmark's size, and adds no large
 /// verbatim copies (`large_region_repeats` at most the paper's, or 2).
@@ -1241,5 +1241,68 @@ fn seam_refinement_lowers_the_pixel_methods_errors() {
             repeats <= paper_repeats.max(2),
             "{name}: large_region_repeats {paper_repeats} → {repeats}"
         );
+    }
+}
+
+/// The region alignment and the seam passes of `refine = "aligned_seams"`
+/// add no large verbatim copies: on every shared texture at seeds 1–3
+/// (the matched choice at the planar benchmark's size), after each of
+/// `align_regions`, `refine_seams` and `align_regions` again, no exemplar
+/// pixel is copied by large regions (a third of the exemplar or more) more
+/// often than before or than twice. Without their guards (no join into a
+/// large region, no large region moved or grown where two large ones copy
+/// already) grass at seed 2 of the planar config reached 3.
+#[test]
+fn alignment_and_seam_passes_add_no_large_verbatim_repeats() {
+    use surfsynth::kernels::jump_map::refine::{
+        ALIGN_SWEEPS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, align_regions, refine_seams,
+    };
+    use surfsynth::kernels::metrics::quality::verbatim_copying;
+    let hidden = surfsynth::progress::Progress::hidden();
+    for name in TEXTURES {
+        let ex = load(name);
+        let map = analyse(&ex, &JumpMapSettings::default()).unwrap();
+        let toroidal = map.boundary() == Boundary::Toroidal;
+        for seed in 1..=3 {
+            let out = synthesize_pixels(
+                &ex,
+                &map,
+                &PixelSynthesisSettings {
+                    seed,
+                    choice: PixelChoice::Matched,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+            let mut sources = out.sources.clone();
+            let repeats = |s: &SourceMap| {
+                verbatim_copying(&metric_sources(s), ex.width, ex.height).large_region_repeats
+            };
+            let mut before = repeats(&sources);
+            for step in ["align", "seams", "align again"] {
+                match step {
+                    "seams" => {
+                        refine_seams(
+                            &mut sources,
+                            &ex,
+                            toroidal,
+                            SEAM_REFINE_PASSES,
+                            SEAM_REFINE_RADIUS,
+                            &hidden,
+                        );
+                    }
+                    _ => {
+                        align_regions(&mut sources, &ex, toroidal, ALIGN_SWEEPS, &hidden);
+                    }
+                }
+                let after = repeats(&sources);
+                println!("{name} seed {seed} {step}: large_region_repeats {before} → {after}");
+                assert!(
+                    after <= before.max(2),
+                    "{name} seed {seed} {step}: large_region_repeats {before} → {after}"
+                );
+                before = after;
+            }
+        }
     }
 }

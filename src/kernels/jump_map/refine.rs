@@ -104,8 +104,53 @@ pub fn refine_seams(
     let r = radius as i64;
     let mut report = SeamRefineReport::default();
     let mut cands: Vec<TexelCoord> = Vec::with_capacity(9);
+    // Copied regions of at least this area count as large in the
+    // verbatim-copy measure: a move may not make one by joining regions.
+    let large = ((ew * eh) as usize).div_ceil(3);
+    let n = (w * h) as usize;
+    // Regions, tracked through a pass: union-find over nodes with areas; a
+    // pixel that moves gets a fresh node (its old region loses one pixel;
+    // splits are not tracked, so areas only overestimate).
+    let mut parent: Vec<u32> = Vec::with_capacity(2 * n);
+    let mut area: Vec<u32> = Vec::with_capacity(2 * n);
+    let mut node: Vec<u32> = Vec::with_capacity(n);
+    let mut joined: Vec<u32> = Vec::with_capacity(4);
+    let mut cover = vec![0u16; (ew * eh) as usize];
+    let texel = |t: TexelCoord| (t.y as i64 * ew + t.x as i64) as usize;
     for _ in 0..passes {
-        let mut next = vec![false; (w * h) as usize];
+        parent.clear();
+        parent.extend(0..n as u32);
+        area.clear();
+        area.resize(n, 1);
+        node.clear();
+        node.extend(0..n as u32);
+        for y in 0..h {
+            for x in 0..w {
+                for (dx, dy) in [(1, 0), (0, 1)] {
+                    let (nx, ny) = (x + dx, y + dy);
+                    if nx < w && ny < h && shifted(src[at(x, y)], dx, dy) == Some(src[at(nx, ny)]) {
+                        let (a, b) = (
+                            find(&mut parent, at(x, y) as u32),
+                            find(&mut parent, at(nx, ny) as u32),
+                        );
+                        if a != b {
+                            let (lo, hi) = (a.min(b), a.max(b));
+                            parent[hi as usize] = lo;
+                            area[lo as usize] += area[hi as usize];
+                        }
+                    }
+                }
+            }
+        }
+        // Per exemplar pixel, how many pixels of large regions copy it.
+        cover.iter_mut().for_each(|c| *c = 0);
+        for i in 0..n {
+            if area[find(&mut parent, i as u32) as usize] as usize >= large {
+                let t = src[i];
+                cover[texel(t)] += 1;
+            }
+        }
+        let mut next = vec![false; n];
         let (mut visited, mut moved) = (0, 0);
         for y in 0..h {
             progress.inc(1);
@@ -160,16 +205,71 @@ pub fn refine_seams(
                     }
                     e
                 };
+                // The regions a candidate joins: the 4-neighbours that
+                // continue it.
+                let joins = |cand: TexelCoord,
+                             parent: &mut Vec<u32>,
+                             joined: &mut Vec<u32>,
+                             node: &[u32],
+                             src: &[TexelCoord]| {
+                    joined.clear();
+                    for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                        let (nx, ny) = (x + dx, y + dy);
+                        if nx >= 0
+                            && ny >= 0
+                            && nx < w
+                            && ny < h
+                            && shifted(cand, dx, dy) == Some(src[at(nx, ny)])
+                        {
+                            let root = find(parent, node[at(nx, ny)]);
+                            if !joined.contains(&root) {
+                                joined.push(root);
+                            }
+                        }
+                    }
+                };
                 let mut best = (cost(here, f32::INFINITY), here);
                 for &cand in &cands[1..] {
                     let e = cost(cand, best.0);
                     if e < best.0 {
-                        best = (e, cand);
+                        joins(cand, &mut parent, &mut joined, &node, src);
+                        let total: usize = joined.iter().map(|&g| area[g as usize] as usize).sum();
+                        // No join into a large region, no region grown to
+                        // large, and no pixel added to a large region where
+                        // two large regions copy its source already.
+                        let allowed = total + 1 < large
+                            || (joined.len() == 1 && total >= large && cover[texel(cand)] < 2);
+                        if allowed {
+                            best = (e, cand);
+                        }
                     }
                 }
                 if best.1 != here {
                     src[at(x, y)] = best.1;
                     moved += 1;
+                    // Track the move: out of its region, into the ones it
+                    // continues.
+                    let old = find(&mut parent, node[at(x, y)]);
+                    if area[old as usize] as usize >= large {
+                        cover[texel(here)] = cover[texel(here)].saturating_sub(1);
+                    }
+                    area[old as usize] = area[old as usize].saturating_sub(1);
+                    let fresh = parent.len() as u32;
+                    parent.push(fresh);
+                    area.push(1);
+                    node[at(x, y)] = fresh;
+                    joins(best.1, &mut parent, &mut joined, &node, src);
+                    for &g in &joined {
+                        let (a, b) = (find(&mut parent, fresh), find(&mut parent, g));
+                        if a != b {
+                            let (lo, hi) = (a.min(b), a.max(b));
+                            parent[hi as usize] = lo;
+                            area[lo as usize] += area[hi as usize];
+                        }
+                    }
+                    if area[find(&mut parent, fresh) as usize] as usize >= large {
+                        cover[texel(best.1)] += 1;
+                    }
                     for qy in (y - r).max(0)..=(y + r).min(h - 1) {
                         for qx in (x - r).max(0)..=(x + r).min(w - 1) {
                             next[at(qx, qy)] = true;
@@ -199,6 +299,14 @@ pub const ALIGN_SHIFT: i64 = 6;
 /// before): 1 pixel 1.04–1.21, 3 pixels 0.99–1.13, 5 pixels 0.98–1.13.
 pub const ALIGN_DEPTH: usize = 5;
 
+/// Depth of [`align_regions`]' screening cost: every shift is first
+/// compared this many pixels deep, and only the [`ALIGN_SCREEN_KEEP`]
+/// cheapest are compared [`ALIGN_DEPTH`] pixels deep.
+pub const ALIGN_SCREEN_DEPTH: usize = 2;
+
+/// Shifts that pass [`align_regions`]' screening.
+pub const ALIGN_SCREEN_KEEP: usize = 8;
+
 /// Border pairs [`align_regions`] compares the shifts of a region on (spread
 /// along its border; the winner is checked on the whole border).
 pub const ALIGN_SEARCH_PAIRS: usize = 48;
@@ -211,7 +319,7 @@ struct OutsideHalf {
 }
 
 /// Sweeps of `jump_image`'s `refine = "aligned_seams"` per alignment.
-pub const ALIGN_SWEEPS: u32 = 8;
+pub const ALIGN_SWEEPS: u32 = 4;
 
 /// Regions smaller than this many pixels are left to the pixel passes.
 pub const ALIGN_MIN_PIXELS: usize = 16;
@@ -239,7 +347,8 @@ pub struct AlignReport {
 /// difference of `p` and `q`). Shifts that take a source out of an inset
 /// exemplar are not tried. A region keeps its sources unless a shift is
 /// strictly cheaper, so the border cost never grows. Up to `sweeps`
-/// sweeps, until none moves. Sequential and deterministic.
+/// sweeps, until none moves. Sequential and deterministic. `progress`
+/// advances by one per region and sweep.
 ///
 /// The pixel passes of [`refine_seams`] move one pixel at a time, so a
 /// copied piece that landed a row or two off its neighbours (board edges
@@ -250,6 +359,7 @@ pub fn align_regions(
     exemplar: &Image,
     toroidal: bool,
     sweeps: u32,
+    progress: &Progress,
 ) -> AlignReport {
     let (w, h) = (sources.width as i64, sources.height as i64);
     let (ew, eh) = (exemplar.width as i64, exemplar.height as i64);
@@ -260,6 +370,14 @@ pub fn align_regions(
         .flat_map(|dy| (-ALIGN_SHIFT..=ALIGN_SHIFT).map(move |dx| (dx, dy)))
         .filter(|&d| d != (0, 0))
         .collect();
+    let shift_index = |d: (i64, i64)| -> usize {
+        ((d.1 + ALIGN_SHIFT) * (2 * ALIGN_SHIFT + 1) + d.0 + ALIGN_SHIFT) as usize
+    };
+    let mut nearest_first = shifts.clone();
+    nearest_first.sort_by_key(|&(dx, dy)| (dx * dx + dy * dy, shift_index((dx, dy))));
+    let mut order: Vec<(i64, i64)> = Vec::with_capacity(shifts.len());
+    let mut tried = vec![false; shifts.len() + 1];
+    let mut kept: Vec<(f32, usize, (i64, i64))> = Vec::with_capacity(ALIGN_SCREEN_KEEP + 1);
     let mut report = AlignReport::default();
     if n == 0 || ew == 0 || eh == 0 {
         return report;
@@ -316,33 +434,34 @@ pub fn align_regions(
     // continuation k + 1 pixels on against q's source k on, and the other
     // way round, k < depth; the plain colour difference where a
     // continuation leaves an inset exemplar.
-    let pair_cost = |sp: TexelCoord, q: &OutsideHalf, d: (i64, i64), step: (i64, i64)| -> f32 {
-        let (px, py) = (sp.x as i64 + d.0, sp.y as i64 + d.1);
-        let (px, py) = match shifted(px, py) {
-            Some(t) => t,
-            None => return f32::INFINITY,
+    let pair_cost =
+        |sp: TexelCoord, q: &OutsideHalf, d: (i64, i64), step: (i64, i64), depth: usize| -> f32 {
+            let (px, py) = (sp.x as i64 + d.0, sp.y as i64 + d.1);
+            let (px, py) = match shifted(px, py) {
+                Some(t) => t,
+                None => return f32::INFINITY,
+            };
+            let cp = colour(px, py);
+            let mut total = 0.0;
+            for k in 0..depth {
+                let k1 = k as i64;
+                let ahead = match (
+                    shifted(px + (k1 + 1) * step.0, py + (k1 + 1) * step.1),
+                    q.ahead[k],
+                ) {
+                    (Some((x, y)), Some(b)) => diff(colour(x, y), b),
+                    _ => diff(cp, q.cq),
+                };
+                let behind = match (q.behind[k], shifted(px - k1 * step.0, py - k1 * step.1)) {
+                    (Some(a), Some((u, v))) => diff(a, colour(u, v)),
+                    _ => diff(cp, q.cq),
+                };
+                total += ahead + behind;
+            }
+            total
         };
-        let cp = colour(px, py);
-        let mut total = 0.0;
-        for k in 0..ALIGN_DEPTH {
-            let k1 = k as i64;
-            let ahead = match (
-                shifted(px + (k1 + 1) * step.0, py + (k1 + 1) * step.1),
-                q.ahead[k],
-            ) {
-                (Some((x, y)), Some(b)) => diff(colour(x, y), b),
-                _ => diff(cp, q.cq),
-            };
-            let behind = match (q.behind[k], shifted(px - k1 * step.0, py - k1 * step.1)) {
-                (Some(a), Some((u, v))) => diff(a, colour(u, v)),
-                _ => diff(cp, q.cq),
-            };
-            total += ahead + behind;
-        }
-        total
-    };
     let mut border: Vec<(u32, u32, (i64, i64))> = Vec::new();
-    let mut halves: Vec<OutsideHalf> = Vec::new();
+    let mut halves: Vec<(u32, (i64, i64), OutsideHalf)> = Vec::new();
     let mut near: Vec<u32> = Vec::new();
     // Copied regions of at least this area count as large in the
     // verbatim-copy measure (`kernels::metrics::quality`): a shift may not
@@ -362,6 +481,7 @@ pub fn align_regions(
         moved_by((t.x as i64 - x, t.y as i64 - y), (0, 0))
     };
     let mut dirty = vec![true; n];
+    let mut cover = vec![0u16; (ew * eh) as usize];
     for _ in 0..sweeps {
         let mut moved = 0;
         let mut next_dirty = vec![false; n];
@@ -408,6 +528,16 @@ pub fn align_regions(
             .filter(|&r| (start[r as usize + 1] - start[r as usize]) as usize >= ALIGN_MIN_PIXELS)
             .collect();
         report.regions = report.regions.max(roots.len());
+        progress.set_length(u64::from(sweeps) * roots.len() as u64);
+        progress.set_position(report.shifted.len() as u64 * roots.len() as u64);
+        // Per exemplar pixel, how many pixels of large regions copy it.
+        cover.iter_mut().for_each(|c| *c = 0);
+        for (i, &l) in label.iter().enumerate() {
+            if (start[l as usize + 1] - start[l as usize]) as usize >= large {
+                let t = src[i];
+                cover[(t.y as i64 * ew + t.x as i64) as usize] += 1;
+            }
+        }
         // Per region (by label) its offset and the group it has joined by
         // a shift in this sweep (union-find over labels, with areas).
         let mut group: Vec<u32> = (0..n as u32).collect();
@@ -420,6 +550,7 @@ pub fn align_regions(
             }
         }
         for &root in &roots {
+            progress.inc(1);
             let region = &pixels[start[root as usize] as usize..start[root as usize + 1] as usize];
             // The region's border pairs (inside, outside, step).
             border.clear();
@@ -462,19 +593,35 @@ pub fn align_regions(
             halves.extend(
                 border
                     .iter()
-                    .map(|&(_, j, step)| outside(src[j as usize], step)),
+                    .step_by(stride)
+                    .map(|&(i, j, step)| (i, step, outside(src[j as usize], step))),
             );
-            let cost_on = |every: usize, d: (i64, i64), bound: f32| -> f32 {
+            // The cost on every `every`-th search pair, given up above `bound`.
+            let cost_on = |every: usize, depth: usize, d: (i64, i64), bound: f32| -> f32 {
                 let mut e = 0.0f32;
-                for (&(i, _, step), q) in border.iter().zip(&halves).step_by(every) {
-                    e += pair_cost(src[i as usize], q, d, step);
-                    if e >= bound {
+                for (i, step, q) in halves.iter().step_by(every) {
+                    e += pair_cost(src[*i as usize], q, d, *step, depth);
+                    if e > bound {
                         return e;
                     }
                 }
                 e
             };
-            let cost = |d: (i64, i64), bound: f32| cost_on(stride, d, bound);
+            let whole_border = |d: (i64, i64)| -> f32 {
+                let mut e = 0.0f32;
+                for &(i, j, step) in &border {
+                    e += pair_cost(
+                        src[i as usize],
+                        &outside(src[j as usize], step),
+                        d,
+                        step,
+                        ALIGN_DEPTH,
+                    );
+                }
+                e
+            };
+            let cost = |d: (i64, i64), bound: f32| cost_on(1, ALIGN_DEPTH, d, bound);
+            let screen = |d: (i64, i64), bound: f32| cost_on(2, ALIGN_SCREEN_DEPTH, d, bound);
             // Shifts that keep every source of the region inside an inset
             // exemplar.
             let (mut lo, mut hi) = ((i64::MAX, i64::MAX), (i64::MIN, i64::MIN));
@@ -485,7 +632,30 @@ pub fn align_regions(
             }
             let mut best = (cost((0, 0), f32::INFINITY), (0i64, 0i64));
             let own = area[own_group as usize] as usize;
-            for &(dx, dy) in &shifts {
+            // Shifts that join a neighbouring group first, then the rest
+            // nearest first: a cheap shift found early bounds the others'
+            // sums sooner. Ties go to the shift first in raster order, so
+            // the order does not change the result.
+            order.clear();
+            kept.clear();
+            tried.iter_mut().for_each(|t| *t = false);
+            tried[shift_index((0, 0))] = true;
+            for &g in &near {
+                let (ox, oy) = offset[g as usize];
+                let (rx, ry) = offset[root as usize];
+                let mut d = (ox - rx, oy - ry);
+                if toroidal {
+                    // The nearest representative of the wrapped difference.
+                    d.0 = (d.0 + ew / 2).rem_euclid(ew) - ew / 2;
+                    d.1 = (d.1 + eh / 2).rem_euclid(eh) - eh / 2;
+                }
+                if d.0.abs() <= ALIGN_SHIFT && d.1.abs() <= ALIGN_SHIFT && !tried[shift_index(d)] {
+                    tried[shift_index(d)] = true;
+                    order.push(d);
+                }
+            }
+            order.extend(nearest_first.iter().filter(|&&d| !tried[shift_index(d)]));
+            for &(dx, dy) in &order {
                 if !toroidal
                     && (lo.0 + dx < 0 || lo.1 + dy < 0 || hi.0 + dx >= ew || hi.1 + dy >= eh)
                 {
@@ -500,16 +670,57 @@ pub fn align_regions(
                 if joined > 0 && own + joined >= large {
                     continue;
                 }
-                let e = cost((dx, dy), best.0);
-                if e < best.0 {
-                    best = (e, (dx, dy));
+                // Screened on the shallow cost: the `ALIGN_SCREEN_KEEP`
+                // cheapest (ties to the first in raster order) go on.
+                let bound = if kept.len() == ALIGN_SCREEN_KEEP {
+                    kept[ALIGN_SCREEN_KEEP - 1].0
+                } else {
+                    f32::INFINITY
+                };
+                let e = screen((dx, dy), bound);
+                let key = (e, shift_index((dx, dy)));
+                if e <= bound {
+                    let at = kept.partition_point(|&(f, k, _)| (f, k) < key);
+                    if at < ALIGN_SCREEN_KEEP {
+                        kept.insert(at, (e, key.1, (dx, dy)));
+                        kept.truncate(ALIGN_SCREEN_KEEP);
+                    }
                 }
             }
-            if best.1 != (0, 0)
-                && stride > 1
-                && cost_on(1, best.1, f32::INFINITY) >= cost_on(1, (0, 0), f32::INFINITY)
-            {
+            for &(_, _, d) in &kept {
+                let e = cost(d, best.0);
+                if e < best.0
+                    || (e == best.0 && best.1 != (0, 0) && shift_index(d) < shift_index(best.1))
+                {
+                    best = (e, d);
+                }
+            }
+            if best.1 != (0, 0) && stride > 1 && whole_border(best.1) >= whole_border((0, 0)) {
                 best.1 = (0, 0);
+            }
+            // A large region may not move its sources where two other large
+            // regions copy the exemplar already (the verbatim measure's
+            // repeats).
+            if best.1 != (0, 0) && own >= large {
+                let texel = |x: i64, y: i64| (y * ew + x) as usize;
+                for &i in region {
+                    let t = src[i as usize];
+                    cover[texel(t.x as i64, t.y as i64)] -= 1;
+                }
+                let fits = region.iter().all(|&i| {
+                    let t = src[i as usize];
+                    shifted(t.x as i64 + best.1.0, t.y as i64 + best.1.1)
+                        .is_some_and(|(x, y)| cover[texel(x, y)] < 2)
+                });
+                if !fits {
+                    best.1 = (0, 0);
+                }
+                for &i in region {
+                    let t = src[i as usize];
+                    let (x, y) = shifted(t.x as i64 + best.1.0, t.y as i64 + best.1.1)
+                        .unwrap_or((t.x as i64, t.y as i64));
+                    cover[texel(x, y)] += 1;
+                }
             }
             if best.1 != (0, 0) {
                 moved += 1;
@@ -708,22 +919,20 @@ mod tests {
     /// the right half continues it but two rows down (a board edge off by
     /// two pixels at the seam).
     fn misaligned(w: u32, h: u32, ex: &Image) -> SourceMap {
-        let texels = (0..w * h)
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                let dy = if x < w / 2 { 8 } else { 10 };
-                TexelCoord {
-                    x: x + 4,
-                    y: y + dy,
-                }
-            })
-            .collect();
+        map_of(w, h, ex, |x, y| TexelCoord {
+            x: x + 4,
+            y: y + if x < w / 2 { 8 } else { 10 },
+        })
+    }
+
+    /// A `w × h` source map over `ex` with `source(x, y)` at each pixel.
+    fn map_of(w: u32, h: u32, ex: &Image, source: impl Fn(u32, u32) -> TexelCoord) -> SourceMap {
         SourceMap {
             width: w,
             height: h,
             exemplar_width: ex.width,
             exemplar_height: ex.height,
-            texels,
+            texels: (0..w * h).map(|i| source(i % w, i / w)).collect(),
         }
     }
 
@@ -731,7 +940,7 @@ mod tests {
     fn a_misaligned_region_is_moved_to_continue_its_neighbour() {
         let ex = boards(64);
         let mut s = misaligned(32, 32, &ex);
-        let report = align_regions(&mut s, &ex, false, ALIGN_SWEEPS);
+        let report = align_regions(&mut s, &ex, false, ALIGN_SWEEPS, &Progress::hidden());
         assert_eq!(report.regions, 2, "{report:?}");
         assert!(report.shifted[0] >= 1, "{report:?}");
         // Every pair across the seam now continues: one copied piece.
@@ -748,7 +957,7 @@ mod tests {
         let ex = boards(36);
         let mut s = misaligned(32, 16, &ex);
         let before = s.texels.clone();
-        let report = align_regions(&mut s, &ex, false, ALIGN_SWEEPS);
+        let report = align_regions(&mut s, &ex, false, ALIGN_SWEEPS, &Progress::hidden());
         assert_eq!(report.regions, 2, "{report:?}");
         let seam_continues = (0..16usize).all(|y| {
             let (a, b) = (s.texels[y * 32 + 15], s.texels[y * 32 + 16]);
@@ -765,6 +974,69 @@ mod tests {
                 .collect();
             assert!(m.iter().all(|&v| v == m[0]), "a half moved in part");
         }
+    }
+
+    /// Copied regions of `s` (4-connected pixels whose sources continue
+    /// each other), as their areas, largest first.
+    fn region_areas(s: &SourceMap) -> Vec<usize> {
+        let (w, h) = (s.width as usize, s.height as usize);
+        let mut parent: Vec<u32> = (0..(w * h) as u32).collect();
+        for y in 0..h {
+            for x in 0..w {
+                let i = y * w + x;
+                for (j, dx, dy) in [(i + 1, 1, 0), (i + w, 0, 1)] {
+                    if (dx == 1 && x + 1 == w) || (dy == 1 && y + 1 == h) {
+                        continue;
+                    }
+                    let (a, b) = (s.texels[i], s.texels[j]);
+                    if (b.x, b.y) == (a.x + dx, a.y + dy) {
+                        let (ra, rb) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
+                        parent[ra.max(rb) as usize] = ra.min(rb);
+                    }
+                }
+            }
+        }
+        let mut area = vec![0usize; w * h];
+        for i in 0..w * h {
+            area[find(&mut parent, i as u32) as usize] += 1;
+        }
+        area.retain(|&a| a > 0);
+        area.sort_unstable_by(|a, b| b.cmp(a));
+        area
+    }
+
+    /// Two pieces of 15 × `h` pixels copying one 36² exemplar at one
+    /// offset, with a column of pixels from elsewhere between them: each
+    /// column pixel's best candidate is the pieces' continuation (it matches
+    /// both sides exactly), which joins them.
+    fn split_by_a_column(h: u32, ex: &Image) -> SourceMap {
+        map_of(31, h, ex, |x, y| {
+            if x == 15 {
+                TexelCoord {
+                    x: 30,
+                    y: (y * 7) % 30,
+                }
+            } else {
+                TexelCoord { x: x + 2, y: y + 4 }
+            }
+        })
+    }
+
+    #[test]
+    fn seam_passes_never_join_pieces_into_a_copy_of_a_third_of_the_exemplar() {
+        let ex = boards(36);
+        let large = (36usize * 36).div_ceil(3);
+        // 8 rows: joined they copy 248 pixels, under a third of 1 296, and
+        // the passes join them (the column takes the continuation).
+        let mut small = split_by_a_column(8, &ex);
+        refine_seams(&mut small, &ex, false, 3, 2, &Progress::hidden());
+        assert_eq!(region_areas(&small), vec![31 * 8], "not joined");
+        // 20 rows: joined they would copy 620 pixels, a third or more; the
+        // guard keeps them apart.
+        let mut tall = split_by_a_column(20, &ex);
+        refine_seams(&mut tall, &ex, false, 3, 2, &Progress::hidden());
+        let areas = region_areas(&tall);
+        assert!(areas[0] < large, "a copy of {} pixels: {areas:?}", areas[0]);
     }
 
     /// A 32² exemplar of smooth, position-dependent colour (every window

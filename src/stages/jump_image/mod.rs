@@ -47,7 +47,8 @@ pub struct JumpImageSettings {
     pub seams: String,
     /// How the pixel method picks a source: `matched` or `random`.
     pub choice: String,
-    /// The pixel method's seam refinement: `seams` or `none` (the paper).
+    /// The pixel method's seam refinement: `aligned_seams`, `seams` or
+    /// `none` (the paper).
     pub refine: String,
     /// Boundary-avoidance band.
     pub boundary_fraction: f32,
@@ -72,7 +73,7 @@ impl Default for JumpImageSettings {
             patch_side: 0.3,
             seams: "cut".into(),
             choice: "matched".into(),
-            refine: "seams".into(),
+            refine: "aligned_seams".into(),
             boundary_fraction: 0.2,
             field: "perspective".into(),
             field_scale: [1.0, 0.25],
@@ -130,13 +131,13 @@ impl StageSettings for JumpImageSettings {
             name: "choice",
             unit: "",
             range: ParamRange::OneOf(&["matched", "random"]),
-            doc: "pixel: matched (default; an extension) = the paper's draw decides whether a pixel jumps; then the destination in any synthesised neighbour's jump list, or the neighbour continuation, whose 5x5 exemplar window best matches the synthesised pixels around wins (k-coherent candidates with the jump map as the similarity set; planar benchmark, seeds 1-3, with refine = seams: issue 13's failing cells 7 -> 3 of 15, brick meets the gate, planks p90 still 1.18-1.33x the peer's); random = a random neighbour and a jump by weight (§5.1, the paper)",
+            doc: "pixel: matched (default; an extension) = the paper's draw decides whether a pixel jumps; then the destination in any synthesised neighbour's jump list, or the neighbour continuation, whose 5x5 exemplar window best matches the synthesised pixels around wins (k-coherent candidates with the jump map as the similarity set; planar benchmark, seeds 1-3, with refine = seams: issue 13's failing cells 7 -> 3 of 15, brick meets the gate, planks p90 still 1.18-1.33x the peer's; aligned_seams meets it on planks too); random = a random neighbour and a jump by weight (§5.1, the paper)",
         },
         ParamDoc {
             name: "refine",
             unit: "",
             range: ParamRange::OneOf(&["aligned_seams", "seams", "none"]),
-            doc: "pixel: aligned_seams = an extension (an option: slower) = seams between two passes that move whole copied regions (4-connected pixels whose sources continue each other) by up to 6 exemplar pixels per axis where that lowers the seam cost along their border (continuations 5 pixels deep), never joining regions into a copied region of a third of the exemplar or more (planar benchmark, seeds 1-3: issue 13's failing cells 3 -> 1 of 15, planks p90 1.13-1.27 -> 0.82-0.94x the peer's, but the stage takes 0.12-0.17 s instead of 0.03 s at 256x256); seams (default) = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates), first on the source map and exemplar halved (windows then see twice the structure; a moved coarse pixel sets its 2x2 block to its donor's fine continuation), then at full size; none = the paper's result",
+            doc: "pixel: aligned_seams (default) = an extension: seams between two alignments that move whole copied regions (4-connected pixels whose sources continue each other, at least 16) by up to 6 exemplar pixels per axis where that lowers the seam cost along their border (continuations 5 pixels deep; every shift screened 2 pixels deep, the 8 cheapest compared in full), at most 4 sweeps each, never joining regions into a copied region of a third of the exemplar or more nor moving a large one where two large ones copy the exemplar already (planar benchmark, seeds 1-3, ratio to the peer: planks p90 1.13-1.27 -> 0.86-0.97x, issue 13's gate met on all 15 cells; 0.08-0.10 s at 256x256, 25-31x faster than the peer); seams = an extension: after synthesis, 3 passes over the pixels next to a seam, each taking the continuation of one of its 8 neighbours whose 5x5 exemplar window best matches the output around it (texture optimisation restricted to coherent candidates; no move joins regions into a large copied region or adds a pixel to one where two large ones copy its source already), first on the source map and exemplar halved (windows then see twice the structure; a moved coarse pixel sets its 2x2 block to its donor's fine continuation), then at full size (0.03 s; planks p90 1.13-1.27x the peer's); none = the paper's result",
         },
         ParamDoc {
             name: "boundary_fraction",
@@ -310,11 +311,23 @@ impl Stage for JumpImage {
                 .map(|mut o| {
                     let align = settings.refine == "aligned_seams";
                     let toroidal = map.boundary() == Boundary::Toroidal;
-                    if settings.refine == "seams" || align {
+                    let mut align_now = |sources: &mut crate::kernels::jump_map::SourceMap| {
                         if align {
-                            aligned.push(align_regions(&mut o.sources, ex, toroidal, ALIGN_SWEEPS));
+                            let _s = tracing::info_span!("align_regions").entered();
+                            progress.start_part("align", 0);
+                            aligned.push(align_regions(
+                                sources,
+                                ex,
+                                toroidal,
+                                ALIGN_SWEEPS,
+                                &progress,
+                            ));
                         }
+                    };
+                    if settings.refine == "seams" || align {
+                        align_now(&mut o.sources);
                         progress.start_part("seams", 0);
+                        let seams_span = tracing::info_span!("refine_seams").entered();
                         let report = refine_seams_pyramid(
                             &mut o.sources,
                             ex,
@@ -324,9 +337,8 @@ impl Stage for JumpImage {
                             SEAM_REFINE_LEVELS,
                             &progress,
                         );
-                        if align {
-                            aligned.push(align_regions(&mut o.sources, ex, toroidal, ALIGN_SWEEPS));
-                        }
+                        drop(seams_span);
+                        align_now(&mut o.sources);
                         refined = Some(report);
                         if let Ok(image) = o.sources.gather(ex) {
                             o.image = image;
