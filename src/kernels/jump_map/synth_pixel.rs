@@ -34,6 +34,7 @@ use super::{
     Boundary, JumpMap, JumpMapError, PixelOrder, SourceMap, SynthesisOutput, TexelCoord, TexelRect,
 };
 use crate::image::Image;
+use crate::mesh::union_find_root;
 use crate::progress::Progress;
 
 /// Marks an output pixel not yet synthesized (and the padding border).
@@ -91,8 +92,16 @@ pub enum PixelChoice {
     /// coherent runs that copied regions larger than a third of the
     /// exemplar up to 4 times (water); with every neighbour's list a jump
     /// finds a destination that fits, and over seeds 1–3 (with the seam
-    /// refinement) no such region is repeated more than twice. The
-    /// `jump_image` stage's default; the kernel's default stays the paper.
+    /// refinement) no such region is repeated more than twice. At seeds
+    /// 4 and 6 planks and water still did (3 times, from the synthesis
+    /// itself), so the loop now tracks its copied regions as it places
+    /// pixels (`RepeatGuard`) and takes the next best candidate where the
+    /// best would join regions into a copy of a third of the exemplar, or
+    /// add to such a copy an exemplar pixel two large copies take already
+    /// (a forced jump when none is allowed): seeds 1–6 on the five photos,
+    /// at most 2 (outputs where the guard never refuses are unchanged).
+    /// The `jump_image` stage's default; the kernel's default stays the
+    /// paper.
     Matched,
 }
 
@@ -464,10 +473,139 @@ fn packed_colours(exemplar: &Image, shift: u32) -> Vec<[f32; 3]> {
     out
 }
 
+/// Copied regions of the matched loop, tracked as pixels are placed
+/// (union-find over the padded grid with areas: regions only grow), so a
+/// pixel's source can be refused where it would repeat a large copy. A
+/// region of at least `large` pixels (a third of the exemplar, the
+/// verbatim-copy measure's "large") counts in `cover`, per exemplar
+/// address the pixels of large regions that copy it; a region refused on
+/// reaching `large` is `capped` and never grows.
+struct RepeatGuard {
+    parent: Vec<u32>,
+    area: Vec<u32>,
+    capped: Vec<bool>,
+    cover: Vec<u16>,
+    large: u32,
+    roots: [u32; 4],
+    joined: usize,
+}
+
+impl RepeatGuard {
+    fn new(grid_len: usize, addresses: usize, large: u32) -> Self {
+        Self {
+            parent: (0..grid_len as u32).collect(),
+            area: vec![1; grid_len],
+            capped: vec![false; grid_len],
+            cover: vec![0; addresses],
+            large,
+            roots: [0; 4],
+            joined: 0,
+        }
+    }
+
+    /// The distinct regions of the synthesised neighbours of `pi` that
+    /// source `o` continues, into `roots[..joined]`.
+    fn join_roots<const TOROIDAL: bool>(
+        &mut self,
+        ctx: &Ctx,
+        grid: &[u32],
+        pi: usize,
+        pw: usize,
+        o: u32,
+    ) {
+        self.joined = 0;
+        let (cand, dirs, n) = synthesised_neighbours(grid, pi, pw);
+        let at = [pi - 1, pi + 1, pi - pw, pi + pw];
+        for i in 0..n {
+            if ctx.step::<TOROIDAL>(cand[i], dirs[i]) != o {
+                continue;
+            }
+            // `cand` lists the synthesised neighbours in `at`'s order.
+            let q = at[usize::from(dirs[i])];
+            let r = union_find_root(&mut self.parent, q as u32);
+            if !self.roots[..self.joined].contains(&r) {
+                self.roots[self.joined] = r;
+                self.joined += 1;
+            }
+        }
+    }
+
+    /// Whether `o` may be placed at `pi`: it joins no regions into a large
+    /// one, grows no capped region, and adds no pixel to a large region
+    /// where two large regions copy `o` already; a region that would
+    /// become large over exemplar pixels copied twice already is capped.
+    fn allows<const TOROIDAL: bool>(
+        &mut self,
+        ctx: &Ctx,
+        grid: &[u32],
+        pi: usize,
+        pw: usize,
+        o: u32,
+    ) -> bool {
+        self.join_roots::<TOROIDAL>(ctx, grid, pi, pw, o);
+        let total: u32 = 1 + self.roots[..self.joined]
+            .iter()
+            .map(|&r| self.area[r as usize])
+            .sum::<u32>();
+        if total < self.large {
+            return true;
+        }
+        if self.joined != 1 || self.capped[self.roots[0] as usize] {
+            return false;
+        }
+        let root = self.roots[0];
+        if self.area[root as usize] >= self.large {
+            return self.cover[o as usize] < 2;
+        }
+        // Becoming large: every exemplar pixel it copies must be free.
+        let fits = self.cover[o as usize] < 2
+            && (0..grid.len()).all(|q| {
+                grid[q] == NONE
+                    || union_find_root(&mut self.parent, q as u32) != root
+                    || self.cover[grid[q] as usize] < 2
+            });
+        if !fits {
+            self.capped[root as usize] = true;
+        }
+        fits
+    }
+
+    /// Records `grid[pi]`, just placed.
+    fn place<const TOROIDAL: bool>(&mut self, ctx: &Ctx, grid: &[u32], pi: usize, pw: usize) {
+        let o = grid[pi];
+        self.join_roots::<TOROIDAL>(ctx, grid, pi, pw, o);
+        let was_large = self.roots[..self.joined]
+            .iter()
+            .any(|&r| self.area[r as usize] >= self.large);
+        let mut root = pi as u32;
+        for j in 0..self.joined {
+            let r = self.roots[j];
+            let (lo, hi) = (root.min(r), root.max(r));
+            self.parent[hi as usize] = lo;
+            self.area[lo as usize] += self.area[hi as usize];
+            self.capped[lo as usize] |= self.capped[hi as usize];
+            root = lo;
+        }
+        if self.area[root as usize] < self.large {
+            return;
+        }
+        if was_large {
+            self.cover[o as usize] = self.cover[o as usize].saturating_add(1);
+        } else {
+            for (q, &a) in grid.iter().enumerate() {
+                if a != NONE && union_find_root(&mut self.parent, q as u32) == root {
+                    self.cover[a as usize] = self.cover[a as usize].saturating_add(1);
+                }
+            }
+        }
+    }
+}
+
 /// The loop of [`PixelChoice::Matched`]: as [`run`], but among the
 /// candidates of a pixel (the drawn neighbour's jump destinations when the
 /// draw says jump, else every synthesised neighbour's continuation) the one
-/// whose exemplar window best matches the synthesised pixels around.
+/// whose exemplar window best matches the synthesised pixels around and
+/// the [`RepeatGuard`] allows.
 #[inline(never)]
 fn run_matched<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
     order: I,
@@ -482,6 +620,9 @@ fn run_matched<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
     let ph = grid.len() / pw;
     let mut done = 0u64;
     let mut options: Vec<u32> = Vec::with_capacity(2 * k + 4);
+    let mut errors: Vec<f32> = Vec::with_capacity(2 * k + 4);
+    let large = (ctx.w * ctx.h).div_ceil(3);
+    let mut guard = RepeatGuard::new(grid.len(), (ctx.h as usize) << ctx.table.shift, large);
     let (ew, eh) = (i64::from(ctx.w), i64::from(ctx.h));
     let shift = ctx.table.shift;
     let error = |grid: &[u32], pi: usize, a: u32| -> f32 {
@@ -559,24 +700,34 @@ fn run_matched<const TOROIDAL: bool, I: Iterator<Item = (u32, u32)>>(
             }
             options.sort_unstable();
             options.dedup();
-            match options.len() {
-                0 => ctx.forced::<TOROIDAL>(a, dir, rng),
-                1 => options[0],
-                _ => {
-                    let mut best = options[0];
-                    let mut least = f32::INFINITY;
-                    for &o in &options {
-                        let err = error(grid, pi, o);
-                        if err < least {
-                            least = err;
-                            best = o;
-                        }
+            // The best-matching option the repeat guard allows (ties to the
+            // first); a forced jump when it allows none.
+            errors.clear();
+            if options.len() > 1 {
+                errors.extend(options.iter().map(|&o| error(grid, pi, o)));
+            } else {
+                errors.resize(options.len(), 0.0);
+            }
+            loop {
+                let mut best = None;
+                let mut least = f32::INFINITY;
+                for (i, &err) in errors.iter().enumerate() {
+                    if err < least || (best.is_none() && err.is_finite()) {
+                        least = err;
+                        best = Some(i);
                     }
-                    best
+                }
+                match best {
+                    Some(i) if guard.allows::<TOROIDAL>(ctx, grid, pi, pw, options[i]) => {
+                        break options[i];
+                    }
+                    Some(i) => errors[i] = f32::INFINITY,
+                    None => break ctx.forced::<TOROIDAL>(a, dir, rng),
                 }
             }
         };
         grid[pi] = addr;
+        guard.place::<TOROIDAL>(ctx, grid, pi, pw);
     }
 }
 

@@ -131,7 +131,7 @@ impl StageSettings for JumpImageSettings {
             name: "choice",
             unit: "",
             range: ParamRange::OneOf(&["matched", "random"]),
-            doc: "pixel: matched (default; an extension) = the paper's draw decides whether a pixel jumps; then the destination in any synthesised neighbour's jump list, or the neighbour continuation, whose 5x5 exemplar window best matches the synthesised pixels around wins (k-coherent candidates with the jump map as the similarity set; planar benchmark, seeds 1-3, with refine = seams: issue 13's failing cells 7 -> 3 of 15, brick meets the gate, planks p90 still 1.18-1.33x the peer's; aligned_seams meets it on planks too); random = a random neighbour and a jump by weight (§5.1, the paper)",
+            doc: "pixel: matched (default; an extension) = the paper's draw decides whether a pixel jumps; then the destination in any synthesised neighbour's jump list, or the neighbour continuation, whose 5x5 exemplar window best matches the synthesised pixels around wins (k-coherent candidates with the jump map as the similarity set; planar benchmark, seeds 1-3, with refine = seams: issue 13's failing cells 7 -> 3 of 15, brick meets the gate, planks p90 still 1.18-1.33x the peer's; aligned_seams meets it on planks too; the next best candidate is taken where the best would join copied regions into a copy of a third of the exemplar or add to one an exemplar pixel two such copies take already); random = a random neighbour and a jump by weight (§5.1, the paper)",
         },
         ParamDoc {
             name: "refine",
