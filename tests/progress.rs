@@ -119,6 +119,8 @@ fn long_stages_log_progress_off_a_terminal_and_not_with_quiet() {
     assert_logged(&logged, "retile", "level 2/2");
     assert_logged(&logged, "match", "level 1/2");
     assert_logged(&logged, "map_back", "");
+    assert_logged(&logged, "result_metrics", "texture energy");
+    assert_logged(&logged, "result_metrics", "quality");
     let (quiet, quiet_ply) = run(dir.path(), &wei_levoy(), "0", &["-q"]);
     assert!(
         progress_lines(&quiet).is_empty(),
@@ -147,6 +149,7 @@ fn graph_match_logs_levels_and_passes() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let (logged, ply) = run(dir.path(), &graph_match(), "0", &[]);
     assert_logged(&logged, "subdivide_sqrt2", "step 1");
+    assert_logged(&logged, "diffuse_orientation", "level 1/");
     assert_logged(&logged, "graph_match", "level 1/");
     assert!(
         progress_lines(&logged)

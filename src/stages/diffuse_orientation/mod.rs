@@ -29,6 +29,7 @@ use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::sweep::{relax_sweep, sweep_field};
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::progress::Progress;
 use crate::stages::position;
 use crate::stages::subdivide_sqrt2::carry_attribute;
 use crate::stages::world::*;
@@ -315,6 +316,9 @@ impl Stage for DiffuseOrientation {
             let mut coarsest_cache = Some((coarsest_topo, coarsest_normals));
             let mut directions: Vec<Vec3> = Vec::new();
             let mut sweep: Vec<f32> = Vec::new();
+            // Three steps per level: topology, diffusion, sweep (3.5 s a
+            // level at a million vertices).
+            let progress = Progress::new(3 * levels.len() as u64, Self::KIND);
             for (i, &e) in levels.iter().enumerate() {
                 let Ok((geometry, parents)) = meshes.get(e) else {
                     return;
@@ -322,10 +326,12 @@ impl Stage for DiffuseOrientation {
                 let mesh = &geometry.0;
                 let _span =
                     tracing::info_span!("diffuse_level", vertices = mesh.vertex_count()).entered();
+                progress.set_part(&format!("level {}/{}", i + 1, levels.len()));
                 let (topo, normals) = match coarsest_cache.take() {
                     Some(cached) if i == 0 => cached,
                     _ => (Topology::build(mesh), mesh.vertex_normals()),
                 };
+                progress.inc(1);
                 let (count, of_vertex) = topo.components();
                 let components = Components {
                     count,
@@ -369,6 +375,7 @@ impl Stage for DiffuseOrientation {
                     );
                     metrics.record(ctx.index, "sweep_anchor", anchor);
                 }
+                progress.inc(1);
                 directions = result.directions;
                 if settings.sweep {
                     sweep = match carried {
@@ -409,12 +416,14 @@ impl Stage for DiffuseOrientation {
                     .zip(&directions)
                     .map(|(&n, &d)| TangentFrame::from_up(n, d))
                     .collect();
+                progress.inc(1);
                 let mut ec = commands.entity(e);
                 ec.insert(Frames(frames));
                 if settings.sweep {
                     ec.insert(SweepField(sweep.clone()));
                 }
             }
+            progress.finish();
             metrics.record(ctx.index, "levels", levels.len());
         })
         .into_configs()
