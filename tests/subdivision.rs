@@ -5,6 +5,7 @@
 mod common;
 
 use glam::{Vec2, Vec3};
+use rayon::prelude::*;
 use surfsynth::kernels::sqrt2::{
     MAX_HIERARCHY_LEVELS, Sqrt2Settings, Subdivided, adaptive_sqrt2, interpolate_attribute,
     sqrt2_subdivide, sqrt2_subdivide_with, subdivide_to,
@@ -799,21 +800,44 @@ fn point_triangle_distance(q: Vec3, a: Vec3, b: Vec3, c: Vec3) -> f32 {
     seg(a, b).min(seg(b, c)).min(seg(c, a))
 }
 
-/// Largest distance from a vertex of `fine` to the surface of `input`.
-fn distance_to_surface(fine: &PolyMesh, input: &PolyMesh) -> f32 {
-    let tris: Vec<[Vec3; 3]> = input
+/// Points on the surface of `mesh`: its vertices, and per triangle its
+/// centroid, its edges' midpoints and the midpoints between the centroid
+/// and each corner.
+fn surface_samples(mesh: &PolyMesh) -> Vec<Vec3> {
+    let mut out = mesh.positions.clone();
+    for f in mesh.triangulated().faces() {
+        let [a, b, c] = [0, 1, 2].map(|k| mesh.positions[f[k] as usize]);
+        let m = (a + b + c) / 3.0;
+        out.extend([m, (a + b) / 2.0, (b + c) / 2.0, (c + a) / 2.0]);
+        out.extend([a, b, c].map(|p| (p + m) / 2.0));
+    }
+    out
+}
+
+/// Largest distance from `points` to the surface of `mesh`.
+fn distance_to_surface(points: &[Vec3], mesh: &PolyMesh) -> f32 {
+    let tris: Vec<[Vec3; 3]> = mesh
         .triangulated()
         .faces()
-        .map(|f| [0, 1, 2].map(|k| input.positions[f[k] as usize]))
+        .map(|f| [0, 1, 2].map(|k| mesh.positions[f[k] as usize]))
         .collect();
-    fine.positions
-        .iter()
+    points
+        .par_iter()
         .map(|&q| {
             tris.iter()
                 .map(|t| point_triangle_distance(q, t[0], t[1], t[2]))
                 .fold(f32::INFINITY, f32::min)
         })
-        .fold(0.0, f32::max)
+        .reduce(|| 0.0, f32::max)
+}
+
+/// The (sampled) Hausdorff distance between two surfaces: the farthest
+/// either's samples lie from the other's surface, as (from `a`, from `b`).
+fn hausdorff(a: &PolyMesh, b: &PolyMesh) -> (f32, f32) {
+    (
+        distance_to_surface(&surface_samples(a), b),
+        distance_to_surface(&surface_samples(b), a),
+    )
 }
 
 /// Runs the `subdivide_sqrt2` stage on `mesh` with `extra` settings and
@@ -836,6 +860,17 @@ fn subdivide_stage(mesh: &PolyMesh, extra: &str) -> PolyMesh {
 /// subdivided vertex stays within 1e-4 of the diagonal of the input surface
 /// (the subdivision surface itself, `on_input_surface = false`, cuts the
 /// corners by 0.13 cells, more than the wall is thick).
+///
+/// Not yet asserted, printed: the two-sided (sampled) Hausdorff distance.
+/// Measured: 0.083 from the subdivided surface to the input (triangles
+/// bridge the holes' inner corners between two walls, about a wall's
+/// thickness) and 0.378 from the input to the subdivided surface (the
+/// plate's outer corners are rounded off: a corner vertex is relaxed and
+/// projected back onto the surface, away from the corner), against 0.133
+/// and 0.376 for the subdivision surface. Creases and corners need
+/// feature-aware rules (corner vertices pinned, crease vertices relaxed
+/// along the crease) before the surface, not only its vertices, stays on
+/// the input.
 #[test]
 fn thin_walls_keep_their_shape_through_four_steps() {
     let (plate, holes) = common::messy::perforated_plate(11, 0.1);
@@ -847,11 +882,13 @@ fn thin_walls_keep_their_shape_through_four_steps() {
     let kept = subdivide_stage(&plate, "");
     let paper = subdivide_stage(&plate, "on_input_surface = false");
     let (d_kept, d_paper) = (
-        distance_to_surface(&kept, &plate),
-        distance_to_surface(&paper, &plate),
+        distance_to_surface(&kept.positions, &plate),
+        distance_to_surface(&paper.positions, &plate),
     );
+    let (kept_out, kept_in) = hausdorff(&kept, &plate);
+    let (paper_out, paper_in) = hausdorff(&paper, &plate);
     eprintln!(
-        "{} vertices: farthest from the input {d_kept:.2e} (on the input surface) vs {d_paper:.4} (the subdivision surface); diagonal {diagonal:.2}, wall 0.1",
+        "{} vertices: farthest from the input {d_kept:.2e} (on the input surface) vs {d_paper:.4} (the subdivision surface); sampled Hausdorff (to / from the input) {kept_out:.4} / {kept_in:.4} vs {paper_out:.4} / {paper_in:.4}; diagonal {diagonal:.2}, wall 0.1",
         kept.vertex_count()
     );
     assert_eq!(kept.vertex_count(), paper.vertex_count());
