@@ -18,7 +18,7 @@ pub use error::MeshError;
 pub use info::MeshInfo;
 pub use io::{LoadOptions, load_mesh};
 pub use repair::LoadReport;
-pub use topology::{Topology, edge_key, union_find_root};
+pub use topology::{Topology, edge_key, union_find_join, union_find_root};
 
 use glam::Vec3;
 use std::ops::Range;

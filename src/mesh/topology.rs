@@ -63,6 +63,21 @@ pub fn union_find_root(parent: &mut [u32], mut x: u32) -> u32 {
     x
 }
 
+/// Joins the sets of `a` and `b` in a union–find forest whose roots carry
+/// `size` (areas, counts): the smaller root index becomes the root and
+/// takes the other's size. Returns the root.
+#[inline]
+pub fn union_find_join(parent: &mut [u32], size: &mut [u32], a: u32, b: u32) -> u32 {
+    let (ra, rb) = (union_find_root(parent, a), union_find_root(parent, b));
+    if ra == rb {
+        return ra;
+    }
+    let (lo, hi) = (ra.min(rb), ra.max(rb));
+    parent[hi as usize] = lo;
+    size[lo as usize] += size[hi as usize];
+    lo
+}
+
 fn csr_from_pairs(n: usize, pairs: &[(u32, u32)]) -> (Vec<u32>, Vec<u32>) {
     let mut start = vec![0u32; n + 1];
     for &(k, _) in pairs {

@@ -17,7 +17,7 @@
 use super::map::TexelCoord;
 use super::sources::SourceMap;
 use crate::image::Image;
-use crate::mesh::union_find_root as find;
+use crate::mesh::{union_find_join as join, union_find_root as find};
 use crate::progress::Progress;
 
 /// Passes of `jump_image`'s `refine = "seams"`: most pixels that move do
@@ -129,15 +129,7 @@ pub fn refine_seams(
                 for (dx, dy) in [(1, 0), (0, 1)] {
                     let (nx, ny) = (x + dx, y + dy);
                     if nx < w && ny < h && shifted(src[at(x, y)], dx, dy) == Some(src[at(nx, ny)]) {
-                        let (a, b) = (
-                            find(&mut parent, at(x, y) as u32),
-                            find(&mut parent, at(nx, ny) as u32),
-                        );
-                        if a != b {
-                            let (lo, hi) = (a.min(b), a.max(b));
-                            parent[hi as usize] = lo;
-                            area[lo as usize] += area[hi as usize];
-                        }
+                        join(&mut parent, &mut area, at(x, y) as u32, at(nx, ny) as u32);
                     }
                 }
             }
@@ -259,15 +251,11 @@ pub fn refine_seams(
                     area.push(1);
                     node[at(x, y)] = fresh;
                     joins(best.1, &mut parent, &mut joined, &node, src);
+                    let mut root = fresh;
                     for &g in &joined {
-                        let (a, b) = (find(&mut parent, fresh), find(&mut parent, g));
-                        if a != b {
-                            let (lo, hi) = (a.min(b), a.max(b));
-                            parent[hi as usize] = lo;
-                            area[lo as usize] += area[hi as usize];
-                        }
+                        root = join(&mut parent, &mut area, root, g);
                     }
-                    if area[find(&mut parent, fresh) as usize] as usize >= large {
+                    if area[root as usize] as usize >= large {
                         cover[texel(best.1)] += 1;
                     }
                     for qy in (y - r).max(0)..=(y + r).min(h - 1) {
@@ -732,14 +720,11 @@ pub fn align_regions(
                 offset[root as usize] = new_offset;
                 offset[own_group as usize] = new_offset;
                 for &g in &near {
-                    if offset[g as usize] == new_offset {
-                        let (a, b) = (find(&mut group, own_group), find(&mut group, g));
-                        if a != b {
-                            let (lo, hi) = (a.min(b), a.max(b));
-                            group[hi as usize] = lo;
-                            area[lo as usize] += area[hi as usize];
-                            offset[lo as usize] = new_offset;
-                        }
+                    if offset[g as usize] == new_offset
+                        && find(&mut group, own_group) != find(&mut group, g)
+                    {
+                        let lo = join(&mut group, &mut area, own_group, g);
+                        offset[lo as usize] = new_offset;
                     }
                 }
                 for &i in region {

@@ -34,7 +34,7 @@ use super::{
     Boundary, JumpMap, JumpMapError, PixelOrder, SourceMap, SynthesisOutput, TexelCoord, TexelRect,
 };
 use crate::image::Image;
-use crate::mesh::union_find_root;
+use crate::mesh::{union_find_join, union_find_root};
 use crate::progress::Progress;
 
 /// Marks an output pixel not yet synthesized (and the padding border).
@@ -580,11 +580,9 @@ impl RepeatGuard {
         let mut root = pi as u32;
         for j in 0..self.joined {
             let r = self.roots[j];
-            let (lo, hi) = (root.min(r), root.max(r));
-            self.parent[hi as usize] = lo;
-            self.area[lo as usize] += self.area[hi as usize];
-            self.capped[lo as usize] |= self.capped[hi as usize];
-            root = lo;
+            let capped = self.capped[root as usize] | self.capped[r as usize];
+            root = union_find_join(&mut self.parent, &mut self.area, root, r);
+            self.capped[root as usize] = capped;
         }
         if self.area[root as usize] < self.large {
             return;
