@@ -51,29 +51,41 @@ fn onto_surface(
 /// a feature of the input: 30°.
 const FEATURE_COS: f32 = 0.866;
 
-/// The positions of the input's corners: vertices whose incident faces'
-/// normals fall into three or more directions more than 30° apart (a box
-/// corner; a crease has two). Degenerate faces are ignored.
-fn corner_positions(mesh: &crate::mesh::PolyMesh) -> Vec<Vec3> {
+/// A position's exact bits, to find a vertex again by where it is.
+fn position_key(p: Vec3) -> [u32; 3] {
+    [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
+}
+
+/// The positions (as [`position_key`]s) of the input's corners: vertices
+/// whose incident faces' normals fall into three or more directions more
+/// than 30° apart (a box corner; a crease has two). Degenerate faces are
+/// ignored.
+fn corner_keys(mesh: &crate::mesh::PolyMesh) -> std::collections::HashSet<[u32; 3]> {
     let normals = mesh.face_normals();
-    let mut around: Vec<Vec<Vec3>> = vec![Vec::new(); mesh.vertex_count()];
+    // Per vertex, up to three directions found so far.
+    let mut around = vec![([Vec3::ZERO; 3], 0u8); mesh.vertex_count()];
     for (f, face) in mesh.faces().enumerate() {
         let n = normals[f];
         if !n.is_finite() || n.length_squared() < 0.5 {
             continue;
         }
         for &v in face {
-            let clusters = &mut around[v as usize];
-            if clusters.len() < 3 && clusters.iter().all(|c| c.dot(n) < FEATURE_COS) {
-                clusters.push(n);
+            let (dirs, count) = &mut around[v as usize];
+            if *count < 3
+                && dirs[..*count as usize]
+                    .iter()
+                    .all(|c| c.dot(n) < FEATURE_COS)
+            {
+                dirs[*count as usize] = n;
+                *count += 1;
             }
         }
     }
     around
         .iter()
         .zip(&mesh.positions)
-        .filter(|(c, _)| c.len() >= 3)
-        .map(|(_, &p)| p)
+        .filter(|((_, count), _)| *count >= 3)
+        .map(|(_, &p)| position_key(p))
         .collect()
 }
 
@@ -89,9 +101,8 @@ fn keep_corners(
     if corners.is_empty() {
         return;
     }
-    let key = |p: Vec3| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
     for (v, &p) in before.positions.iter().enumerate() {
-        if corners.contains(&key(p)) {
+        if corners.contains(&position_key(p)) {
             after.positions[v] = p;
         }
     }
@@ -416,11 +427,8 @@ impl Stage for SubdivideSqrt2 {
                 .on_input_surface
                 .then(|| crate::kernels::retile::SurfaceProjector::new(input));
             // Its corners, which every level keeps where it has them.
-            let corners: std::collections::HashSet<[u32; 3]> = if settings.on_input_surface {
-                corner_positions(input)
-                    .into_iter()
-                    .map(|p| [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
-                    .collect()
+            let corners = if settings.on_input_surface {
+                corner_keys(input)
             } else {
                 Default::default()
             };
