@@ -434,10 +434,12 @@ fn jump_surface_on_the_plane_meets_issue_13s_gate_and_beats_the_papers_behaviour
 /// courses and plank lines cut at paste edges) and stay within 5 % on the
 /// stochastic ones, where there is no structure to continue (grass at
 /// seed 1: 0.00781 against the draw's 0.00779, both under the peer's
-/// 0.00917). Over seeds 1–6 (exact measure) the matched choice, with its
-/// shrunk band errors (`kernels::lapped::choice::PRIOR_WEIGHT_SHARE`),
-/// meets the gate in 28 of 30 texture × seed cases (planks p90 1.07 × at
-/// seed 5, sharpness 0.896 at seed 6); the config's seed is 1.
+/// 0.00917). Over seeds 1–6 (exact measure) the matched choice, ranked on
+/// the flattened parametrisation with shrunk band errors
+/// (`kernels::lapped::choice::PRIOR_WEIGHT_SHARE`) and shifted by up to 2
+/// whole pixels (`match_shift`), meets the gate in 30 of 30 texture × seed
+/// cases (28 before the shift: planks p90 1.07 × at seed 5, sharpness
+/// 0.896 at seed 6); the config's seed is 1.
 #[test]
 fn lapped_on_the_plane_meets_issue_13s_gate_and_beats_the_random_draw() {
     let results = planar_results_without_large_repeats("lapped");

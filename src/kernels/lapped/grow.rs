@@ -283,11 +283,6 @@ impl<'a> Grower<'a> {
     /// faces added. Call again after the parametrisation changed (§3.4: the
     /// optimisation may uncover parts of the texture patch).
     pub fn grow(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
-        self.grow_over(patch, hull, true)
-    }
-
-    /// [`Grower::grow`], refiltering the patch's Jacobians first or not.
-    fn grow_over(&mut self, patch: &mut SurfacePatch, hull: &Hull, refilter: bool) -> usize {
         let radius = hull
             .vertices
             .iter()
@@ -298,28 +293,7 @@ impl<'a> Grower<'a> {
             self.settings.max_reach * radius,
             &|a: Vec2, b: Vec2| hull.segment_intersects(a, b),
             &mut |_: u32, _: [Vec2; 3]| true,
-            refilter,
         )
-    }
-
-    /// [`Grower::grow`] for a patch whose coordinates have not changed
-    /// since this grower last grew it (no optimisation in between): the
-    /// filtered Jacobians of its faces are still those of its last growth,
-    /// so they are not computed again (same result, bit for bit; checked
-    /// in debug builds). The paste loop's matched choice regrows over the
-    /// chosen texture patch's hull this way.
-    pub fn grow_unchanged(&mut self, patch: &mut SurfacePatch, hull: &Hull) -> usize {
-        let keep = self.settings.distortion_radius > 0.0 && self.smooth.len() == patch.faces.len();
-        #[cfg(debug_assertions)]
-        if keep {
-            let kept = self.smooth.clone();
-            self.refilter(patch);
-            debug_assert!(
-                kept == self.smooth,
-                "grow_unchanged: the coordinates changed"
-            );
-        }
-        self.grow_over(patch, hull, !keep)
     }
 
     /// [`Grower::grow`] with the growth distance bounded by `max_dist`
@@ -336,21 +310,20 @@ impl<'a> Grower<'a> {
         reaches: &dyn Fn(Vec2, Vec2) -> bool,
         admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
     ) -> usize {
-        self.grow_filtered(patch, max_dist, reaches, admit, true)
+        self.grow_filtered(patch, max_dist, reaches, admit)
     }
 
-    /// [`Grower::grow_with`]; `refilter: false` keeps the filtered
-    /// Jacobians of the last growth ([`Grower::grow_unchanged`]).
+    /// [`Grower::grow_with`], the patch's filtered Jacobians computed anew
+    /// first.
     fn grow_filtered(
         &mut self,
         patch: &mut SurfacePatch,
         max_dist: f32,
         reaches: &dyn Fn(Vec2, Vec2) -> bool,
         admit: &mut dyn FnMut(u32, [Vec2; 3]) -> bool,
-        refilter: bool,
     ) -> usize {
         let mesh = self.mesh;
-        if self.settings.distortion_radius > 0.0 && refilter {
+        if self.settings.distortion_radius > 0.0 {
             self.refilter(patch);
         }
         self.heap.clear();
@@ -699,45 +672,6 @@ mod tests {
                 assert!(p.faces.len() > 500, "{}", p.faces.len());
             }
         }
-    }
-
-    #[test]
-    fn growing_again_unchanged_is_growing_again() {
-        // Two growers, one patch: regrown over a larger hull with the kept
-        // filtered Jacobians, or with them computed again, faces,
-        // coordinates and the next growth's filter are the same bits.
-        let mesh = sphere(4);
-        let m = TriMesh::new(&mesh).unwrap();
-        let t = global_up_field(&m, Vec3::Y, 0.5);
-        let field = FaceField {
-            t: &t,
-            isotropic: false,
-            scale: 1.0,
-        };
-        let settings = GrowSettings {
-            distortion_radius: 0.3,
-            max_distortion: 0.2,
-            ..Default::default()
-        };
-        let square = |r: f32| {
-            Hull::new(vec![
-                Vec2::new(-r, -r),
-                Vec2::new(r, -r),
-                Vec2::new(r, r),
-                Vec2::new(-r, r),
-            ])
-        };
-        let (small, large) = (square(0.3), square(0.7));
-        let mut kept = Grower::new(&m, field, settings);
-        let mut fresh = Grower::new(&m, field, settings);
-        let mut a = kept.start(40, [0.2, 0.3, 0.5], 0.0);
-        let mut b = fresh.start(40, [0.2, 0.3, 0.5], 0.0);
-        assert_eq!(kept.grow(&mut a, &small), fresh.grow(&mut b, &small));
-        let added = kept.grow_unchanged(&mut a, &large);
-        assert!(added > 0, "the larger hull adds faces");
-        assert_eq!(added, fresh.grow(&mut b, &large));
-        assert_eq!(a, b);
-        assert_eq!(kept.smooth, fresh.smooth);
     }
 
     #[test]
