@@ -275,6 +275,13 @@ impl Progress {
         }
     }
 
+    /// A guard that [`finish`](Self::finish)es this progress when it is
+    /// dropped: a stage that returns early (an error, nothing to measure)
+    /// does not leave its bar standing on the terminal.
+    pub fn finish_on_drop(&self) -> FinishOnDrop<'_> {
+        FinishOnDrop(self)
+    }
+
     /// The line a logged progress would write now (tests).
     pub fn current_line(&self) -> Option<String> {
         match &self.0 {
@@ -284,9 +291,42 @@ impl Progress {
     }
 }
 
+/// Finishes a [`Progress`] when dropped ([`Progress::finish_on_drop`]).
+#[must_use = "the progress is finished when the guard is dropped"]
+#[derive(Debug)]
+pub struct FinishOnDrop<'a>(&'a Progress);
+
+impl Drop for FinishOnDrop<'_> {
+    fn drop(&mut self) {
+        self.0.finish();
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_guard_finishes_the_bar_on_an_early_return() {
+        let bar = indicatif::ProgressBar::hidden();
+        bar.set_length(5);
+        let progress = Progress(Some(Sink::Bar(bar.clone(), Arc::from("stage"))));
+        let stage = |early: bool| {
+            let _finish = progress.finish_on_drop();
+            progress.inc(1);
+            if early {
+                return;
+            }
+            progress.inc(4);
+        };
+        stage(true);
+        assert!(bar.is_finished(), "finished after an early return");
+        // Without the guard the bar would stay at 1 of 5.
+        let other = indicatif::ProgressBar::hidden();
+        other.set_length(5);
+        other.inc(1);
+        assert!(!other.is_finished());
+    }
 
     #[test]
     fn one_line_per_interval_however_many_ticks() {

@@ -15,6 +15,7 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
     let mut files = Vec::new();
     let items = job.images.len() + job.formats.len() + usize::from(job.original.is_some());
     let progress = Progress::new(items as u64, "export");
+    let _finish = progress.finish_on_drop();
     for (name, image) in &job.images {
         progress.set_part(name);
         let path = dir.join(name);

@@ -151,6 +151,7 @@ pub fn load_mesh(path: &Path, options: &LoadOptions) -> Result<(PolyMesh, LoadRe
     // Three coarse steps (read, parse, repair): a file of a million
     // vertices takes a second or two, too long for silence on a terminal.
     let progress = crate::progress::Progress::new(3, "load_mesh");
+    let _finish = progress.finish_on_drop();
     progress.set_part("reading");
     let bytes = std::fs::read(path).map_err(|source| MeshError::Io {
         path: path.to_path_buf(),

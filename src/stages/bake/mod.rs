@@ -251,6 +251,7 @@ fn bake_world(
         padding_px: settings.padding,
     };
     let progress = Progress::new(0, Bake::KIND);
+    let _finish = progress.finish_on_drop();
     let mut atlas =
         build_uv_atlas_with_progress(&mesh.positions, &tris, &atlas_settings, &progress)
             .map_err(|e| e.to_string())?;

@@ -237,6 +237,7 @@ impl Stage for Coherent {
             };
             // The kernel sets the length: vertices times passes.
             let progress = Progress::new(0, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let start = match settings.start {
                 Start::Random => None,
                 Start::Sources => {

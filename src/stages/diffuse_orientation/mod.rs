@@ -319,6 +319,7 @@ impl Stage for DiffuseOrientation {
             // Three steps per level: topology, diffusion, sweep (3.5 s a
             // level at a million vertices).
             let progress = Progress::new(3 * levels.len() as u64, Self::KIND);
+            let _finish = progress.finish_on_drop();
             for (i, &e) in levels.iter().enumerate() {
                 let Ok((geometry, parents)) = meshes.get(e) else {
                     return;
@@ -423,7 +424,6 @@ impl Stage for DiffuseOrientation {
                     ec.insert(SweepField(sweep.clone()));
                 }
             }
-            progress.finish();
             metrics.record(ctx.index, "levels", levels.len());
         })
         .into_configs()

@@ -184,6 +184,7 @@ impl Stage for Displace {
                 0
             };
             let progress = Progress::new(3 + smoothing_steps, Self::KIND);
+            let _finish = progress.finish_on_drop();
             progress.set_part("heights");
             let (mut heights, moved) = if use_uvs {
                 let Some(uvs) = uvs else {

@@ -416,6 +416,7 @@ impl Stage for GraphMatch {
                 })
                 .sum();
             let progress = Progress::new(steps, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let mut state: Option<SynthesisState> = None;
             let mut per_level = Vec::new();
             let mut total = PassStats::default();

@@ -238,6 +238,7 @@ impl Stage for JumpImage {
             let started = std::time::Instant::now();
             // The kernels set the length: pixels, or patches.
             let progress = Progress::new(0, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let mut refined = None;
             let mut aligned = Vec::new();
             let result = match settings.method.as_str() {

@@ -195,6 +195,7 @@ pub fn load_or_analyse(
         }
     }
     let progress = Progress::new(0, JumpMapStage::KIND);
+    let _finish = progress.finish_on_drop();
     let analysed = analyse_with_progress(exemplar, settings, &progress);
     progress.finish();
     let (map, stats) = analysed.map_err(|e| e.to_string())?;

@@ -291,6 +291,7 @@ impl Stage for JumpSurface {
             };
             let progress =
                 crate::progress::Progress::new(mesh.vertex_count() as u64, "jump_surface");
+            let _finish = progress.finish_on_drop();
             let out = {
                 let _s = tracing::info_span!("synthesize").entered();
                 let matcher = (settings.choice == "matched").then_some(Matcher {
@@ -343,6 +344,7 @@ impl Stage for JumpSurface {
                 // Its own bar: on a large fine mesh the refinement can take
                 // longer than the synthesis.
                 let refine_progress = crate::progress::Progress::new(0, "jump_surface seams");
+                let _finish = refine_progress.finish_on_drop();
                 let level = SynthesisLevel {
                     mesh,
                     frames: &frames.0,

@@ -770,6 +770,7 @@ fn atlas_layout(mesh: &PolyMesh, settings: &AtlasSettings) -> Result<AtlasLayout
     // Laying out a million-vertex scan takes tens of seconds: a part of
     // its own on the stage's progress.
     let progress = Progress::new(0, LappedPaste::KIND);
+    let _finish = progress.finish_on_drop();
     let uv = crate::kernels::atlas::build_uv_atlas_with_progress(
         &mesh.positions,
         &tris,
@@ -937,6 +938,7 @@ impl Stage for LappedPaste {
                 }
             };
             let progress = Progress::new(tri.face_count() as u64, "lapped_paste");
+            let _finish = progress.finish_on_drop();
             let out = paste_until_covered(&tri, view, &textures, &paste_settings, &progress);
             progress.finish();
             let drawn_span = tracing::info_span!("drawn_faces").entered();

@@ -106,6 +106,7 @@ impl Stage for MapBack {
             };
             let normals = original.0.vertex_normals();
             let progress = Progress::new(0, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let mapped = map_back_with_progress(
                 &result.0,
                 &attributes,

@@ -158,6 +158,7 @@ impl Stage for RelaxOrientation {
                 },
             };
             let progress = Progress::new(0, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let result = relax_orientation_with_progress(
                 &views,
                 &RelaxSettings {

@@ -66,6 +66,7 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
         // Phases: plane image, composite, texture energy, quality,
         // histogram (about 1.1-1.5 s at a million vertices on 2 cores).
         let progress = Progress::new(5, "result_metrics");
+        let _finish = progress.finish_on_drop();
         progress.set_part("plane");
         if let Some(plane) = plane.as_deref() {
             plane_quality(plane, &exemplar.image, &settings, &mut metrics);
@@ -240,7 +241,6 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             }
         }
         progress.inc(1);
-        progress.finish();
     })
     .into_configs()
 }

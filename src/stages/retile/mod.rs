@@ -160,6 +160,7 @@ impl Stage for Retile {
                 seed: seed.derive(ctx.index, 0),
             };
             let progress = Progress::new(0, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let pyramid = retile_with_progress(&source.0, &rs, &progress);
             progress.finish();
             let pyramid = match pyramid {

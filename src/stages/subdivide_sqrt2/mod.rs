@@ -221,6 +221,7 @@ fn coarsened(
 ) -> Option<(crate::mesh::PolyMesh, u32)> {
     use crate::kernels::retile::{RetileError, RetileSettings, retile_with_progress};
     let progress = Progress::new(0, "subdivide_sqrt2 (remeshing the dense input)");
+    let _finish = progress.finish_on_drop();
     let mut at_least = RetileSettings::MIN_LEVEL_VERTICES as usize;
     for steps in (1..=COARSEN_STEPS).rev() {
         let n = target >> steps;
@@ -515,6 +516,7 @@ impl Stage for SubdivideSqrt2 {
             .min(MAX_HIERARCHY_VERTICES)
             .max(start_vertices);
             let progress = Progress::new((expected - start_vertices) as u64, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let mut levels: Vec<(crate::mesh::PolyMesh, Option<Parents>, Attributes)> =
                 vec![(coarse, None, attrs)];
             for step in 0..max_steps {

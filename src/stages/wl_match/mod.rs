@@ -267,6 +267,7 @@ impl Stage for Match {
                 .collect();
             let kernel = settings.kernel_settings(seed.derive(ctx.index, 0), exemplar.wrap);
             let progress = Progress::new(0, Self::KIND);
+            let _finish = progress.finish_on_drop();
             let result = wei_levoy_synthesis_with_progress(
                 &inputs,
                 &exemplar.image,
