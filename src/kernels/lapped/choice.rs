@@ -1,10 +1,11 @@
 //! Matched texture choice for a paste (an extension of Praun et al. 2000,
-//! whose paste loop draws the texture patch at random): the grown surface
-//! patch, on its growth's parametrisation (before the least-squares
-//! flattening, which then runs once for the chosen patch), is laid with
-//! each texture patch in turn, and the one whose colours best continue what
-//! the pastes so far show under its edge wins — the choice step of image
-//! quilting (Efros & Freeman 2001), on the surface.
+//! whose paste loop draws the texture patch at random): the grown and
+//! flattened surface patch (the parametrisation the paste keeps) is laid
+//! with each texture patch in turn, and the one whose colours best continue
+//! what the pastes so far show under its edge wins — the choice step of
+//! image quilting (Efros & Freeman 2001), on the surface. The winner is
+//! then shifted by a few whole pixels to where its band matches best
+//! ([`best_shift`]).
 //!
 //! The comparison runs where a seam can be seen: at the coverage samples of
 //! the patch's faces, weighted by `A · α (1 − α)`, with `α` the candidate's
@@ -216,10 +217,8 @@ pub fn band_errors(
     band_errors_of(coverage, textures, bands, patch, &candidates)
 }
 
-/// [`band_errors`] for any list of candidates `(texture patch, shift)`: a
-/// texture patch may appear several times with different shifts (the
-/// shift search of the chosen patch). One `(Σ w · |new − old|², Σ w)` per
-/// candidate, in order.
+/// [`band_errors`] for a list of candidates `(texture patch, shift)`. One
+/// `(Σ w · |new − old|², Σ w)` per candidate, in order.
 fn band_errors_of(
     coverage: &Coverage,
     textures: &[TexturePatch],
@@ -382,10 +381,13 @@ pub fn best_texture(errors: &[(f64, f64)]) -> Option<usize> {
 /// The whole-pixel shift of texture patch `texture` (laid at
 /// `patch.st + base`) whose band error is least, among the shifts of at
 /// most `radius` pixels in each direction; returned in patch units (add it
-/// to `patch.st`). Only a strictly lower mean band error moves the patch
-/// off zero, and ties go to the shorter shift (then the first in raster
-/// order), so the result is the same on every machine. Zero when nothing
-/// is pasted under the band.
+/// to `patch.st`). Shifts whose band sees less than [`MIN_WEIGHT_SHARE`] of
+/// the largest band weight are not eligible (a shift that slides the band
+/// off the pastes below would win on a few samples); among the others a
+/// shift must have a strictly lower mean band error than every shorter one
+/// (zero first; ties in length go to the first in raster order), so the
+/// result is the same on every machine. Zero when nothing is pasted under
+/// the band.
 ///
 /// The choice ranks a few dozen texture patches, each at the one offset
 /// its cut gave it; on structured textures (mortar lines, plank edges two
@@ -500,10 +502,11 @@ pub fn best_shift(
         let (dx, dy) = ((i % side) as i64 - r, (i / side) as i64 - r);
         dx * dx + dy * dy
     });
+    let max_w = total.iter().map(|t| t.1).fold(0.0f64, f64::max);
     let mut best: Option<(f64, usize)> = None;
     for i in order {
         let (e, w) = total[i];
-        if w <= 0.0 {
+        if w <= 0.0 || w < MIN_WEIGHT_SHARE * max_w {
             continue;
         }
         let mean = e / w;
