@@ -48,6 +48,52 @@ pub struct SeamRefineReport {
     pub moved: Vec<usize>,
 }
 
+/// The copied regions of the `w × h` source map `src`: every pixel joined
+/// to its right and lower neighbours where the neighbour's exemplar pixel
+/// continues its own (the next one over, wrapped when `toroidal`), as a
+/// union–find forest in `parent` with each root's pixel count in `area`
+/// (both cleared and refilled). A root is its region's first pixel in
+/// raster order.
+fn copied_regions(
+    src: &[TexelCoord],
+    (w, h): (i64, i64),
+    (ew, eh): (i64, i64),
+    toroidal: bool,
+    parent: &mut Vec<u32>,
+    area: &mut Vec<u32>,
+) {
+    let n = (w * h) as usize;
+    parent.clear();
+    parent.extend(0..n as u32);
+    area.clear();
+    area.resize(n, 1);
+    let continues = |a: TexelCoord, b: TexelCoord, dx: i64, dy: i64| {
+        let (x, y) = (a.x as i64 + dx, a.y as i64 + dy);
+        let (x, y) = if toroidal {
+            (x.rem_euclid(ew), y.rem_euclid(eh))
+        } else if x >= 0 && y >= 0 && x < ew && y < eh {
+            (x, y)
+        } else {
+            return false;
+        };
+        (x, y) == (b.x as i64, b.y as i64)
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            for (dx, dy) in [(1i64, 0i64), (0, 1)] {
+                let (nx, ny) = (x + dx, y + dy);
+                if nx < w && ny < h {
+                    let j = (ny * w + nx) as usize;
+                    if continues(src[i], src[j], dx, dy) {
+                        join(parent, area, i as u32, j as u32);
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Refines `sources` in place over at most `passes` passes with windows of
 /// `radius` pixels around each visited pixel. `toroidal`: the exemplar
 /// tiles (continuations wrap); otherwise continuations outside it are not
@@ -118,22 +164,9 @@ pub fn refine_seams(
     let mut cover = vec![0u16; (ew * eh) as usize];
     let texel = |t: TexelCoord| (t.y as i64 * ew + t.x as i64) as usize;
     for _ in 0..passes {
-        parent.clear();
-        parent.extend(0..n as u32);
-        area.clear();
-        area.resize(n, 1);
+        copied_regions(src, (w, h), (ew, eh), toroidal, &mut parent, &mut area);
         node.clear();
         node.extend(0..n as u32);
-        for y in 0..h {
-            for x in 0..w {
-                for (dx, dy) in [(1, 0), (0, 1)] {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < w && ny < h && shifted(src[at(x, y)], dx, dy) == Some(src[at(nx, ny)]) {
-                        join(&mut parent, &mut area, at(x, y) as u32, at(nx, ny) as u32);
-                    }
-                }
-            }
-        }
         // Per exemplar pixel, how many pixels of large regions copy it.
         cover.iter_mut().for_each(|c| *c = 0);
         for i in 0..n {
@@ -391,9 +424,6 @@ pub fn align_regions(
         }
     };
     let src = &mut sources.texels;
-    let continues = |a: TexelCoord, b: TexelCoord, dx: i64, dy: i64| {
-        shifted(a.x as i64 + dx, a.y as i64 + dy) == Some((b.x as i64, b.y as i64))
-    };
     let diff = |a: [f32; 4], b: [f32; 4]| -> f32 {
         (a[0] - b[0]) * (a[0] - b[0])
             + (a[1] - b[1]) * (a[1] - b[1])
@@ -473,30 +503,12 @@ pub fn align_regions(
     for _ in 0..sweeps {
         let mut moved = 0;
         let mut next_dirty = vec![false; n];
-        // Regions by union-find over the right and lower continuations.
-        let mut parent: Vec<u32> = (0..n as u32).collect();
-        for y in 0..h {
-            for x in 0..w {
-                let i = (y * w + x) as usize;
-                for (dx, dy) in [(1i64, 0i64), (0, 1)] {
-                    let (nx, ny) = (x + dx, y + dy);
-                    if nx < w && ny < h {
-                        let j = (ny * w + nx) as usize;
-                        if continues(src[i], src[j], dx, dy) {
-                            let (a, b) = (find(&mut parent, i as u32), find(&mut parent, j as u32));
-                            if a != b {
-                                // The smaller index is the root: regions are
-                                // numbered by their first pixel.
-                                let (lo, hi) = (a.min(b), a.max(b));
-                                parent[hi as usize] = lo;
-                            }
-                        }
-                    }
-                }
-            }
-        }
+        // Regions by union-find over the right and lower continuations,
+        // numbered by their first pixel.
+        let (mut parent, mut sizes) = (Vec::new(), Vec::new());
+        copied_regions(src, (w, h), (ew, eh), toroidal, &mut parent, &mut sizes);
         let label: Vec<u32> = (0..n as u32).map(|i| find(&mut parent, i)).collect();
-        drop(parent);
+        drop((parent, sizes));
         // Pixels of each region, in raster order (counting sort by label).
         let mut start = vec![0u32; n + 1];
         for &l in &label {
