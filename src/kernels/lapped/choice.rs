@@ -213,30 +213,16 @@ pub fn band_errors(
     patch: &SurfacePatch,
     shifts: &[Vec2],
 ) -> Vec<(f64, f64)> {
-    let candidates: Vec<(usize, Vec2)> = shifts.iter().copied().enumerate().collect();
-    band_errors_of(coverage, textures, bands, patch, &candidates)
-}
-
-/// [`band_errors`] for a list of candidates `(texture patch, shift)`. One
-/// `(Σ w · |new − old|², Σ w)` per candidate, in order.
-fn band_errors_of(
-    coverage: &Coverage,
-    textures: &[TexturePatch],
-    bands: &[FalloffBand],
-    patch: &SurfacePatch,
-    candidates: &[(usize, Vec2)],
-) -> Vec<(f64, f64)> {
     let _span = tracing::trace_span!("match_texture", faces = patch.faces.len()).entered();
-    let n = candidates.len();
-    // Each candidate laid on the patch: its texture patch, the pixel of
-    // `st = 0` (its shift included) and pixels per patch unit (`t` points
-    // up, pixel rows down).
-    let place: Vec<(usize, Vec2, f32)> = candidates
+    let n = textures.len();
+    // Each candidate laid on the patch: the pixel of `st = 0` (its shift
+    // included) and pixels per patch unit (`t` points up, pixel rows down).
+    let place: Vec<(Vec2, f32)> = textures
         .iter()
-        .map(|&(t, shift)| {
-            let tex = &textures[t];
+        .zip(shifts)
+        .map(|(tex, shift)| {
             let unit = tex.unit_px();
-            (t, tex.centre_px + Vec2::new(shift.x, -shift.y) * unit, unit)
+            (tex.centre_px + Vec2::new(shift.x, -shift.y) * unit, unit)
         })
         .collect();
     let chunks: Vec<Vec<(f64, f64)>> = patch
@@ -270,9 +256,9 @@ fn band_errors_of(
                     (lo, hi) = (lo.min(l), hi.max(h));
                 }
                 group_near.clear();
-                for (j, &(t, origin, unit)) in place.iter().enumerate() {
+                for (t, &(origin, unit)) in place.iter().enumerate() {
                     if bands[t].box_meets(origin + lo * unit, origin + hi * unit) {
-                        group_near.push(j);
+                        group_near.push(t);
                     }
                 }
                 if group_near.is_empty() {
@@ -289,20 +275,19 @@ fn band_errors_of(
                     // cheaper than testing the face's box per candidate).
                     let st = corners(i);
                     near.clear();
-                    near.extend(group_near.iter().map(|&j| {
-                        let (_, origin, unit) = place[j];
-                        (j, st.map(|p| origin + p * unit))
+                    near.extend(group_near.iter().map(|&t| {
+                        let (origin, unit) = place[t];
+                        (t, st.map(|p| origin + p * unit))
                     }));
                     for &b in match_samples(&mut samples, coverage.levels[f]) {
                         // The candidates whose band this sample is in
                         // (outside it the weight is not positive): with
                         // none, what the pastes show here is not needed.
                         hits.clear();
-                        for &(j, corner) in &near {
-                            let t = place[j].0;
+                        for &(t, corner) in &near {
                             let p = corner[0] * b[0] + corner[1] * b[1] + corner[2] * b[2];
                             if bands[t].pixel_in_band(floor(p.x), floor(p.y)) {
-                                hits.push((j, p));
+                                hits.push((t, p));
                             }
                         }
                         if hits.is_empty() {
@@ -311,8 +296,8 @@ fn band_errors_of(
                         let Some((old, a_old)) = shown_at(coverage, textures, f, b) else {
                             continue;
                         };
-                        for &(j, p) in &hits {
-                            let Some(px) = pixel_at(&textures[place[j].0], p) else {
+                        for &(t, p) in &hits {
+                            let Some(px) = pixel_at(&textures[t], p) else {
                                 continue;
                             };
                             let a = px[3];
@@ -321,8 +306,8 @@ fn band_errors_of(
                                 continue;
                             }
                             let e: f32 = (0..3).map(|k| (px[k] - old[k]) * (px[k] - old[k])).sum();
-                            sums[j].0 += f64::from(w * e);
-                            sums[j].1 += f64::from(w);
+                            sums[t].0 += f64::from(w * e);
+                            sums[t].1 += f64::from(w);
                         }
                     }
                 }

@@ -19,7 +19,8 @@
 
 use super::choice::{FalloffBand, band_errors, best_shift, best_texture};
 use super::coverage::{Coverage, CoverageSettings, sample_levels};
-use super::grow::{GrowSettings, Grower};
+use super::grow::{GrowSettings, Grower, SurfacePatch};
+use super::hull::Hull;
 use super::mask::TexturePatch;
 use super::param::{SolveSettings, optimise_parametrisation};
 use super::tangent_field::field_discontinuity;
@@ -258,9 +259,9 @@ impl Fenwick {
 /// times at most, ending on a flattening.
 fn flatten(
     mesh: &TriMesh,
-    grower: &mut super::grow::Grower<'_>,
-    patch: &mut super::grow::SurfacePatch,
-    hull: &super::hull::Hull,
+    grower: &mut Grower<'_>,
+    patch: &mut SurfacePatch,
+    hull: &Hull,
     settings: &PasteSettings,
     report: &mut PasteReport,
 ) {
