@@ -48,6 +48,29 @@ pub struct SeamRefineReport {
     pub moved: Vec<usize>,
 }
 
+/// The exemplar address `t + d` in an `ew × eh` exemplar (wrapped when
+/// `toroidal`), if it exists.
+#[inline]
+fn shifted_texel(
+    t: TexelCoord,
+    (dx, dy): (i64, i64),
+    (ew, eh): (i64, i64),
+    toroidal: bool,
+) -> Option<TexelCoord> {
+    let (x, y) = (t.x as i64 + dx, t.y as i64 + dy);
+    if toroidal {
+        Some(TexelCoord {
+            x: x.rem_euclid(ew) as u32,
+            y: y.rem_euclid(eh) as u32,
+        })
+    } else {
+        (x >= 0 && y >= 0 && x < ew && y < eh).then_some(TexelCoord {
+            x: x as u32,
+            y: y as u32,
+        })
+    }
+}
+
 /// The copied regions of the `w × h` source map `src`: every pixel joined
 /// to its right and lower neighbours where the neighbour's exemplar pixel
 /// continues its own (the next one over, wrapped when `toroidal`), as a
@@ -67,17 +90,6 @@ fn copied_regions(
     parent.extend(0..n as u32);
     area.clear();
     area.resize(n, 1);
-    let continues = |a: TexelCoord, b: TexelCoord, dx: i64, dy: i64| {
-        let (x, y) = (a.x as i64 + dx, a.y as i64 + dy);
-        let (x, y) = if toroidal {
-            (x.rem_euclid(ew), y.rem_euclid(eh))
-        } else if x >= 0 && y >= 0 && x < ew && y < eh {
-            (x, y)
-        } else {
-            return false;
-        };
-        (x, y) == (b.x as i64, b.y as i64)
-    };
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
@@ -85,7 +97,7 @@ fn copied_regions(
                 let (nx, ny) = (x + dx, y + dy);
                 if nx < w && ny < h {
                     let j = (ny * w + nx) as usize;
-                    if continues(src[i], src[j], dx, dy) {
+                    if shifted_texel(src[i], (dx, dy), (ew, eh), toroidal) == Some(src[j]) {
                         join(parent, area, i as u32, j as u32);
                     }
                 }
@@ -116,21 +128,7 @@ pub fn refine_seams(
         out[..c].copy_from_slice(&exemplar.data[s..s + c]);
         out
     };
-    // The exemplar address `t + d`, if it exists.
-    let shifted = |t: TexelCoord, dx: i64, dy: i64| -> Option<TexelCoord> {
-        let (x, y) = (t.x as i64 + dx, t.y as i64 + dy);
-        if toroidal {
-            Some(TexelCoord {
-                x: x.rem_euclid(ew) as u32,
-                y: y.rem_euclid(eh) as u32,
-            })
-        } else {
-            (x >= 0 && y >= 0 && x < ew && y < eh).then_some(TexelCoord {
-                x: x as u32,
-                y: y as u32,
-            })
-        }
-    };
+    let shifted = |t: TexelCoord, dx: i64, dy: i64| shifted_texel(t, (dx, dy), (ew, eh), toroidal);
     let at = |x: i64, y: i64| (y * w + x) as usize;
     let src = &mut sources.texels;
     // Seams: pixels whose right or lower neighbour does not continue them.
