@@ -605,3 +605,175 @@ fn jump_patch_on_the_plane_meets_issue_13s_gate_against_the_peer() {
     let results = planar_results_without_large_repeats("jump_patch");
     common::gates::assert_all_near_peer(&results, &common::gates::ISSUE_13);
 }
+
+/// Issue 12's gate for paper-faithful Bangay–Morkel with its stage
+/// defaults (`configs/plane/bangay_morkel.toml`: exhaustive search, no
+/// graph cut) against paper-faithful Wei–Levoy (`configs/plane/wei_levoy.toml`),
+/// both at the benchmark's size and their configs' seeds, on every shared
+/// texture: Bangay–Morkel no worse on every measure (coherence mean and
+/// p90, completeness, structure and histogram at most Wei–Levoy's,
+/// sharpness at least). No peer is needed: the gate compares the two
+/// papers. About 6 minutes (340 s measured on 2 cores; Bangay–Morkel
+/// takes 28–52 s per photo).
+///
+/// Ignored because it fails today; the figures (stop 34, B&M vs WL) are in
+/// the ignore text. Run by hand with
+/// `cargo test --release --test plane -- --ignored bangay_morkel --nocapture`.
+#[test]
+#[ignore = "fails today (issue 12), B&M vs WL at the configs' seeds, 9 of 30 cells: brick completeness 0.000413 vs 0.000269, histogram 0.0117 vs 0.0116; grass sharpness 0.534 vs 0.596, structure 0.125 vs 0.0753, histogram 0.0481 vs 0.0414; planks coherence mean 0.00144 vs 0.00102, p90 0.00328 vs 0.00160; stones histogram 0.0780 vs 0.0607; water coherence mean 0.00227 vs 0.00221, p90 0.00484 vs 0.00423, structure 0.122 vs 0.110"]
+fn bangay_morkel_defaults_are_no_worse_than_wei_levoy_on_every_measure() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut failures = Vec::new();
+    for texture in SHARED_TEXTURES {
+        let exemplar =
+            surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
+        let measure = |method: &str| {
+            let out = run_at_benchmark_size(method, texture, &dir.path().join(method), &[]);
+            let (img, sources) = common::gates::plane_result(&out);
+            common::gates::quality_of(&img, Some(&sources), &exemplar)
+        };
+        let bm = measure("bangay_morkel");
+        let wl = measure("wei_levoy");
+        // (measure, B&M, WL, whether B&M is no worse)
+        let rows = [
+            (
+                "coherence mean",
+                bm.coherence_mean,
+                wl.coherence_mean,
+                bm.coherence_mean <= wl.coherence_mean,
+            ),
+            (
+                "coherence p90",
+                bm.coherence_p90,
+                wl.coherence_p90,
+                bm.coherence_p90 <= wl.coherence_p90,
+            ),
+            (
+                "completeness",
+                bm.completeness,
+                wl.completeness,
+                bm.completeness <= wl.completeness,
+            ),
+            (
+                "sharpness",
+                bm.sharpness,
+                wl.sharpness,
+                bm.sharpness >= wl.sharpness,
+            ),
+            (
+                "structure",
+                bm.structure,
+                wl.structure,
+                bm.structure <= wl.structure,
+            ),
+            (
+                "histogram",
+                bm.histogram,
+                wl.histogram,
+                bm.histogram <= wl.histogram,
+            ),
+        ];
+        for (name, b, w, ok) in rows {
+            println!("{texture}: Bangay–Morkel vs Wei–Levoy on {name}: {b:.6} vs {w:.6}");
+            if !ok {
+                failures.push(format!("{texture} {name}: {b:.6} vs {w:.6}"));
+            }
+        }
+    }
+    assert!(
+        failures.is_empty(),
+        "Bangay–Morkel defaults are worse than Wei–Levoy on: {}",
+        failures.join("; ")
+    );
+}
+
+/// `plane_colours = "sources"` (`PlaneSignal::Coordinates`): where the
+/// vertices' sources agree (one copied patch, source = position × scale +
+/// a shift), the image is the exemplar itself at the exemplar's resolution,
+/// even on a mesh four times coarser than the pixels; interpolating the
+/// vertex colours resamples it through the mesh and loses that detail.
+#[test]
+fn coordinates_continued_through_frames_give_the_exemplar_at_its_resolution_on_a_coarse_mesh() {
+    use surfsynth::kernels::frames::TangentFrame;
+    // A jittered plane of side 63 (one world unit per output pixel at
+    // 64 × 64) with 17 × 17 vertices: about 4 pixels per edge.
+    let opts = BuiltinOptions {
+        resolution: [17, 17],
+        size: 63.0,
+        ..Default::default()
+    };
+    let mesh = builtin_mesh("jittered_plane", &opts).unwrap();
+    // A 128² random exemplar (every pixel unlike its neighbours).
+    let mut rng = 12345u64;
+    let mut next = || {
+        rng = rng
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (rng >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let exemplar = surfsynth::image::Image::from_data(
+        128,
+        128,
+        3,
+        (0..128 * 128 * 3).map(|_| next()).collect(),
+    )
+    .unwrap();
+    // s = +x, t = +y; the texel offset of d is (d.x, −d.y) at 1 texel per
+    // unit. The box's min corner is (−31.5, −31.5): pixel (i, j) is at
+    // x = −31.5 + i, y = 31.5 − j, and should show exemplar pixel
+    // (i + 20, j + 30), whose centre is (i + 20.5, j + 30.5).
+    let frame = TangentFrame::from_direction(glam::Vec3::Z, glam::Vec3::X);
+    let frames = vec![frame; mesh.positions.len()];
+    let sources: Vec<glam::Vec2> = mesh
+        .positions
+        .iter()
+        .map(|p| glam::Vec2::new(p.x + 31.5 + 20.5, 31.5 - p.y + 30.5))
+        .collect();
+    let colours: Vec<f32> = sources
+        .iter()
+        .flat_map(|s| {
+            let mut out = [0.0f32; 3];
+            exemplar.sample_bilinear(s.x, s.y, surfsynth::image::sample::Wrap::Clamp, &mut out);
+            out
+        })
+        .collect();
+    let coordinates = PlaneSignal::Coordinates {
+        sources: &sources,
+        frames: &frames,
+        scale: &[1.0],
+        texture: &exemplar,
+        wrap: surfsynth::image::sample::Wrap::Clamp,
+    };
+    let vertex = PlaneSignal::Colours {
+        values: &colours,
+        channels: 3,
+        sources: Some(&sources),
+    };
+    let error = |signal: &PlaneSignal| {
+        let plane = plane_from_surface(&mesh, signal, [64, 64], [128, 128]).unwrap();
+        let mut worst = 0.0f32;
+        let mut sum = 0.0f32;
+        for j in 0..64u32 {
+            for i in 0..64u32 {
+                let want = exemplar.pixel(i + 20, j + 30);
+                let got = plane.image.pixel(i, j);
+                for c in 0..3 {
+                    let e = (got[c] - want[c]).abs();
+                    worst = worst.max(e);
+                    sum += e;
+                }
+            }
+        }
+        (worst, sum / (64.0 * 64.0 * 3.0))
+    };
+    let (worst, _) = error(&coordinates);
+    assert!(
+        worst < 1e-3,
+        "continued coordinates off the exemplar by {worst}"
+    );
+    let (_, mean_vertex) = error(&vertex);
+    assert!(
+        mean_vertex > 0.1,
+        "vertex colours on a coarse mesh should lose the exemplar's detail: mean error {mean_vertex}"
+    );
+}

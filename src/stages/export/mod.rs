@@ -29,6 +29,22 @@ pub struct ExportSettings {
     pub bake_size: u32,
     /// Width and height of `plane.png` (format `plane`), pixels.
     pub plane_size: [u32; 2],
+    /// How `plane.png` draws a per-vertex result.
+    pub plane_colours: PlaneColours,
+}
+
+/// How the `plane` format draws a per-vertex result.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PlaneColours {
+    /// Each vertex's exemplar coordinate continued across its triangles
+    /// through its tangent frame, the exemplar sampled there and blended
+    /// (`plane::PlaneSignal::Coordinates`); vertex colours where the result
+    /// records no coordinates or frames.
+    Sources,
+    /// The vertex colours, interpolated across each triangle.
+    #[default]
+    Vertex,
 }
 
 impl Default for ExportSettings {
@@ -39,6 +55,7 @@ impl Default for ExportSettings {
             name: "result".into(),
             bake_size: 1024,
             plane_size: [256, 256],
+            plane_colours: PlaneColours::Vertex,
         }
     }
 }
@@ -77,6 +94,12 @@ impl StageSettings for ExportSettings {
             unit: "pixels",
             range: ParamRange::Int(1, 16384),
             doc: "[width, height] of plane.png and plane_sources.png (format `plane`); pixel centres span the mesh's xy bounding box edge to edge (pixel (i, j) at min.x + i/(width−1)·Δx, max.y − j/(height−1)·Δy; row 0 = max y), so for one exemplar pixel per output pixel use a box of (width−1) × (height−1) world units at 1 texel per unit, e.g. a 256 × 256-vertex plane of side 255; a jump_image result must be this size",
+        },
+        ParamDoc {
+            name: "plane_colours",
+            unit: "",
+            range: ParamRange::OneOf(&["sources", "vertex"]),
+            doc: "how format `plane` draws a per-vertex result: sources (default) continues each vertex's exemplar coordinate (`SourceTexels`) across its triangles through its tangent frame at the result's texels per unit and blends the three corners' exemplar samples, so the image has the exemplar's resolution wherever neighbouring sources agree; vertex interpolates the vertex colours (what a PLY viewer shows), which resamples the result through the mesh's vertex lattice. Results without source coordinates or frames are drawn from their vertex colours either way; on a grid with a vertex at every pixel centre both are the same",
         },
         ParamDoc {
             name: "name",
@@ -143,6 +166,8 @@ type ExportQuery<'w, 's> = Query<
         Option<&'static BlendUvs>,
         Option<&'static AtlasTexture>,
         Option<&'static SourceTexels>,
+        Option<&'static Frames>,
+        Option<&'static VertexScale>,
     ),
 >;
 
@@ -186,10 +211,12 @@ impl Stage for Export {
             Option<Res<TexturePatchOrigins>>,
             Option<Res<SynthesisedImage>>,
         ),
+               texture_scale: Option<Res<TextureScale>>,
                originals: Query<(Entity, &Geometry, &VertexColours), With<SourceMesh>>,
                sources: Query<&Geometry, With<SourceMesh>>,
                ticks: bevy_ecs::system::SystemChangeTick| {
-            let Ok((geometry, colours, uvs, blend, atlas, source_texels)) = meshes.get(active.0)
+            let Ok((geometry, colours, uvs, blend, atlas, source_texels, frames, vertex_scale)) =
+                meshes.get(active.0)
             else {
                 return;
             };
@@ -232,6 +259,24 @@ impl Stage for Export {
                     })
                     .collect();
                 let background = crate::image::pixel_rgb(&ex.mean());
+                let n = mesh.vertex_count();
+                let scale_of_run = texture_scale.as_deref().map(|t| [t.texels_per_unit]);
+                let coordinates = match (source_texels, frames) {
+                    (Some(st), Some(f)) if st.0.len() == n && f.0.len() == n => {
+                        let scale: Option<&[f32]> = match vertex_scale {
+                            Some(s) if s.0.len() == n => Some(&s.0),
+                            _ => scale_of_run.as_ref().map(|s| s.as_slice()),
+                        };
+                        scale.map(|scale| plane::PlaneSignal::Coordinates {
+                            sources: &st.0,
+                            frames: &f.0,
+                            scale,
+                            texture: ex,
+                            wrap: exemplar.wrap,
+                        })
+                    }
+                    _ => None,
+                };
                 let signal = match (uvs, colours) {
                     (Some(u), _) => Some(Ok(plane::PlaneSignal::Uvs {
                         uvs: &u.0,
@@ -239,6 +284,12 @@ impl Stage for Export {
                         texture: ex,
                         wrap: exemplar.wrap,
                     })),
+                    (None, Some(_))
+                        if settings.plane_colours == PlaneColours::Sources
+                            && coordinates.is_some() =>
+                    {
+                        coordinates.map(Ok)
+                    }
                     (None, Some(c)) => Some(Ok(plane::PlaneSignal::Colours {
                         values: &c.values,
                         channels: c.channels,

@@ -7,13 +7,14 @@
 
 use crate::image::sample::Wrap;
 use crate::image::{Image, pixel_rgb};
+use crate::kernels::frames::TangentFrame;
 use crate::kernels::lapped::composite::LappedComposite;
 use crate::kernels::plane_raster::{
     PixelHit, PlaneGrid, check_planar_xy, dominant_corner, rasterise_xy, snap_source,
 };
 use crate::mesh::PolyMesh;
 use crate::stages::world::{PlaneImage, SynthesisedImage};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// The result a plane image is drawn from.
@@ -27,6 +28,27 @@ pub enum PlaneSignal<'a> {
         channels: usize,
         /// Per-vertex source coordinates (`SourceTexels`).
         sources: Option<&'a [Vec2]>,
+    },
+    /// Per-vertex exemplar coordinates rendered at the exemplar's own
+    /// resolution (`plane_colours = "sources"`): each corner `v` of the
+    /// pixel's triangle continues its source across the triangle,
+    /// `sources[v] + frames[v].texel_offset(p − pos(v), scale(v))`, and the
+    /// exemplar sampled there is blended with the barycentric weights (the
+    /// 3-way blend of jump maps, Zelinka & Garland §4). Where neighbouring
+    /// sources agree (a copied patch) the pixel is the exemplar's pixel;
+    /// interpolating vertex colours would resample it through the mesh's
+    /// lattice instead.
+    Coordinates {
+        /// Per-vertex source coordinates, level-0 pixels (`SourceTexels`).
+        sources: &'a [Vec2],
+        /// Per-vertex tangent frames (`Frames`).
+        frames: &'a [TangentFrame],
+        /// Texels per world unit, one per vertex or one for all.
+        scale: &'a [f32],
+        /// The exemplar.
+        texture: &'a Image,
+        /// Its wrap.
+        wrap: Wrap,
     },
     /// Per-corner UVs into the exemplar, optionally with the 3-way blend
     /// layers per fan triangle (`BlendUvs`).
@@ -104,6 +126,38 @@ pub fn plane_from_surface(
                 }
                 let src = sources.and_then(|s| s.get(vertex_tris[t][near] as usize).copied());
                 (c, src)
+            }
+            PlaneSignal::Coordinates {
+                sources,
+                frames,
+                scale,
+                texture,
+                wrap,
+            } => {
+                let tri = vertex_tris[t];
+                let p: Vec3 = tri
+                    .iter()
+                    .zip(b)
+                    .map(|(&v, w)| mesh.positions[v as usize] * w)
+                    .sum();
+                let mut out = vec![0.0f32; texture.channels as usize];
+                let mut c = [0.0f32; 3];
+                let mut near_src = Vec2::ZERO;
+                for (k, &v) in tri.iter().enumerate() {
+                    let v = v as usize;
+                    let texels_per_unit = if scale.len() == 1 { scale[0] } else { scale[v] };
+                    let q =
+                        sources[v] + frames[v].texel_offset(p - mesh.positions[v], texels_per_unit);
+                    texture.sample_bilinear(q.x, q.y, *wrap, &mut out);
+                    let px = pixel_rgb(&out);
+                    for i in 0..3 {
+                        c[i] += b[k] * px[i];
+                    }
+                    if k == near {
+                        near_src = q;
+                    }
+                }
+                (c, Some(near_src))
             }
             PlaneSignal::Uvs {
                 uvs,

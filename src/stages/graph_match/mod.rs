@@ -544,6 +544,10 @@ impl Stage for GraphMatch {
                         values: st.colours.clone(),
                     },
                     SourceTexels(st.texels.clone()),
+                    // The scale the sources were matched at, so a renderer
+                    // can continue each source across its vertex's
+                    // neighbourhood (`export`'s `plane_colours = "sources"`).
+                    VertexScale(vec![r_scale; st.texels.len()]),
                 ));
                 state = Some(st);
             }
