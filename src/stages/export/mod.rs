@@ -99,7 +99,7 @@ impl StageSettings for ExportSettings {
             name: "plane_colours",
             unit: "",
             range: ParamRange::OneOf(&["sources", "vertex"]),
-            doc: "how format `plane` draws a per-vertex result: sources (default) continues each vertex's exemplar coordinate (`SourceTexels`) across its triangles through its tangent frame at the result's texels per unit and blends the three corners' exemplar samples, so the image has the exemplar's resolution wherever neighbouring sources agree; vertex interpolates the vertex colours (what a PLY viewer shows), which resamples the result through the mesh's vertex lattice. Results without source coordinates or frames are drawn from their vertex colours either way; on a grid with a vertex at every pixel centre both are the same",
+            doc: "how format `plane` draws a per-vertex result: vertex (default) interpolates the vertex colours (what a PLY viewer shows), which resamples the result through the mesh's vertex lattice; sources continues each vertex's exemplar coordinate (`SourceTexels`) across its triangles through its tangent frame at the result's texels per unit and blends the three corners' exemplar samples, so the image has the exemplar's resolution wherever neighbouring sources agree. Results without source coordinates or frames are drawn from their vertex colours either way; on a grid with a vertex at every pixel centre both are the same",
         },
         ParamDoc {
             name: "name",
@@ -261,8 +261,9 @@ impl Stage for Export {
                 let background = crate::image::pixel_rgb(&ex.mean());
                 let n = mesh.vertex_count();
                 let scale_of_run = texture_scale.as_deref().map(|t| [t.texels_per_unit]);
+                let wants_sources = settings.plane_colours == PlaneColours::Sources;
                 let coordinates = match (source_texels, frames) {
-                    (Some(st), Some(f)) if st.0.len() == n && f.0.len() == n => {
+                    (Some(st), Some(f)) if wants_sources && st.0.len() == n && f.0.len() == n => {
                         let scale: Option<&[f32]> = match vertex_scale {
                             Some(s) if s.0.len() == n => Some(&s.0),
                             _ => scale_of_run.as_ref().map(|s| s.as_slice()),
@@ -284,12 +285,7 @@ impl Stage for Export {
                         texture: ex,
                         wrap: exemplar.wrap,
                     })),
-                    (None, Some(_))
-                        if settings.plane_colours == PlaneColours::Sources
-                            && coordinates.is_some() =>
-                    {
-                        coordinates.map(Ok)
-                    }
+                    (None, Some(_)) if coordinates.is_some() => coordinates.map(Ok),
                     (None, Some(c)) => Some(Ok(plane::PlaneSignal::Colours {
                         values: &c.values,
                         channels: c.channels,
