@@ -72,7 +72,7 @@ const METHODS: [&str; 10] = [
     "wei_levoy",
     "coherent",
     "bangay_morkel",
-    "bangay_morkel_graph_cut",
+    "bangay_morkel_no_cut",
     "bangay_morkel_coherent",
 ];
 

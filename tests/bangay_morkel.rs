@@ -1217,7 +1217,7 @@ fn coherent_candidates_give_graph_cuts_fewer_seams() {
     for texture in ["brick", "planks"] {
         let run = |extra: &str| regions_and_p90(&bm_plane(texture, 3, extra).2);
         let (paper_cut, paper_p90) = run("graph_cut = true");
-        let (coherent, _) = run("candidates = \"coherent\"");
+        let (coherent, _) = run("graph_cut = false\ncandidates = \"coherent\"");
         let (coherent_cut, coherent_p90) = run("graph_cut = true\ncandidates = \"coherent\"");
         println!(
             "{texture}: region area (px) exhaustive+cut {paper_cut:.1}, coherent {coherent:.1}, coherent+cut {coherent_cut:.1}; p90 {paper_p90:.5} vs {coherent_p90:.5}"
@@ -1257,6 +1257,7 @@ up = [0.0, 1.0, 0.0]
 kind = "graph_match"
 passes = [1]
 k_max = 6
+graph_cut = false
 density_invariant = {density_invariant}
 "#
     );

@@ -50,6 +50,22 @@ impl PlaneGrid {
         }
     }
 
+    /// The grid of `width × height` pixels `pixel` world units apart, pixel
+    /// `(0, 0)` on the top-left corner of `positions`' xy bounding box
+    /// (`min.x`, `max.y`): pixel `(i, j)` at `(min.x + i·pixel, max.y −
+    /// j·pixel)`, whatever the box's size (pixels beyond the mesh are
+    /// outside). On a grid of vertices `pixel` apart every pixel centre is a
+    /// vertex, even where the box is not `(width − 1) · pixel` wide.
+    pub fn at_spacing(positions: &[Vec3], width: u32, height: u32, pixel: f32) -> Self {
+        let bounds = Self::over(positions, width, height);
+        let span = |n: u32| n.saturating_sub(1).max(1) as f32 * pixel;
+        Self {
+            min: Vec2::new(bounds.min.x, bounds.max.y - span(height)),
+            max: Vec2::new(bounds.min.x + span(width), bounds.max.y),
+            ..bounds
+        }
+    }
+
     /// Pixel steps across the box (one pixel: the centre of the box).
     fn steps(&self) -> Vec2 {
         Vec2::new(

@@ -31,6 +31,9 @@ pub struct ExportSettings {
     pub plane_size: [u32; 2],
     /// How `plane.png` draws a per-vertex result.
     pub plane_colours: PlaneColours,
+    /// World units between `plane.png`'s pixel centres; 0 = they span the
+    /// mesh's bounding box.
+    pub plane_pixel: f32,
 }
 
 /// How the `plane` format draws a per-vertex result.
@@ -56,6 +59,7 @@ impl Default for ExportSettings {
             bake_size: 1024,
             plane_size: [256, 256],
             plane_colours: PlaneColours::Vertex,
+            plane_pixel: 0.0,
         }
     }
 }
@@ -100,6 +104,12 @@ impl StageSettings for ExportSettings {
             unit: "",
             range: ParamRange::OneOf(&["sources", "vertex"]),
             doc: "how format `plane` draws a per-vertex result: vertex (default) interpolates the vertex colours (what a PLY viewer shows), which resamples the result through the mesh's vertex lattice; sources continues each vertex's exemplar coordinate (`SourceTexels`) across its triangles through its tangent frame at the result's texels per unit and blends the three corners' exemplar samples, so the image has the exemplar's resolution wherever neighbouring sources agree. Results without source coordinates or frames are drawn from their vertex colours either way; on a grid with a vertex at every pixel centre both are the same",
+        },
+        ParamDoc {
+            name: "plane_pixel",
+            unit: "world units",
+            range: ParamRange::Float(0.0, 1e9),
+            doc: "distance between plane.png's pixel centres; 0 (default) = they span the mesh's xy bounding box edge to edge (see plane_size); > 0 = pixel (i, j) at (min.x + i·plane_pixel, max.y − j·plane_pixel), from the box's top-left corner whatever its size (pixels beyond the mesh stay black, sources unknown), e.g. 1 on a 257 × 257-vertex grid of side 256 puts a vertex at every pixel centre of a 256 × 256 image (what a √2 hierarchy of a 17 × 17 quad grid reaches)",
         },
         ParamDoc {
             name: "name",
@@ -310,7 +320,13 @@ impl Stage for Export {
                 };
                 let result = match (signal, synthesised.as_deref()) {
                     (Some(Ok(signal)), _) => {
-                        plane::plane_from_surface(mesh, &signal, settings.plane_size, ex_size)
+                        plane::plane_from_surface_at(
+                        mesh,
+                        &signal,
+                        settings.plane_size,
+                        ex_size,
+                        settings.plane_pixel,
+                    )
                     }
                     (Some(Err(e)), _) => Err(format!("format `plane`: the lapped pastes: {e}")),
                     (None, Some(img)) => plane::plane_from_image(img, settings.plane_size, ex_size),

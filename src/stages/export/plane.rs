@@ -91,9 +91,26 @@ pub fn plane_from_surface(
     size: [u32; 2],
     exemplar_size: [u32; 2],
 ) -> Result<PlaneImage, String> {
+    plane_from_surface_at(mesh, signal, size, exemplar_size, 0.0)
+}
+
+/// [`plane_from_surface`] with pixels `pixel` world units apart from the
+/// box's top-left corner ([`PlaneGrid::at_spacing`]); `pixel = 0` spans the
+/// bounding box ([`PlaneGrid::over`]).
+pub fn plane_from_surface_at(
+    mesh: &PolyMesh,
+    signal: &PlaneSignal,
+    size: [u32; 2],
+    exemplar_size: [u32; 2],
+    pixel: f32,
+) -> Result<PlaneImage, String> {
     check_planar_xy(&mesh.positions).map_err(|r| planar_message("the active mesh", &r))?;
     let [w, h] = size;
-    let grid = PlaneGrid::over(&mesh.positions, w, h);
+    let grid = if pixel > 0.0 {
+        PlaneGrid::at_spacing(&mesh.positions, w, h, pixel)
+    } else {
+        PlaneGrid::over(&mesh.positions, w, h)
+    };
     let (corner_tris, face_of) = mesh.triangulate_corners();
     let vertex_tris: Vec<[u32; 3]> = corner_tris
         .iter()
