@@ -9,7 +9,7 @@ mod common;
 use common::*;
 use std::path::{Path, PathBuf};
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
-use surfsynth::stages::export::plane::{PlaneSignal, plane_from_surface};
+use surfsynth::stages::export::plane::{PlaneSignal, plane_from_surface, plane_from_surface_at};
 
 const STONES: &str = "textures/stones.png";
 
@@ -197,6 +197,62 @@ fn every_plane_config_writes_plane_png_and_sources_of_the_requested_size() {
             100.0 * known
         );
     }
+}
+
+/// `export.plane_pixel`: on a grid of vertices one unit apart whose box is
+/// one unit wider than the image (what eight √2 steps of a 17 × 17 quad
+/// grid of side 256 give for a 256² image), pixels one unit apart from the
+/// box's top-left corner are each exactly one vertex's colour; spanning
+/// the box instead puts most pixel centres between vertices, which blends
+/// neighbours. Pixels beyond the mesh stay unknown.
+#[test]
+fn plane_pixel_puts_a_vertex_at_every_pixel_centre_of_a_wider_grid() {
+    // 17 × 17 vertices of side 16 (spacing 1), centred on the origin.
+    let opts = BuiltinOptions {
+        resolution: [17, 17],
+        size: 16.0,
+        ..Default::default()
+    };
+    let mesh = builtin_mesh("plane", &opts).unwrap();
+    // A colour no interpolation reproduces: hashed per vertex.
+    let colour = |x: f32, y: f32| {
+        let h = ((x + 8.0) as u32 * 7919 + (y + 8.0) as u32 * 104_729) % 1000;
+        [h as f32 / 1000.0, 0.5, 1.0 - h as f32 / 1000.0]
+    };
+    let values: Vec<f32> = mesh
+        .positions
+        .iter()
+        .flat_map(|p| colour(p.x, p.y))
+        .collect();
+    let signal = PlaneSignal::Colours {
+        values: &values,
+        channels: 3,
+        sources: None,
+    };
+    let exact = plane_from_surface_at(&mesh, &signal, [16, 16], [8, 8], 1.0).unwrap();
+    let spanning = plane_from_surface(&mesh, &signal, [16, 16], [8, 8]).unwrap();
+    let (mut worst_exact, mut mean_spanning) = (0.0f32, 0.0f32);
+    for j in 0..16u32 {
+        for i in 0..16u32 {
+            let want = colour(-8.0 + i as f32, 8.0 - j as f32);
+            let err = |got: &[f32]| (0..3).map(|c| (got[c] - want[c]).abs()).fold(0.0, f32::max);
+            worst_exact = worst_exact.max(err(exact.image.pixel(i, j)));
+            mean_spanning += err(spanning.image.pixel(i, j)) / 256.0;
+        }
+    }
+    assert!(worst_exact < 1e-6, "plane_pixel = 1: worst {worst_exact}");
+    assert!(
+        mean_spanning > 0.05,
+        "spanning the box: mean {mean_spanning}"
+    );
+    // A 20 × 20 image at 1 unit reaches past the mesh on the right and the
+    // bottom: those pixels are black.
+    let past = plane_from_surface_at(&mesh, &signal, [20, 20], [8, 8], 1.0).unwrap();
+    assert_eq!(past.image.pixel(19, 19), &[0.0, 0.0, 0.0]);
+    assert!(
+        past.image.pixel(16, 16)[1] > 0.0,
+        "the last vertex is inside"
+    );
 }
 
 #[test]
