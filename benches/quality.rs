@@ -283,7 +283,9 @@ fn run_peer(exemplar: &Image, size: u32, threads: Threads) -> Result<Outcome, St
 /// `--set` overrides for a `size` × `size` result: every stage's
 /// `plane_size` and `width`/`height` pair; a plane mesh's
 /// `input.mesh_options.size` (world units, one exemplar pixel per unit:
-/// `size - 1`) and, where the mesh has one vertex per output pixel (its
+/// `size - 1` when the image spans the mesh's box, `size × plane_pixel`
+/// when pixels are `plane_pixel` units apart from its corner, as on
+/// Bangay–Morkel's grid one vertex wider than the image) and, where the mesh has one vertex per output pixel (its
 /// resolution equals the plane size), its resolution. Nothing else is scaled
 /// (e.g. coarse base meshes, patch sizes), so sizes other than the configs'
 /// 256 are only exact for the image-space and per-pixel methods.
@@ -293,8 +295,14 @@ fn size_overrides(config_text: &str, size: u32) -> Vec<String> {
     };
     let mut out = Vec::new();
     let mut plane_size = None;
+    let mut plane_pixel = None;
     let stages = table.get("stage").and_then(|s| s.as_array());
     for (i, stage) in stages.into_iter().flatten().enumerate() {
+        if let Some(p) = stage.get("plane_pixel").and_then(|p| p.as_float())
+            && p > 0.0
+        {
+            plane_pixel = Some(p);
+        }
         if let Some(p) = stage.get("plane_size") {
             plane_size = Some(p.clone());
             out.push(format!("stage.{}.plane_size=[{size}, {size}]", i + 1));
@@ -310,7 +318,10 @@ fn size_overrides(config_text: &str, size: u32) -> Vec<String> {
         .and_then(|o| o.as_table());
     if let Some(options) = options {
         if options.contains_key("size") {
-            out.push(format!("input.mesh_options.size={}.0", size - 1));
+            match plane_pixel {
+                Some(p) => out.push(format!("input.mesh_options.size={:?}", size as f64 * p)),
+                None => out.push(format!("input.mesh_options.size={}.0", size - 1)),
+            }
         }
         if let (Some(r), Some(p)) = (options.get("resolution"), &plane_size)
             && r.as_array()
