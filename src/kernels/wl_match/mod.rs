@@ -419,8 +419,10 @@ pub fn wei_levoy_synthesis_with_progress(
                     scratch,
                 )
             };
-            // Which vertices each vertex reads (covered stencil vertices),
-            // as one flat list with offsets, built per fixed chunk.
+            // Which vertices each vertex reads (covered stencil vertices):
+            // per fixed chunk of vertices, one flat list and each vertex's
+            // offsets into it, read in place. (Copied into one list they
+            // were held twice at the level's peak: ~230 bytes per vertex.)
             let chunks: Vec<(Vec<u32>, Vec<u32>, usize)> = (0..nv.div_ceil(FLATTEN_CHUNK))
                 .into_par_iter()
                 .map(|c| {
@@ -428,7 +430,8 @@ pub fn wei_levoy_synthesis_with_progress(
                     pool.with(|scratch| {
                         let mut st = vec![StencilPoint::UNCOVERED; tp];
                         let mut flat = Vec::with_capacity(vs.len() * tp);
-                        let mut counts = Vec::with_capacity(vs.len());
+                        let mut starts = Vec::with_capacity(vs.len() + 1);
+                        starts.push(0u32);
                         let mut one: Vec<u32> = Vec::with_capacity(3 * tp);
                         let mut uncovered = 0;
                         for v in vs {
@@ -444,9 +447,10 @@ pub fn wei_levoy_synthesis_with_progress(
                             one.sort_unstable();
                             one.dedup();
                             flat.extend_from_slice(&one);
-                            counts.push(one.len() as u32);
+                            starts.push(flat.len() as u32);
                         }
-                        (flat, counts, uncovered)
+                        flat.shrink_to_fit();
+                        (flat, starts, uncovered)
                     })
                 })
                 .collect();
@@ -454,20 +458,13 @@ pub fn wei_levoy_synthesis_with_progress(
             let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
             let uncovered: usize = chunks.iter().map(|c| c.2).sum();
             report.uncovered = uncovered as f32 / (nv * tp).max(1) as f32;
-            let mut offsets = Vec::with_capacity(nv + 1);
-            offsets.push(0usize);
-            let mut reads = Vec::with_capacity(chunks.iter().map(|c| c.0.len()).sum());
-            for (flat, counts, _) in chunks {
-                reads.extend_from_slice(&flat);
-                for c in counts {
-                    offsets.push(offsets[offsets.len() - 1] + c as usize);
-                }
-            }
             let order = schedule::random_order(nv, mix(settings.seed, l as u64, 2));
             let batches = schedule::dependency_batches(&order, |v| {
-                &reads[offsets[v as usize]..offsets[v as usize + 1]]
+                let (flat, starts, _) = &chunks[v as usize / FLATTEN_CHUNK];
+                let i = v as usize % FLATTEN_CHUNK;
+                &flat[starts[i] as usize..starts[i + 1] as usize]
             });
-            drop(reads);
+            drop(chunks);
             report.batches = batches.len();
             report.flatten_seconds += started.elapsed().as_secs_f64();
             drop(schedule_span);
