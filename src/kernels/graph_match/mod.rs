@@ -110,7 +110,8 @@ pub const FOOTPRINT: f32 = 0.5;
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Candidates {
-    /// Every texel of the level (Algorithm 1; the paper).
+    /// Every texel of the level (Algorithm 1; the paper); with a clamped
+    /// exemplar, every texel whose region lies inside it.
     #[default]
     Exhaustive,
     /// k-coherent candidates (an extension; Ashikhmin 2001, Tong et al.

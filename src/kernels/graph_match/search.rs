@@ -124,7 +124,9 @@ const PRUNE_SLACK: f32 = 1.0 + 1e-5;
 
 /// The candidate texel `Q` on level `level` minimising
 /// `Σ mᵢ |colour(level(i), Q + offsetᵢ) − v̄ᵢ|²` over every texel of the
-/// level (exhaustive, Algorithm 1); ties go to the lowest `y · width + x`.
+/// level (exhaustive, Algorithm 1) — with a clamped exemplar, every texel
+/// whose samples all lie inside it (`complete_box`); ties go to the
+/// lowest `y · width + x`.
 /// `None` when `groups` is empty.
 ///
 /// Candidates are scored 32 adjacent texels of a row at a time, a tight

@@ -204,7 +204,7 @@ impl StageSettings for GraphMatchStageSettings {
             name: "candidates",
             unit: "",
             range: ParamRange::OneOf(&["exhaustive", "coherent"]),
-            doc: "where a vertex's texel is looked for: exhaustive = every texel of the level (Algorithm 1, the paper); coherent = an extension: the sources of the coloured region vertices within two edges shifted back by their offsets, and the `similar` texels most like each (k-coherence, Tong et al. 2002), so matches continue their neighbours' patches and graph cuts take larger pieces; the coarsest level's first pass stays exhaustive (it lays out the pattern)",
+            doc: "where a vertex's texel is looked for: exhaustive = every texel of the level (Algorithm 1, the paper; with exemplar_wrap = \"clamp\" only texels whose whole region lies inside the exemplar, since a sample past the edge would read the edge texel repeated); coherent = an extension: the sources of the coloured region vertices within two edges shifted back by their offsets, and the `similar` texels most like each (k-coherence, Tong et al. 2002), so matches continue their neighbours' patches and graph cuts take larger pieces; the coarsest level's first pass stays exhaustive (it lays out the pattern)",
         },
         ParamDoc {
             name: "jump_cost",
