@@ -285,8 +285,9 @@ fn run_peer(exemplar: &Image, size: u32, threads: Threads) -> Result<Outcome, St
 /// `input.mesh_options.size` (world units, one exemplar pixel per unit:
 /// `size - 1` when the image spans the mesh's box, `size × plane_pixel`
 /// when pixels are `plane_pixel` units apart from its corner, as on
-/// Bangay–Morkel's grid one vertex wider than the image) and, where the mesh has one vertex per output pixel (its
-/// resolution equals the plane size), its resolution. Nothing else is scaled
+/// Bangay–Morkel's grid one vertex wider than the image) and, where the
+/// mesh has one vertex per output pixel (its resolution equals the plane
+/// size), its resolution. Nothing else is scaled
 /// (e.g. coarse base meshes, patch sizes), so sizes other than the configs'
 /// 256 are only exact for the image-space and per-pixel methods.
 fn size_overrides(config_text: &str, size: u32) -> Vec<String> {

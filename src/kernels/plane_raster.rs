@@ -56,8 +56,12 @@ impl PlaneGrid {
     /// j·pixel)`, whatever the box's size (pixels beyond the mesh are
     /// outside). On a grid of vertices `pixel` apart every pixel centre is a
     /// vertex, even where the box is not `(width − 1) · pixel` wide.
+    /// `pixel ≤ 0` (or NaN) spans the box instead ([`PlaneGrid::over`]).
     pub fn at_spacing(positions: &[Vec3], width: u32, height: u32, pixel: f32) -> Self {
         let bounds = Self::over(positions, width, height);
+        if pixel.is_nan() || pixel <= 0.0 {
+            return bounds;
+        }
         let span = |n: u32| n.saturating_sub(1).max(1) as f32 * pixel;
         Self {
             min: Vec2::new(bounds.min.x, bounds.max.y - span(height)),

@@ -319,15 +319,13 @@ impl Stage for Export {
                     (None, None) => None,
                 };
                 let result = match (signal, synthesised.as_deref()) {
-                    (Some(Ok(signal)), _) => {
-                        plane::plane_from_surface_at(
+                    (Some(Ok(signal)), _) => plane::plane_from_surface_at(
                         mesh,
                         &signal,
                         settings.plane_size,
                         ex_size,
                         settings.plane_pixel,
-                    )
-                    }
+                    ),
                     (Some(Err(e)), _) => Err(format!("format `plane`: the lapped pastes: {e}")),
                     (None, Some(img)) => plane::plane_from_image(img, settings.plane_size, ex_size),
                     (None, None) => Err("format `plane` needs a result: vertex colours, per-corner texture coordinates, lapped pastes or a `jump_image`; none exists".into()),

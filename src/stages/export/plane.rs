@@ -106,11 +106,7 @@ pub fn plane_from_surface_at(
 ) -> Result<PlaneImage, String> {
     check_planar_xy(&mesh.positions).map_err(|r| planar_message("the active mesh", &r))?;
     let [w, h] = size;
-    let grid = if pixel > 0.0 {
-        PlaneGrid::at_spacing(&mesh.positions, w, h, pixel)
-    } else {
-        PlaneGrid::over(&mesh.positions, w, h)
-    };
+    let grid = PlaneGrid::at_spacing(&mesh.positions, w, h, pixel);
     let (corner_tris, face_of) = mesh.triangulate_corners();
     let vertex_tris: Vec<[u32; 3]> = corner_tris
         .iter()
