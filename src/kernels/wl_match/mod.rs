@@ -305,6 +305,14 @@ pub fn wei_levoy_synthesis_with_progress(
     );
     let ch = exemplar.channels as usize;
     let pyramid = gaussian_pyramid(exemplar, count, settings.wrap);
+    // Every colour a query holds is a convex combination of pyramid pixels
+    // (or a level's mean), so it lies in the pyramid's range of values.
+    let range = pyramid
+        .iter()
+        .flat_map(|img| img.data.iter().copied())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        });
     let geometry: Vec<LevelGeometry> = levels
         .iter()
         .enumerate()
@@ -363,6 +371,7 @@ pub fn wei_levoy_synthesis_with_progress(
             coarse_parts,
             ch,
             settings.parent_reach,
+            range,
         );
         drop(coarse_span);
         report.parent_misses = misses;
@@ -377,9 +386,13 @@ pub fn wei_levoy_synthesis_with_progress(
             let mut matches = vec![NO_MATCH; nv];
             matches
                 .par_chunks_mut(PASS1_CHUNK)
-                .zip(coarse.par_chunks(PASS1_CHUNK * coarse_dim))
-                .for_each(|(out, q)| {
-                    search.search(q, out);
+                .enumerate()
+                .for_each(|(c, out)| {
+                    let mut q = vec![0.0f32; out.len() * coarse_dim];
+                    for (i, row) in q.chunks_exact_mut(coarse_dim).enumerate() {
+                        coarse.row_into(c * PASS1_CHUNK + i, row);
+                    }
+                    search.search(&q, out);
                     progress.inc(out.len() as u64);
                 });
             report.search_seconds += started.elapsed().as_secs_f64();
@@ -493,8 +506,7 @@ pub fn wei_levoy_synthesis_with_progress(
                                     &geo.default,
                                     &mut row[..fine_dim],
                                 );
-                                row[fine_dim..]
-                                    .copy_from_slice(&coarse[v * coarse_dim..(v + 1) * coarse_dim]);
+                                coarse.row_into(v, &mut row[fine_dim..]);
                             }
                         });
                         let mut out = vec![NO_MATCH; vs.len()];
@@ -605,10 +617,55 @@ fn mean_distance(matches: &[Match], dim: usize) -> f32 {
     (sum / (matches.len() * dim) as f64) as f32
 }
 
+/// The coarser parts of every vertex's query, stored as 16-bit steps of
+/// the exemplar pyramid's value range: half the bytes of `f32` rows (the
+/// largest array of the match stage on dense meshes, ~150 instead of ~300
+/// bytes per vertex with the paper's neighbourhoods), read back within half
+/// a step (`(hi − lo) / 131 070`, below 1e-5 for 8-bit images, 1/500 of an
+/// 8-bit grey level).
+struct CoarseRows {
+    values: Vec<u16>,
+    dim: usize,
+    lo: f32,
+    step: f32,
+}
+
+impl CoarseRows {
+    fn new(nv: usize, dim: usize, (lo, hi): (f32, f32)) -> Self {
+        let (lo, hi) = if lo.is_finite() && hi.is_finite() && hi > lo {
+            (lo, hi)
+        } else {
+            (0.0, 1.0)
+        };
+        Self {
+            values: vec![0; nv * dim],
+            dim,
+            lo,
+            step: (hi - lo) / u16::MAX as f32,
+        }
+    }
+
+    fn quantise(&self, x: f32) -> u16 {
+        ((x - self.lo) / self.step)
+            .round()
+            .clamp(0.0, u16::MAX as f32) as u16
+    }
+
+    /// Vertex `v`'s row, as values.
+    fn row_into(&self, v: usize, out: &mut [f32]) {
+        let row = &self.values[v * self.dim..(v + 1) * self.dim];
+        for (o, &q) in out.iter_mut().zip(row) {
+            *o = self.lo + q as f32 * self.step;
+        }
+    }
+}
+
 /// The coarser parts of every vertex of level `l`: where its normal meets
 /// each coarser level, a flattened, resampled template of that level's
-/// (already synthesised) colours. Returns the values (rows of the parts'
-/// total size) and the number of parent lookups that met nothing.
+/// (already synthesised) colours. Returns the rows (the parts' total size
+/// each; values in `range`) and the number of parent lookups that met
+/// nothing.
+#[allow(clippy::too_many_arguments)]
 fn coarse_queries(
     levels: &[SynthesisLevel],
     geometry: &[LevelGeometry],
@@ -617,23 +674,26 @@ fn coarse_queries(
     parts: &[Part],
     ch: usize,
     reach: f32,
-) -> (Vec<f32>, usize) {
+    range: (f32, f32),
+) -> (CoarseRows, usize) {
     let dim: usize = parts.iter().map(|p| p.values(ch)).sum();
     let nv = levels[l].mesh.vertex_count();
-    let mut out = vec![0.0f32; nv * dim];
+    let mut out = CoarseRows::new(nv, dim, range);
     if dim == 0 {
         return (out, 0);
     }
     // Scratches shared by the chunks (see `ScratchPool`).
     let pool = ScratchPool::new();
-    let misses: usize = out
+    let mut values = std::mem::take(&mut out.values);
+    let misses: usize = values
         .par_chunks_mut(dim * FLATTEN_CHUNK)
         .enumerate()
         .map(|(c, rows)| {
             pool.with(|scratch| {
                 let mut stencil = Vec::<StencilPoint>::new();
+                let mut row = vec![0.0f32; dim];
                 let mut misses = 0;
-                for (i, row) in rows.chunks_exact_mut(dim).enumerate() {
+                for (i, dst) in rows.chunks_exact_mut(dim).enumerate() {
                     misses += coarse_row(
                         levels,
                         geometry,
@@ -643,15 +703,19 @@ fn coarse_queries(
                         ch,
                         reach,
                         c * FLATTEN_CHUNK + i,
-                        row,
+                        &mut row,
                         scratch,
                         &mut stencil,
                     );
+                    for (d, &x) in dst.iter_mut().zip(&row) {
+                        *d = out.quantise(x);
+                    }
                 }
                 misses
             })
         })
         .sum();
+    out.values = values;
     (out, misses)
 }
 
@@ -719,6 +783,43 @@ fn coarse_row(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn coarse_rows_read_back_within_half_a_step_of_the_range() {
+        let (lo, hi) = (-0.25f32, 1.5f32);
+        let mut rows = CoarseRows::new(3, 4, (lo, hi));
+        let values = [
+            lo,
+            hi,
+            0.0,
+            1.0,
+            0.123_456,
+            0.999_99,
+            -0.2,
+            1.499,
+            0.5,
+            0.25,
+            0.75,
+            1.0 / 3.0,
+        ];
+        let quantised: Vec<u16> = values.iter().map(|&x| rows.quantise(x)).collect();
+        rows.values = quantised;
+        let half_step = (hi - lo) / u16::MAX as f32 / 2.0;
+        let mut out = [0.0f32; 4];
+        for v in 0..3 {
+            rows.row_into(v, &mut out);
+            for (o, x) in out.iter().zip(&values[v * 4..v * 4 + 4]) {
+                assert!((o - x).abs() <= half_step * 1.01, "{x} read back as {o}");
+            }
+        }
+        // The ends of the range are exact; values outside it are clamped.
+        assert_eq!(rows.quantise(lo), 0);
+        assert_eq!(rows.quantise(hi), u16::MAX);
+        assert_eq!(rows.quantise(hi + 1.0), u16::MAX);
+        // An empty or flat range still reads back what it stored.
+        let flat = CoarseRows::new(1, 1, (0.5, 0.5));
+        assert!(flat.step > 0.0);
+    }
 
     #[test]
     fn coarser_parts_span_the_fine_template() {
