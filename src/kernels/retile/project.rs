@@ -406,10 +406,13 @@ impl SurfaceProjector {
         let mut face = hint;
         let (mut point, mut bary) = self.tri_closest(face, p);
         let mut d2 = (point - p).length_squared();
+        // The face the walk came from is farther than `face` (each step is
+        // a strict improvement), so it is not tested again.
+        let mut came_from = NONE;
         for _ in 0..MAX_STEPS {
             let mut step = None;
             for &g in &self.neighbours[face as usize] {
-                if g == NONE {
+                if g == NONE || g == came_from {
                     continue;
                 }
                 let (q, b) = self.tri_closest(g, p);
@@ -419,7 +422,10 @@ impl SurfaceProjector {
                 }
             }
             match step {
-                Some((g, q, b)) => (face, point, bary) = (g, q, b),
+                Some((g, q, b)) => {
+                    came_from = face;
+                    (face, point, bary) = (g, q, b);
+                }
                 None => return Some(SurfacePoint { point, face, bary }),
             }
         }
