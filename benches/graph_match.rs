@@ -72,6 +72,7 @@ fn bench_pass(c: &mut Criterion) {
         cut_sigma: 0.15,
         candidates: Default::default(),
         jump_cost: 0.0,
+        spread: 0.0,
         density_invariant: false,
     };
     let mut order: Vec<u32> = (0..nv as u32).collect();

@@ -223,6 +223,7 @@ fn oversampled_and_plain_matching_pick_the_same_texel() {
             cut_sigma: 1.0,
             candidates: Default::default(),
             jump_cost: 0.0,
+            spread: 0.0,
             density_invariant: false,
         };
         let centre = (20 * 41 + 20) as u32;
@@ -306,6 +307,7 @@ fn synthesise_plane(
         cut_sigma: 0.15,
         candidates: Default::default(),
         jump_cost: 0.0,
+        spread: 0.0,
         density_invariant: false,
     };
     let mut state: Option<SynthesisState> = None;
@@ -1042,6 +1044,7 @@ fn graph_cut_colours_more_than_the_target_even_when_k_min_is_one() {
         cut_sigma: 1.0,
         candidates: Default::default(),
         jump_cost: 0.0,
+        spread: 0.0,
         density_invariant: false,
     };
     assert_eq!(region_k(1.0, 1.0, 1.0, 1.0, 1, 1), 1);

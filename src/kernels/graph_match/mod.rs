@@ -42,7 +42,7 @@ mod search;
 mod stack;
 
 pub use region::{KRegion, RegionScratch, k_for_side, k_region, mean_edge_lengths, region_k};
-pub use search::{BestMatch, MatchGroups, Sample, best_candidate, best_match};
+pub use search::{BestMatch, MatchGroups, Sample, best_candidate, best_candidate_with, best_match};
 pub use stack::{ImageLevels, MatchImages};
 
 use crate::image::sample::Wrap;
@@ -88,6 +88,11 @@ pub struct GraphMatchSettings {
     /// shifts by this fraction of its sum (its sum is scaled by
     /// `1 + jump_cost`); ≥ 0.
     pub jump_cost: f32,
+    /// With coherent candidates: weight of the occurrence penalty
+    /// ([`Occupancy`]); a candidate in a part of the exemplar used `x > 1`
+    /// times an even share costs `spread · (x − 1)` times the mean of the
+    /// candidates' sums more. 0 = off (the default). ≥ 0.
+    pub spread: f32,
     /// Results that follow the texture, not the tessellation: region
     /// vertices less than half a texel from a matched vertex take the texel
     /// under them and are not matched on their own in the same pass
@@ -124,6 +129,85 @@ pub enum Candidates {
     Coherent,
 }
 
+/// How often the vertices' texels fall in each cell of the exemplar, for
+/// the occurrence penalty of coherent candidates
+/// ([`GraphMatchSettings::spread`]; as in `kernels::coherent`, after the
+/// occurrence maps of Kaspar et al. 2015): without it, continued patches
+/// keep copying the part of the exemplar they started in, and a result can
+/// settle on a quarter of it. Counts are taken at the start of a pass and
+/// updated after each parallel batch, so a batch reads one state whatever
+/// the thread count.
+struct Occupancy {
+    /// Cell side in level-0 texels.
+    cell: f32,
+    cols: u32,
+    rows: u32,
+    counts: Vec<u32>,
+    /// Mean count per cell.
+    expected: f32,
+}
+
+impl Occupancy {
+    /// `texels_per_vertex`: the level's mean area per vertex in level-0
+    /// texels². A cell counts as evenly used at the larger of the mean count
+    /// and one copy of it (a result smaller than the exemplar need not use
+    /// all of it, and a patch copied once is not over-used).
+    fn new(
+        state: &SynthesisState,
+        images: &MatchImages,
+        cell: f32,
+        texels_per_vertex: f32,
+    ) -> Self {
+        let img = images.image(0);
+        let cell = cell.max(1.0);
+        let cols = ((img.width as f32 / cell).ceil() as u32).max(1);
+        let rows = ((img.height as f32 / cell).ceil() as u32).max(1);
+        let mut occ = Self {
+            cell,
+            cols,
+            rows,
+            counts: vec![0; (cols * rows) as usize],
+            expected: 1.0,
+        };
+        let mut n = 0usize;
+        for (t, &c) in state.texels.iter().zip(&state.coloured) {
+            if c {
+                let i = occ.index(*t);
+                occ.counts[i] += 1;
+                n += 1;
+            }
+        }
+        let once = cell * cell / texels_per_vertex.max(f32::MIN_POSITIVE);
+        occ.expected = (n as f32 / occ.counts.len() as f32).max(once).max(1.0);
+        occ
+    }
+
+    #[inline]
+    fn index(&self, t: Vec2) -> usize {
+        let x = ((t.x.max(0.0) / self.cell) as u32).min(self.cols - 1);
+        let y = ((t.y.max(0.0) / self.cell) as u32).min(self.rows - 1);
+        (y * self.cols + x) as usize
+    }
+
+    /// How far the uses of `t`'s cell by other vertices than the one at
+    /// `here` exceed an even share, in even shares (0 up to one share).
+    #[inline]
+    fn load(&self, t: Vec2, here: Option<Vec2>) -> f32 {
+        let i = self.index(t);
+        let own = u32::from(here.is_some_and(|h| self.index(h) == i));
+        (self.counts[i].saturating_sub(own) as f32 / self.expected - 1.0).max(0.0)
+    }
+
+    fn moved(&mut self, from: Option<Vec2>, to: Vec2) {
+        if let Some(f) = from {
+            let i = self.index(f);
+            self.counts[i] = self.counts[i].saturating_sub(1);
+        }
+        let j = self.index(to);
+        self.counts[j] += 1;
+    }
+}
+
 /// Region vertices at most this many edges from the centre give coherent
 /// candidates.
 const COHERENT_DEPTH: u32 = 2;
@@ -140,6 +224,7 @@ impl Default for GraphMatchSettings {
             cut_sigma: 1.0,
             candidates: Candidates::Exhaustive,
             jump_cost: 0.0,
+            spread: 0.0,
             density_invariant: false,
         }
     }
@@ -399,6 +484,24 @@ pub fn match_pass_with_progress(
     let mut pending: std::collections::VecDeque<Planned> = std::collections::VecDeque::new();
     let mut kept: std::collections::VecDeque<Planned> = std::collections::VecDeque::new();
     let mut next = 0usize;
+    let mut occupancy = (settings.spread > 0.0 && settings.candidates == Candidates::Coherent)
+        .then(|| {
+            let texels_per_vertex = level
+                .mean_edge
+                .iter()
+                .map(|&e| {
+                    let t = (settings.r_scale * e) as f64;
+                    t * t
+                })
+                .sum::<f64>()
+                / n.max(1) as f64;
+            Occupancy::new(
+                state,
+                images,
+                settings.region_texels / 2.0,
+                texels_per_vertex as f32,
+            )
+        });
     loop {
         if pending.len() < MAX_BATCH && next < order.len() {
             let end = (next + PLAN_AHEAD).min(order.len());
@@ -467,6 +570,7 @@ pub fn match_pass_with_progress(
             &mut covered,
             &mut batch,
             &mut stats,
+            occupancy.as_mut(),
         );
     }
     stats
@@ -523,19 +627,21 @@ fn run_batch(
     covered: &mut [bool],
     batch: &mut Vec<Planned>,
     stats: &mut PassStats,
+    mut occupancy: Option<&mut Occupancy>,
 ) {
     if batch.is_empty() {
         return;
     }
     let st: &SynthesisState = state;
+    let occ: Option<&Occupancy> = occupancy.as_deref();
     let outcomes: Vec<Outcome> = if batch.len() == 1 {
         vec![match_vertex(
-            level, images, settings, seed, st, &batch[0], true,
+            level, images, settings, seed, st, &batch[0], true, occ,
         )]
     } else {
         batch
             .par_iter()
-            .map(|p| match_vertex(level, images, settings, seed, st, p, false))
+            .map(|p| match_vertex(level, images, settings, seed, st, p, false, occ))
             .collect()
     };
     let ch = state.channels;
@@ -543,6 +649,9 @@ fn run_batch(
         let centre = p.region.vertices[0];
         for (i, &(w, texel, l)) in o.writes.iter().enumerate() {
             let wi = w as usize;
+            if let Some(occ) = occupancy.as_deref_mut() {
+                occ.moved(state.coloured[wi].then_some(state.texels[wi]), texel);
+            }
             state.colours[wi * ch..(wi + 1) * ch].copy_from_slice(&o.colours[i * ch..(i + 1) * ch]);
             state.texels[wi] = texel;
             state.coloured[wi] = true;
@@ -567,6 +676,7 @@ fn wrap_texel(images: &MatchImages, t: Vec2) -> Vec2 {
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn match_vertex(
     level: &LevelMesh,
     images: &MatchImages,
@@ -575,6 +685,7 @@ fn match_vertex(
     state: &SynthesisState,
     planned: &Planned,
     parallel: bool,
+    occupancy: Option<&Occupancy>,
 ) -> Outcome {
     let ch = state.channels;
     let region = &planned.region;
@@ -650,7 +761,27 @@ fn match_vertex(
     let found = if coherent.is_empty() {
         best_match(images, lp, &groups, &seeds, parallel)
     } else {
-        best_candidate(images, lp, &groups, &coherent, 1.0 + settings.jump_cost)
+        let here = state.coloured[centre as usize].then_some(state.texels[centre as usize]);
+        best_candidate_with(
+            images,
+            lp,
+            &groups,
+            &coherent,
+            1.0 + settings.jump_cost,
+            if occupancy.is_some() {
+                settings.spread
+            } else {
+                0.0
+            },
+            |c| {
+                occupancy.map_or(0.0, |o| {
+                    o.load(
+                        Vec2::new(c[0] as f32 + 0.5, c[1] as f32 + 0.5) * factor,
+                        here,
+                    )
+                })
+            },
+        )
     };
     let q = match found {
         Some(b) => [b.x, b.y],
@@ -821,4 +952,46 @@ fn coherent_candidates(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::image::Image;
+
+    #[test]
+    fn occupancy_counts_use_beyond_an_even_share() {
+        // A 32² exemplar in cells of 8: 16 cells.
+        let img = Image::new(32, 32, 3);
+        let images = MatchImages::new(&img, ImageLevels::Stack, 1, Wrap::Clamp);
+        // 64 coloured vertices, all in the top-left cell; one uncoloured.
+        let mut state = SynthesisState::uncoloured(65, 3);
+        for v in 0..64 {
+            state.texels[v] = Vec2::new(1.5, 2.5);
+            state.coloured[v] = true;
+        }
+        // One texel² per vertex: a copy of a cell is 64 vertices, more than
+        // the mean count (4), so that is the even share.
+        let mut occ = Occupancy::new(&state, &images, 8.0, 1.0);
+        assert_eq!(occ.expected, 64.0);
+        let (tl, other) = (Vec2::new(3.0, 3.0), Vec2::new(20.0, 20.0));
+        assert_eq!(occ.load(tl, None), 0.0);
+        assert_eq!(occ.load(other, None), 0.0);
+        // 64 more uses of the cell: one share over.
+        for _ in 0..64 {
+            occ.moved(None, tl);
+        }
+        assert_eq!(occ.load(tl, None), 1.0);
+        // A vertex already there does not count itself.
+        assert!(occ.load(tl, Some(tl)) < 1.0);
+        // Moving uses out lowers it again.
+        for _ in 0..64 {
+            occ.moved(Some(tl), other);
+        }
+        assert_eq!(occ.load(tl, None), 0.0);
+        // Sparse vertices (16 texels² each): the mean count is the share.
+        let occ = Occupancy::new(&state, &images, 8.0, 16.0);
+        assert_eq!(occ.expected, 4.0);
+        assert_eq!(occ.load(tl, None), 15.0);
+    }
 }

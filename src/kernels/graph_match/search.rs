@@ -194,15 +194,46 @@ pub fn best_candidate(
     candidates: &[([u32; 2], bool)],
     jump_factor: f32,
 ) -> Option<BestMatch> {
-    if groups.is_empty() {
+    best_candidate_with(images, level, groups, candidates, jump_factor, 0.0, |_| 0.0)
+}
+
+/// [`best_candidate`] with an occurrence penalty: each candidate also costs
+/// `spread × load(texel) × mean`, where `mean` is the mean sum over the
+/// candidates (so the penalty is in the sums' units and vanishes where every
+/// candidate matches exactly) and `load` how far the candidate's part of the
+/// exemplar is over-used (0 = at most an even share). `spread = 0` is
+/// [`best_candidate`].
+pub fn best_candidate_with(
+    images: &MatchImages,
+    level: usize,
+    groups: &MatchGroups,
+    candidates: &[([u32; 2], bool)],
+    jump_factor: f32,
+    spread: f32,
+    load: impl Fn([u32; 2]) -> f32,
+) -> Option<BestMatch> {
+    if groups.is_empty() || candidates.is_empty() {
         return None;
     }
     let w = images.planes(level).width as u32;
+    let sums: Vec<f32> = candidates
+        .iter()
+        .map(|&([x, y], _)| distance_at(images, groups, x as usize, y as usize))
+        .collect();
+    let weight = if spread > 0.0 {
+        spread * sums.iter().sum::<f32>() / sums.len() as f32
+    } else {
+        0.0
+    };
     candidates
         .iter()
-        .map(|&([x, y], jump)| {
-            let d = distance_at(images, groups, x as usize, y as usize);
-            (if jump { d * jump_factor } else { d }, y * w + x, d)
+        .zip(&sums)
+        .map(|(&(c, jump), &d)| {
+            let mut cost = if jump { d * jump_factor } else { d };
+            if weight > 0.0 {
+                cost += weight * load(c);
+            }
+            (cost, c[1] * w + c[0], d)
         })
         .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
         .map(|(_, i, distance)| BestMatch {
@@ -431,6 +462,34 @@ mod tests {
         assert_eq!(pick(1.0), lo);
         assert_eq!(pick(ratio * 1.01), hi);
         assert!(best_candidate(&images, 0, &g, &[], 1.0).is_none());
+    }
+
+    #[test]
+    fn an_over_used_candidate_loses_by_the_occurrence_penalty() {
+        let img = noise(40, 30, 3, 3);
+        let images = MatchImages::new(&img, ImageLevels::Stack, 1, Wrap::Repeat);
+        let (samples, colours) = window(&img, &images, [17, 9], 1, Wrap::Repeat, |_, _| 1);
+        let mut g = MatchGroups::new();
+        g.build(&samples, &colours, 3, true);
+        let (exact, other) = ([17u32, 9u32], [3u32, 4u32]);
+        let cands = [(exact, false), (other, false)];
+        let pick = |spread: f32, load_exact: f32| {
+            let b = best_candidate_with(&images, 0, &g, &cands, 1.0, spread, |c| {
+                if c == exact { load_exact } else { 0.0 }
+            })
+            .unwrap();
+            [b.x, b.y]
+        };
+        // Off, or not over-used: the exact window (sum 0) wins.
+        assert_eq!(pick(0.0, 10.0), exact);
+        assert_eq!(pick(1.0, 0.0), exact);
+        // Its penalty is spread · load · (mean of the two sums) = 1.5 × the
+        // other's sum: the other wins; at 0.5 × it does not.
+        assert_eq!(pick(1.0, 3.0), other);
+        assert_eq!(pick(1.0, 1.0), exact);
+        // spread 0 is `best_candidate`.
+        let b = best_candidate(&images, 0, &g, &cands, 1.0).unwrap();
+        assert_eq!([b.x, b.y], exact);
     }
 
     #[test]
