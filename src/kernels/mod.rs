@@ -16,6 +16,7 @@ pub mod jump_surface;
 pub mod lapped;
 pub mod max_flow;
 pub mod metrics;
+mod occupancy;
 pub mod orientation_field;
 pub mod plane_raster;
 pub mod relax_orientation;

@@ -54,6 +54,7 @@ use rayon::prelude::*;
 use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appearance_level_cached};
 use super::flatten::{TriangleAdjacency, mean_fan_triangle_area, template_spacing};
 use super::frames::TangentFrame;
+use super::occupancy::Occupancy;
 use super::wl_match::parents::TriangleBvh;
 use super::wl_match::schedule::{dependency_batches_of, random_order};
 use super::wl_match::{SynthesisLevel, WlError, validate_levels};
@@ -402,61 +403,15 @@ fn cost(
     e
 }
 
-/// How often the level's coordinates use each cell of the exemplar: the
-/// occurrence penalty (an extension, as the occurrence maps of Kaspar et al.
-/// 2015) makes a candidate in an over-used cell cost more, so the synthesis
-/// spreads over all of the exemplar's content instead of settling on its
-/// easiest-to-match parts.
-struct Occupancy {
-    cell: f32,
-    cols: u32,
-    rows: u32,
-    counts: Vec<u32>,
-    /// Mean count per cell.
-    expected: f32,
-}
-
-impl Occupancy {
-    fn new(coords: &[Vec2], domain: &Domain, cell: f32) -> Self {
-        let cell = cell.max(1.0);
-        let cols = ((domain.width / cell).ceil() as u32).max(1);
-        let rows = ((domain.height / cell).ceil() as u32).max(1);
-        let mut occ = Self {
-            cell,
-            cols,
-            rows,
-            counts: vec![0; (cols * rows) as usize],
-            expected: (coords.len() as f32 / (cols * rows) as f32).max(1e-6),
-        };
-        for &c in coords {
-            let i = occ.index(c);
-            occ.counts[i] += 1;
-        }
-        occ
+/// The level's uses of the exemplar's cells (`kernels::occupancy`): every
+/// coordinate once; an even share is the mean count per cell.
+fn occupancy(coords: &[Vec2], domain: &Domain, cell: f32) -> Occupancy {
+    let mut occ = Occupancy::new(domain.width, domain.height, cell);
+    occ.expected = (coords.len() as f32 / occ.cells() as f32).max(1e-6);
+    for &c in coords {
+        occ.add(c);
     }
-
-    #[inline]
-    fn index(&self, c: Vec2) -> usize {
-        let x = ((c.x / self.cell) as u32).min(self.cols - 1);
-        let y = ((c.y / self.cell) as u32).min(self.rows - 1);
-        (y * self.cols + x) as usize
-    }
-
-    fn moved(&mut self, from: Vec2, to: Vec2) {
-        let (a, b) = (self.index(from), self.index(to));
-        if a != b {
-            self.counts[a] -= 1;
-            self.counts[b] += 1;
-        }
-    }
-
-    /// Uses of `c`'s cell by the other vertices, relative to the mean.
-    #[inline]
-    fn load(&self, c: Vec2, here: Vec2) -> f32 {
-        let i = self.index(c);
-        let own = u32::from(i == self.index(here));
-        self.counts[i].saturating_sub(own) as f32 / self.expected
-    }
+    occ
 }
 
 /// What one batch of corrections reads besides the coordinates.
@@ -497,7 +452,7 @@ fn correct(v: u32, coords: &[Vec2], k: &Corrector) -> (Vec2, u8) {
         targets[i] = app.vectors[p as usize];
     }
     let targets = &targets[..ws.len()];
-    let penalty = |c: Vec2| weight * occ.load(c, here);
+    let penalty = |c: Vec2| weight * occ.share(c, Some(here));
     let mut best = (
         cost(app, domain, here, offsets, targets, f32::INFINITY) + penalty(here),
         here,
@@ -842,7 +797,7 @@ fn synthesis(
         report.energy.push(e0);
         report.mean_neighbours = mean_neighbours;
         let cell = (4.0 * ratio).min(w.min(h) as f32 / 2.0);
-        let mut occ = Occupancy::new(&coords, &domain, cell);
+        let mut occ = occupancy(&coords, &domain, cell);
         // Which vertices a pass visits. A synthesis: all, every pass. A
         // refinement (`start`), in its first pass: those in `mask`, or
         // without one, those whose neighbourhood does not already match
@@ -935,7 +890,7 @@ fn synthesis(
                                 }
                             }
                         }
-                        occ.moved(coords[v as usize], c);
+                        occ.moved(Some(coords[v as usize]), c);
                         coords[v as usize] = c;
                         picks[how as usize] += 1;
                     }

@@ -129,29 +129,22 @@ pub enum Candidates {
     Coherent,
 }
 
-/// How often the vertices' texels fall in each cell of the exemplar, for
+/// The vertices' uses of the exemplar's cells (`kernels::occupancy`), for
 /// the occurrence penalty of coherent candidates
-/// ([`GraphMatchSettings::spread`]; as in `kernels::coherent`, after the
-/// occurrence maps of Kaspar et al. 2015): without it, continued patches
-/// keep copying the part of the exemplar they started in, and a result can
+/// ([`GraphMatchSettings::spread`]): without it, continued patches keep
+/// copying the part of the exemplar they started in, and a result can
 /// settle on a quarter of it. Counts are taken at the start of a pass and
 /// updated after each parallel batch, so a batch reads one state whatever
-/// the thread count.
-struct Occupancy {
-    /// Cell side in level-0 texels.
-    cell: f32,
-    cols: u32,
-    rows: u32,
-    counts: Vec<u32>,
-    /// Mean count per cell.
-    expected: f32,
-}
+/// the thread count. Coordinates are level-0 texels; the penalty counts
+/// only use beyond an even share.
+struct Occupancy(crate::kernels::occupancy::Occupancy);
 
 impl Occupancy {
-    /// `texels_per_vertex`: the level's mean area per vertex in level-0
-    /// texels². A cell counts as evenly used at the larger of the mean count
-    /// and one copy of it (a result smaller than the exemplar need not use
-    /// all of it, and a patch copied once is not over-used).
+    /// Cells of side `cell` texels. `texels_per_vertex`: the level's mean
+    /// area per vertex in level-0 texels². A cell counts as evenly used at
+    /// the larger of the mean count and one copy of it (a result smaller
+    /// than the exemplar need not use all of it, and a patch copied once is
+    /// not over-used).
     fn new(
         state: &SynthesisState,
         images: &MatchImages,
@@ -159,52 +152,30 @@ impl Occupancy {
         texels_per_vertex: f32,
     ) -> Self {
         let img = images.image(0);
-        let cell = cell.max(1.0);
-        let cols = ((img.width as f32 / cell).ceil() as u32).max(1);
-        let rows = ((img.height as f32 / cell).ceil() as u32).max(1);
-        let mut occ = Self {
-            cell,
-            cols,
-            rows,
-            counts: vec![0; (cols * rows) as usize],
-            expected: 1.0,
-        };
+        let mut occ =
+            crate::kernels::occupancy::Occupancy::new(img.width as f32, img.height as f32, cell);
         let mut n = 0usize;
         for (t, &c) in state.texels.iter().zip(&state.coloured) {
             if c {
-                let i = occ.index(*t);
-                occ.counts[i] += 1;
+                occ.add(*t);
                 n += 1;
             }
         }
+        let cell = cell.max(1.0);
         let once = cell * cell / texels_per_vertex.max(f32::MIN_POSITIVE);
-        occ.expected = (n as f32 / occ.counts.len() as f32).max(once).max(1.0);
-        occ
-    }
-
-    #[inline]
-    fn index(&self, t: Vec2) -> usize {
-        let x = ((t.x.max(0.0) / self.cell) as u32).min(self.cols - 1);
-        let y = ((t.y.max(0.0) / self.cell) as u32).min(self.rows - 1);
-        (y * self.cols + x) as usize
+        occ.expected = (n as f32 / occ.cells() as f32).max(once).max(1.0);
+        Self(occ)
     }
 
     /// How far the uses of `t`'s cell by other vertices than the one at
     /// `here` exceed an even share, in even shares (0 up to one share).
     #[inline]
     fn load(&self, t: Vec2, here: Option<Vec2>) -> f32 {
-        let i = self.index(t);
-        let own = u32::from(here.is_some_and(|h| self.index(h) == i));
-        (self.counts[i].saturating_sub(own) as f32 / self.expected - 1.0).max(0.0)
+        (self.0.share(t, here) - 1.0).max(0.0)
     }
 
     fn moved(&mut self, from: Option<Vec2>, to: Vec2) {
-        if let Some(f) = from {
-            let i = self.index(f);
-            self.counts[i] = self.counts[i].saturating_sub(1);
-        }
-        let j = self.index(to);
-        self.counts[j] += 1;
+        self.0.moved(from, to);
     }
 }
 
@@ -973,7 +944,7 @@ mod tests {
         // One texel² per vertex: a copy of a cell is 64 vertices, more than
         // the mean count (4), so that is the even share.
         let mut occ = Occupancy::new(&state, &images, 8.0, 1.0);
-        assert_eq!(occ.expected, 64.0);
+        assert_eq!(occ.0.expected, 64.0);
         let (tl, other) = (Vec2::new(3.0, 3.0), Vec2::new(20.0, 20.0));
         assert_eq!(occ.load(tl, None), 0.0);
         assert_eq!(occ.load(other, None), 0.0);
@@ -991,7 +962,7 @@ mod tests {
         assert_eq!(occ.load(tl, None), 0.0);
         // Sparse vertices (16 texels² each): the mean count is the share.
         let occ = Occupancy::new(&state, &images, 8.0, 16.0);
-        assert_eq!(occ.expected, 4.0);
+        assert_eq!(occ.0.expected, 4.0);
         assert_eq!(occ.load(tl, None), 15.0);
     }
 }
