@@ -29,7 +29,8 @@
 //! chips and holes and are left out), and the per-vertex methods
 //! synthesise at the config's texture density whatever the scan. The step
 //! column is therefore the cost of one more vertex from the previous size
-//! to this one (10 k → 100 k, 100 k → 1 M): the measure of linearity.
+//! to this one (10 k → 100 k, 100 k → 1 M; "–" at the first size after the
+//! baseline and after a failed run): the measure of linearity.
 //! CPU seconds are the child's user + system time (`getrusage`), steadier
 //! than wall time on a shared machine; scans of at most 100 k vertices run
 //! `SURFSYNTH_SCALING_REPEATS` times (default 3) and the best is kept.
@@ -177,6 +178,8 @@ fn main() {
                 peak = peak.min(m["peak_rss_bytes"].as_f64().unwrap_or(f64::NAN));
             }
             if let Some(reason) = failed {
+                // The next size's step would span two intervals.
+                previous.remove(method);
                 println!(
                     "| {method} | {} | failed: {reason} | | | | | | | | |",
                     report.vertices
@@ -232,8 +235,14 @@ fn main() {
             // small scans, the synthesis at the config's texture density
             // for the per-vertex methods) cancels, so a linear method
             // shows the same figure at every step.
-            let step_cpu = match previous.insert(method, (v, cpu)) {
-                Some((pv, pcpu)) if v > pv => format!("{:.1}", (cpu - pcpu) / (v - pv) * 1e6),
+            // (Not from the baseline: that is the marginal column.)
+            let step_cpu = match baselines.get(method) {
+                Some(&(bv, _, _)) if bv < v => match previous.insert(method, (v, cpu)) {
+                    Some((pv, pcpu)) if v > pv => {
+                        format!("{:.1}", (cpu - pcpu) / (v - pv) * 1e6)
+                    }
+                    _ => "–".into(),
+                },
                 _ => "–".into(),
             };
             println!(

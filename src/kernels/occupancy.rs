@@ -29,7 +29,7 @@ impl Occupancy {
             cell,
             cols,
             rows,
-            counts: vec![0; (cols * rows) as usize],
+            counts: vec![0; cols as usize * rows as usize],
             expected: 1.0,
         }
     }
@@ -44,7 +44,7 @@ impl Occupancy {
     pub(crate) fn index(&self, c: Vec2) -> usize {
         let x = ((c.x / self.cell) as u32).min(self.cols - 1);
         let y = ((c.y / self.cell) as u32).min(self.rows - 1);
-        (y * self.cols + x) as usize
+        y as usize * self.cols as usize + x as usize
     }
 
     /// One more use at `c`.

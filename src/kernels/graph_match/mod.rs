@@ -88,8 +88,8 @@ pub struct GraphMatchSettings {
     /// shifts by this fraction of its sum (its sum is scaled by
     /// `1 + jump_cost`); ≥ 0.
     pub jump_cost: f32,
-    /// With coherent candidates: weight of the occurrence penalty
-    /// ([`Occupancy`]); a candidate in a part of the exemplar used `x > 1`
+    /// With coherent candidates: weight of the occurrence penalty (counts
+    /// per exemplar cell, `kernels::occupancy`); a candidate in a part of the exemplar used `x > 1`
     /// times an even share costs `spread · (x − 1)` times the mean of the
     /// candidates' sums more. 0 = off (the default). ≥ 0.
     pub spread: f32,
@@ -140,8 +140,9 @@ pub enum Candidates {
 struct Occupancy(crate::kernels::occupancy::Occupancy);
 
 impl Occupancy {
-    /// Cells of side `cell` texels. `texels_per_vertex`: the level's mean
-    /// area per vertex in level-0 texels². A cell counts as evenly used at
+    /// Cells of side `cell` level-0 texels. `texels_per_vertex`: about the
+    /// level's area per vertex in level-0 texels² (its mean edge squared).
+    /// A cell counts as evenly used at
     /// the larger of the mean count and one copy of it (a result smaller
     /// than the exemplar need not use all of it, and a patch copied once is
     /// not over-used).
@@ -405,7 +406,8 @@ thread_local! {
 /// other's colours, so they are matched in parallel batches of pairwise
 /// disjoint regions, formed as `rule` allows; regions are planned ahead in
 /// parallel. The result equals processing the (possibly permuted, see
-/// [`BatchRule`]) order one vertex at a time and does not depend on the
+/// [`BatchRule`]) order one vertex at a time — except the occurrence counts
+/// of `spread`, which advance once per batch — and does not depend on the
 /// thread count.
 ///
 /// Preconditions: `state` and `level` describe the same vertices; `images`
@@ -466,10 +468,14 @@ pub fn match_pass_with_progress(
                 })
                 .sum::<f64>()
                 / n.max(1) as f64;
+            // Half the region's side, in level-0 texels: the region is in
+            // texels of the level the level's typical vertex matches on.
+            let edge = level.mean_edge.iter().map(|&e| e as f64).sum::<f64>() / n.max(1) as f64;
+            let factor = images.level_factor(images.level_for(settings.r_scale * edge as f32));
             Occupancy::new(
                 state,
                 images,
-                settings.region_texels / 2.0,
+                settings.region_texels / 2.0 * factor,
                 texels_per_vertex as f32,
             )
         });

@@ -216,22 +216,26 @@ pub fn best_candidate_with(
         return None;
     }
     let w = images.planes(level).width as u32;
-    let sums: Vec<f32> = candidates
-        .iter()
-        .map(|&([x, y], _)| distance_at(images, groups, x as usize, y as usize))
-        .collect();
+    let sum = |[x, y]: [u32; 2]| distance_at(images, groups, x as usize, y as usize);
+    // The penalty's unit: the mean of the candidates' sums (0, and no
+    // second pass over the candidates, when off or not finite).
     let weight = if spread > 0.0 {
-        spread * sums.iter().sum::<f32>() / sums.len() as f32
+        let mean = candidates.iter().map(|&(c, _)| sum(c)).sum::<f32>() / candidates.len() as f32;
+        let weight = spread * mean;
+        if weight.is_finite() { weight } else { 0.0 }
     } else {
         0.0
     };
     candidates
         .iter()
-        .zip(&sums)
-        .map(|(&(c, jump), &d)| {
+        .map(|&(c, jump)| {
+            let d = sum(c);
             let mut cost = if jump { d * jump_factor } else { d };
             if weight > 0.0 {
-                cost += weight * load(c);
+                let l = load(c);
+                if l > 0.0 {
+                    cost += weight * l;
+                }
             }
             (cost, c[1] * w + c[0], d)
         })

@@ -632,10 +632,11 @@ struct CoarseRows {
 
 impl CoarseRows {
     fn new(nv: usize, dim: usize, (lo, hi): (f32, f32)) -> Self {
-        let (lo, hi) = if lo.is_finite() && hi.is_finite() && hi > lo {
-            (lo, hi)
-        } else {
-            (0.0, 1.0)
+        // A flat (or unknown) range still gets a step around its value.
+        let (lo, hi) = match (lo.is_finite(), hi.is_finite()) {
+            (true, true) if (hi - lo) / u16::MAX as f32 > 0.0 => (lo, hi),
+            (true, _) => (lo - 0.5, lo + 0.5),
+            _ => (0.0, 1.0),
         };
         Self {
             values: vec![0; nv * dim],
@@ -653,6 +654,7 @@ impl CoarseRows {
 
     /// Vertex `v`'s row, as values.
     fn row_into(&self, v: usize, out: &mut [f32]) {
+        debug_assert_eq!(out.len(), self.dim);
         let row = &self.values[v * self.dim..(v + 1) * self.dim];
         for (o, &q) in out.iter_mut().zip(row) {
             *o = self.lo + q as f32 * self.step;
