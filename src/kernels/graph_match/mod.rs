@@ -459,18 +459,15 @@ pub fn match_pass_with_progress(
     let mut next = 0usize;
     let mut occupancy = (settings.spread > 0.0 && settings.candidates == Candidates::Coherent)
         .then(|| {
-            let texels_per_vertex = level
-                .mean_edge
-                .iter()
-                .map(|&e| {
-                    let t = (settings.r_scale * e) as f64;
-                    t * t
-                })
-                .sum::<f64>()
-                / n.max(1) as f64;
+            // The level's mean edge and mean squared edge in texels, one pass.
+            let (edge, squared) = level.mean_edge.iter().fold((0.0f64, 0.0f64), |(a, b), &e| {
+                let t = (settings.r_scale * e) as f64;
+                (a + e as f64, b + t * t)
+            });
+            let texels_per_vertex = squared / n.max(1) as f64;
+            let edge = edge / n.max(1) as f64;
             // Half the region's side, in level-0 texels: the region is in
             // texels of the level the level's typical vertex matches on.
-            let edge = level.mean_edge.iter().map(|&e| e as f64).sum::<f64>() / n.max(1) as f64;
             let factor = images.level_factor(images.level_for(settings.r_scale * edge as f32));
             Occupancy::new(
                 state,
@@ -745,11 +742,7 @@ fn match_vertex(
             &groups,
             &coherent,
             1.0 + settings.jump_cost,
-            if occupancy.is_some() {
-                settings.spread
-            } else {
-                0.0
-            },
+            occupancy.map_or(0.0, |_| settings.spread),
             |c| {
                 occupancy.map_or(0.0, |o| {
                     o.load(

@@ -426,13 +426,20 @@ mod tests {
         (samples, colours)
     }
 
-    #[test]
-    fn best_candidate_prefers_shifts_by_the_jump_factor() {
+    /// A repeating 40 × 30 noise exemplar and the groups of its own 3 × 3
+    /// window at (17, 9) (sum 0 there).
+    fn window_at_17_9() -> (MatchImages, MatchGroups) {
         let img = noise(40, 30, 3, 3);
         let images = MatchImages::new(&img, ImageLevels::Stack, 1, Wrap::Repeat);
         let (samples, colours) = window(&img, &images, [17, 9], 1, Wrap::Repeat, |_, _| 1);
         let mut g = MatchGroups::new();
         g.build(&samples, &colours, 3, true);
+        (images, g)
+    }
+
+    #[test]
+    fn best_candidate_prefers_shifts_by_the_jump_factor() {
+        let (images, g) = window_at_17_9();
         let exact = best_match(&images, 0, &g, &[], false).unwrap();
         assert_eq!((exact.x, exact.y), (17, 9));
         let other = [3u32, 4];
@@ -470,11 +477,7 @@ mod tests {
 
     #[test]
     fn an_over_used_candidate_loses_by_the_occurrence_penalty() {
-        let img = noise(40, 30, 3, 3);
-        let images = MatchImages::new(&img, ImageLevels::Stack, 1, Wrap::Repeat);
-        let (samples, colours) = window(&img, &images, [17, 9], 1, Wrap::Repeat, |_, _| 1);
-        let mut g = MatchGroups::new();
-        g.build(&samples, &colours, 3, true);
+        let (images, g) = window_at_17_9();
         let (exact, other) = ([17u32, 9u32], [3u32, 4u32]);
         let cands = [(exact, false), (other, false)];
         let pick = |spread: f32, load_exact: f32| {

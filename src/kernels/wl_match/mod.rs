@@ -387,12 +387,15 @@ pub fn wei_levoy_synthesis_with_progress(
             matches
                 .par_chunks_mut(PASS1_CHUNK)
                 .enumerate()
-                .for_each(|(c, out)| {
-                    let mut q = vec![0.0f32; out.len() * coarse_dim];
+                .for_each_init(Vec::new, |q, (c, out)| {
+                    // This chunk's rows, back as values, in a buffer each
+                    // worker reuses.
+                    q.clear();
+                    q.resize(out.len() * coarse_dim, 0.0f32);
                     for (i, row) in q.chunks_exact_mut(coarse_dim).enumerate() {
                         coarse.row_into(c * PASS1_CHUNK + i, row);
                     }
-                    search.search(&q, out);
+                    search.search(q, out);
                     progress.inc(out.len() as u64);
                 });
             report.search_seconds += started.elapsed().as_secs_f64();
