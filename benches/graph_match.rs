@@ -12,7 +12,7 @@
 //!
 //! Run with `cargo bench --bench graph_match`; keep a baseline with
 //! `cargo bench --bench graph_match -- --save-baseline main` and compare a
-//! change with `-- --baseline main`. Needs `../shared/data/textures/water.png`
+//! change with `-- --baseline main`. Needs `data/textures/water.png`
 //! (falls back to the builtin `noise` exemplar when it is missing).
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
@@ -42,7 +42,7 @@ fn quad_grid(n: usize, edge: f32) -> PolyMesh {
 
 fn exemplar() -> Image {
     let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/textures/water.png");
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/water.png");
     surfsynth::image::load_image(&path).unwrap_or_else(|_| {
         surfsynth::image::builtin_exemplar("noise", &Default::default()).expect("builtin exemplar")
     })

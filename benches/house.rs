@@ -11,15 +11,15 @@ use surfsynth::mesh::{LoadOptions, load_mesh};
 use surfsynth::output::render::{RenderOptions, Shading, render_views};
 use surfsynth::pipeline::{Pipeline, RunOptions, run};
 
-fn shared(rel: &str) -> std::path::PathBuf {
+fn data_file(rel: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
+        .join("data")
         .join(rel)
 }
 
 fn house(c: &mut Criterion) {
     surfsynth::progress::set_enabled(false);
-    let fandisk = shared("meshes/fandisk.off");
+    let fandisk = data_file("meshes/fandisk.off");
     c.bench_function("load/fandisk_6k5", |b| {
         b.iter(|| load_mesh(&fandisk, &LoadOptions::default()).unwrap())
     });

@@ -18,7 +18,7 @@ use surfsynth::mesh::Topology;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 
 fn stones() -> surfsynth::image::Image {
-    load_image(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/textures/stones.png"))
+    load_image(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/stones.png"))
         .expect("shared stones texture")
 }
 

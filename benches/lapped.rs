@@ -30,9 +30,9 @@ use surfsynth::progress::Progress;
 
 fn bunny() -> PolyMesh {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/meshes/bunny_1k8.obj");
+        .join("data/meshes/bunny_1k8.obj");
     surfsynth::mesh::load_mesh(&path, &Default::default())
-        .expect("../shared/data/meshes/bunny_1k8.obj")
+        .expect("data/meshes/bunny_1k8.obj")
         .0
 }
 

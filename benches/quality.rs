@@ -18,9 +18,9 @@
 //!
 //! Environment knobs:
 //! - `QUALITY_TEXTURE_DIR=FOLDER`: where the textures are (every `*.png`
-//!   there); default `../shared/data/textures/`.
+//!   there); default `data/textures/`.
 //! - `QUALITY_TEXTURES=stones,water`: textures to run, by file stem; default
-//!   every `*.png` in `../shared/data/textures/` (listed at run time, so a new
+//!   every `*.png` in `data/textures/` (listed at run time, so a new
 //!   texture is picked up).
 //! - `QUALITY_METHODS=peer,jump_pixel,...`: methods to run; default the peer
 //!   and every method of `configs/plane/` below ([`METHODS`]).
@@ -163,7 +163,7 @@ fn knobs(manifest: &Path) -> Result<Knobs, String> {
     // project never tuned on); default the shared photos.
     let dir = std::env::var_os("QUALITY_TEXTURE_DIR")
         .map(PathBuf::from)
-        .unwrap_or_else(|| manifest.join("../shared/data/textures"));
+        .unwrap_or_else(|| manifest.join("data/textures"));
     let mut all: Vec<(String, PathBuf)> = std::fs::read_dir(&dir)
         .map_err(|e| format!("cannot list {}: {e}", dir.display()))?
         .flatten()

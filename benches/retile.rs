@@ -5,7 +5,7 @@
 //!
 //! Workflow: `cargo bench --bench retile -- --save-baseline main` on the
 //! base commit, then `cargo bench --bench retile -- --baseline main` on the
-//! change to compare. The bunny cases are skipped when `../shared/data` is
+//! change to compare. The bunny cases are skipped when `data` is
 //! missing.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
@@ -22,7 +22,7 @@ fn inputs() -> Vec<(&'static str, PolyMesh)> {
         "icosphere",
         builtin_mesh("icosphere", &BuiltinOptions::default()).expect("builtin icosphere"),
     )];
-    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/meshes/bunny_1k8.obj");
+    let bunny = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes/bunny_1k8.obj");
     if let Ok((mesh, _)) = load_mesh(&bunny, &LoadOptions::default()) {
         out.push(("bunny", mesh));
     }

@@ -53,7 +53,7 @@ use surfsynth::mesh::{PolyMesh, Topology};
 /// builtin bricks when the shared data is not beside the clone.
 fn exemplar() -> Image {
     let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/textures/stones.png");
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/stones.png");
     match load_image(&path) {
         Ok(img) => {
             let mut out = Image::new(64, 64, img.channels);

@@ -25,7 +25,7 @@ use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::world::*;
 
 fn load(name: &str) -> PolyMesh {
-    load_mesh(&shared(&format!("meshes/{name}")), &LoadOptions::default())
+    load_mesh(&data_file(&format!("meshes/{name}")), &LoadOptions::default())
         .unwrap_or_else(|e| panic!("{name}: {e}"))
         .0
 }
@@ -386,8 +386,8 @@ fn a_normal_map_follows_the_synthesis_frame_rotation() {
 #[test]
 fn bake_runs_on_meshes_with_boundaries_and_several_components() {
     for (mesh, min_charts) in [
-        ("../shared/data/meshes/teapot_open.obj", 2),
-        ("../shared/data/meshes/mushroom.off", 2),
+        ("data/meshes/teapot_open.obj", 2),
+        ("data/meshes/mushroom.off", 2),
     ] {
         let world = run(&jump_bake(mesh, 512, r#""glb", "baked_obj""#))
             .unwrap_or_else(|e| panic!("{mesh}: {e}"));
@@ -410,7 +410,7 @@ fn bake_of_vertex_colours_on_a_retiled_mesh_and_of_lapped_pastes() {
     let text = r#"
 seed = 5
 [input]
-mesh = "../shared/data/meshes/eight.off"
+mesh = "data/meshes/eight.off"
 exemplar = "builtin:stripes"
 [[stage]]
 kind = "retile"
@@ -458,7 +458,7 @@ formats = ["glb"]
     let text = r#"
 seed = 4
 [input]
-mesh = "../shared/data/meshes/eight.off"
+mesh = "data/meshes/eight.off"
 exemplar = "builtin:noise"
 [[stage]]
 kind = "tangent_field"
@@ -596,7 +596,7 @@ v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[3])))
 fn glb_passes_the_khronos_validator_and_rereads_with_gltf() {
     // With material channels: the normal and roughness maps become the
     // material's normalTexture and metallicRoughnessTexture.
-    let text = jump_bake("../shared/data/meshes/bunny_1k8.obj", 256, r#""glb", "baked_obj""#)
+    let text = jump_bake("data/meshes/bunny_1k8.obj", 256, r#""glb", "baked_obj""#)
         .replace(
             "exemplar = \"builtin:bricks\"",
             "exemplar = \"builtin:bricks\"\nheight_map = \"derive:builtin\"\nnormal_map = \"derive:height\"\nroughness_map = \"derive:luminance\"",
@@ -756,7 +756,7 @@ fn exemplar_maps_follow_lapped_pastes() {
     let text = r#"
 seed = 9
 [input]
-mesh = "../shared/data/meshes/eight.off"
+mesh = "data/meshes/eight.off"
 exemplar = "builtin:bricks"
 height_map = "derive:luminance"
 [[stage]]

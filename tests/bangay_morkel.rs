@@ -409,7 +409,7 @@ fn plane_image(mesh: &PolyMesh, st: &SynthesisState) -> Image {
 fn gate_plane(textures: &[&str]) {
     let mut results = Vec::new();
     for &name in textures {
-        let full = surfsynth::image::load_image(&common::shared(&format!("textures/{name}.png")))
+        let full = surfsynth::image::load_image(&common::data_file(&format!("textures/{name}.png")))
             .unwrap_or_else(|e| panic!("shared texture {name}: {e}"));
         let ex = common::gates::to_rgb(&common::gates::crop(&full, 32, 32, 64, 64));
         let peer = common::gates::peer_quality(&ex, GATE_SIDE, GATE_SIDE);
@@ -1093,7 +1093,7 @@ fn graph_cut_colours_more_than_the_target_even_when_k_min_is_one() {
 /// the run's `metrics.json`.
 fn bm_plane(texture: &str, seed: u64, extra: &str) -> (Image, Image, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
-    let path = common::shared(&format!("textures/{texture}.png"));
+    let path = common::data_file(&format!("textures/{texture}.png"));
     let config = format!(
         r#"seed = {seed}
 [input]

@@ -56,7 +56,7 @@ fn synthesise(
 }
 
 fn texture(name: &str) -> Image {
-    load_image(&common::shared(&format!("textures/{name}.png")))
+    load_image(&common::data_file(&format!("textures/{name}.png")))
         .unwrap_or_else(|e| panic!("shared texture {name}: {e}"))
 }
 
@@ -171,7 +171,7 @@ up = [0.0, 1.0, 0.0]
 [[stage]]
 kind = "coherent"
 "#,
-        common::shared("textures/brick.png").display()
+        common::data_file("textures/brick.png").display()
     );
     let mut source = ConfigSource::from_text("coherent.toml", &text);
     source.base_dir = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -384,7 +384,7 @@ fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
 fn refining_a_jump_map_result_lowers_its_errors() {
     let tmp = tempfile::tempdir().expect("a temporary folder");
     let quality = |config: &str, texture: &str, extra: &[&str]| {
-        let exemplar = common::shared(&format!("textures/{texture}.png"));
+        let exemplar = common::data_file(&format!("textures/{texture}.png"));
         let set = format!("input.exemplar={}", exemplar.display());
         let mut args = vec![
             "--set",

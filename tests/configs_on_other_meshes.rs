@@ -206,7 +206,7 @@ fn quick_configs_run_on_the_mushroom_within_bounds() {
     .iter()
     .map(|c| root.join(c))
     .collect();
-    check_all(&configs, &[common::shared("meshes/mushroom.off")]);
+    check_all(&configs, &[common::data_file("meshes/mushroom.off")]);
 }
 
 #[test]
@@ -225,8 +225,8 @@ fn every_shipped_config_runs_on_the_knot_and_the_mushroom_within_bounds() {
     check_all(
         &configs,
         &[
-            common::shared("meshes/knot.off"),
-            common::shared("meshes/mushroom.off"),
+            common::data_file("meshes/knot.off"),
+            common::data_file("meshes/mushroom.off"),
         ],
     );
 }

@@ -1,5 +1,5 @@
 //! Integration tests of exemplar loading and of the texture metrics on the
-//! shared texture photographs (`../shared/data/textures`).
+//! shared texture photographs (`data/textures`).
 
 use std::path::PathBuf;
 
@@ -20,7 +20,7 @@ use surfsynth::mesh::{PolyMesh, Topology};
 const TEXTURES: [&str; 5] = ["stones", "brick", "water", "planks", "grass"];
 
 fn data_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("data")
 }
 
 fn texture(name: &str) -> Image {

@@ -26,7 +26,7 @@ const TEXTURES: [&str; 5] = [
 
 fn texture_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/textures")
+        .join("data/textures")
         .join(name)
 }
 

@@ -38,8 +38,8 @@ order = "{order}"
 
 #[test]
 fn corner_uvs_stay_inside_an_inset_exemplar() {
-    let bunny = shared("meshes/bunny_1k8.obj");
-    let stones = shared("textures/stones.png");
+    let bunny = data_file("meshes/bunny_1k8.obj");
+    let stones = data_file("textures/stones.png");
     for order in ["emerging_front", "breadth_first", "random"] {
         let mut w = world_for(&config(
             bunny.to_str().unwrap(),
@@ -106,7 +106,7 @@ fn tileable_exemplar_wraps_and_no_vertex_needs_random_placement_but_the_start() 
 fn planar_surface_result_looks_like_the_peers() {
     use surfsynth::kernels::frames::TangentFrame;
     use surfsynth::kernels::metrics::SurfaceSignal;
-    let stones = shared("textures/stones.png");
+    let stones = data_file("textures/stones.png");
     let text = config(
         "builtin:plane",
         stones.to_str().unwrap(),
@@ -140,8 +140,8 @@ fn identical_outputs_at_one_and_two_threads() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("c.toml");
     let text = config(
-        shared("meshes/bunny_1k8.obj").to_str().unwrap(),
-        shared("textures/planks.png").to_str().unwrap(),
+        data_file("meshes/bunny_1k8.obj").to_str().unwrap(),
+        data_file("textures/planks.png").to_str().unwrap(),
         "clamp",
         40.0,
         "emerging_front",
@@ -255,7 +255,7 @@ fn jump_image_writes_three_images_and_looks_like_the_peers() {
     let cfg = dir.path().join("c.toml");
     let text = format!(
         "seed = 1\n[input]\nexemplar = \"{}\"\nexemplar_wrap = \"clamp\"\n\n[[stage]]\nkind = \"jump_map\"\ncache = false\n[[stage]]\nkind = \"jump_image\"\nwidth = 160\nheight = 96\n",
-        shared("textures/water.png").display()
+        data_file("textures/water.png").display()
     );
     std::fs::write(&cfg, text).unwrap();
     let out = dir.path().join("o");
@@ -274,7 +274,7 @@ fn jump_image_writes_three_images_and_looks_like_the_peers() {
     // The written image and its exact source map (16-bit: red = x / (w − 1),
     // green = y / (h − 1) of the exemplar pixel) against the peer's 160×96
     // synthesis of the same exemplar.
-    let ex = surfsynth::image::load_image(&shared("textures/water.png")).unwrap();
+    let ex = surfsynth::image::load_image(&data_file("textures/water.png")).unwrap();
     let img = img.to_rgb32f();
     let img =
         surfsynth::image::Image::from_data(img.width(), img.height(), 3, img.into_raw()).unwrap();

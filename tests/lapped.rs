@@ -38,7 +38,7 @@ const SHARED_CLOSED: [&str; 5] = [
 ];
 
 fn load(name: &str) -> PolyMesh {
-    load_mesh(&shared(&format!("meshes/{name}")), &LoadOptions::default())
+    load_mesh(&data_file(&format!("meshes/{name}")), &LoadOptions::default())
         .unwrap_or_else(|e| panic!("{name}: {e}"))
         .0
 }
@@ -369,7 +369,7 @@ fn atlas_charts_do_not_overlap() {
 const PIPELINE: &str = r#"
 seed = 4
 [input]
-mesh = "../shared/data/meshes/eight.off"
+mesh = "data/meshes/eight.off"
 exemplar = "builtin:noise"
 
 [[stage]]
@@ -579,8 +579,8 @@ fn a_user_mask_cuts_the_patch_along_it() {
         r#"
 seed = 5
 [input]
-mesh = "../shared/data/meshes/eight.off"
-exemplar = "../shared/data/textures/brick.png"
+mesh = "data/meshes/eight.off"
+exemplar = "data/textures/brick.png"
 
 [[stage]]
 kind = "tangent_field"
@@ -708,8 +708,8 @@ fn lapped_result_reports_its_pastes_and_quality() {
         r#"
 seed = 3
 [input]
-mesh = "../shared/data/meshes/bunny_1k8.obj"
-exemplar = "../shared/data/textures/planks.png"
+mesh = "data/meshes/bunny_1k8.obj"
+exemplar = "data/textures/planks.png"
 
 [[stage]]
 kind = "tangent_field"
@@ -792,7 +792,7 @@ metric_samples = 200
 /// resampled at one exemplar pixel per pixel around the centre, a 127² image
 /// the pastes cover wholly, and the crop.
 fn lapped_plane_image() -> (Image, Image) {
-    let full = load_image(&shared("textures/planks.png")).unwrap();
+    let full = load_image(&data_file("textures/planks.png")).unwrap();
     let crop = gates::to_rgb(&gates::crop(&full, 32, 32, 64, 64));
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("planks_64.png");
@@ -1169,7 +1169,7 @@ fn pastes_per_face_do_not_grow_with_scan_density() {
 seed = 3
 [input]
 mesh = "{}"
-exemplar = "../shared/data/textures/planks.png"
+exemplar = "data/textures/planks.png"
 texture_scale = 0.2
 
 [[stage]]
@@ -1232,8 +1232,8 @@ formats = ["pastes"]
 [[stage]]
 kind = "lapped_paste"
 "#,
-        common::shared("meshes/bunny_1k8.obj").display(),
-        common::shared("textures/stones.png").display()
+        common::data_file("meshes/bunny_1k8.obj").display(),
+        common::data_file("textures/stones.png").display()
     );
     std::fs::write(&config, text).unwrap();
     let (code, _, stderr) = common::run_cli(&[

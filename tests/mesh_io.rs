@@ -1,5 +1,5 @@
 //! Integration tests of mesh loading, repairs, statistics, builtins and mesh
-//! writers, on the shared mesh set in `../shared/data/meshes` and on bad
+//! writers, on the shared mesh set in `data/meshes` and on bad
 //! inputs made in a temporary folder.
 
 use glam::{Vec2, Vec3};
@@ -9,7 +9,7 @@ use surfsynth::mesh::io::{MeshFormat, load_mesh_from_bytes};
 use surfsynth::mesh::{LoadOptions, LoadReport, MeshError, MeshInfo, PolyMesh, load_mesh};
 use surfsynth::output::{obj::write_obj, ply::write_ply};
 
-/// `(file, vertices, faces)` as listed in `../shared/data/README.md`.
+/// `(file, vertices, faces)` as listed in `data/README.md`.
 const SHARED: &[(&str, usize, usize)] = &[
     ("bunny_1k8.obj", 1839, 3674),
     ("knot.off", 3200, 6400),
@@ -21,7 +21,7 @@ const SHARED: &[(&str, usize, usize)] = &[
 ];
 
 fn data_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/meshes")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes")
 }
 
 fn load_shared(name: &str) -> (PolyMesh, LoadReport) {

@@ -3,12 +3,12 @@
 
 mod common;
 use common::peer::peer_synthesis;
-use common::shared;
+use common::data_file;
 use surfsynth::image::{Image, load_image};
 
 /// The top-left `side`² block of a shared texture (small, so the test is fast).
 fn exemplar(name: &str, side: u32) -> Image {
-    let full = load_image(&shared(&format!("textures/{name}.png"))).expect("shared texture");
+    let full = load_image(&data_file(&format!("textures/{name}.png"))).expect("shared texture");
     let c = full.channels as usize;
     let mut data = Vec::with_capacity((side * side) as usize * c);
     for y in 0..side {

@@ -75,7 +75,7 @@ const METHODS: [&str; 10] = [
 /// Runs `configs/plane/METHOD.toml` small on stones into `out`; returns the folder.
 fn run_small(method: &str, out: &Path, extra: &[&str]) -> PathBuf {
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/plane/{method}.toml"));
-    let exemplar = format!("input.exemplar={}", shared(STONES).display());
+    let exemplar = format!("input.exemplar={}", data_file(STONES).display());
     let mut args: Vec<String> = vec![
         "run".into(),
         config.display().to_string(),
@@ -116,7 +116,7 @@ fn read_outputs(
 /// is within `tol` (of 255, every channel) of the plane pixel; and the
 /// fraction of pixels with a known source.
 fn agreement(dir: &Path, tol: u8) -> (f64, f64) {
-    let exemplar = image::open(shared(STONES)).unwrap().to_rgb8();
+    let exemplar = image::open(data_file(STONES)).unwrap().to_rgb8();
     let (plane, sources) = read_outputs(dir);
     let (mut known, mut close) = (0usize, 0usize);
     for (p, s) in plane.pixels().zip(sources.pixels()) {
@@ -312,7 +312,7 @@ fn plane_on_a_non_planar_mesh_is_refused_before_the_run_naming_the_mesh() {
     let dir = tempfile::tempdir().unwrap();
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/jump_surface.toml");
     let out = dir.path().join("out");
-    let exemplar = format!("input.exemplar={}", shared(STONES).display());
+    let exemplar = format!("input.exemplar={}", data_file(STONES).display());
     let (code, _, stderr) = run_cli(&[
         "run",
         config.to_str().unwrap(),
@@ -379,7 +379,7 @@ const SHARED_TEXTURES: [&str; 5] = ["brick", "grass", "planks", "stones", "water
 fn run_at_benchmark_size(method: &str, texture: &str, dir: &Path, sets: &[&str]) -> PathBuf {
     let config = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/plane/{method}.toml"));
     let out = dir.join(texture);
-    let exemplar = shared(&format!("textures/{texture}.png"));
+    let exemplar = data_file(&format!("textures/{texture}.png"));
     let input = format!("input.exemplar={}", exemplar.display());
     let mut args = vec![
         "run",
@@ -597,7 +597,7 @@ fn variant_beside(
     dir: &Path,
 ) -> surfsynth::kernels::metrics::ImageQuality {
     let out = run_at_benchmark_size(method, texture, dir, sets);
-    let ex = surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
+    let ex = surfsynth::image::load_image(&data_file(&format!("textures/{texture}.png"))).unwrap();
     let (img, sources) = common::gates::plane_result(&out);
     let variant = common::gates::quality_of(&img, Some(&sources), &ex);
     println!(
@@ -628,7 +628,7 @@ fn planar_results_without_large_repeats(
     for texture in SHARED_TEXTURES {
         let out = run_at_benchmark_size(method, texture, dir.path(), &[]);
         let exemplar =
-            surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
+            surfsynth::image::load_image(&data_file(&format!("textures/{texture}.png"))).unwrap();
         let (img, sources) = common::gates::plane_result(&out);
         let ours = common::gates::quality_of(&img, Some(&sources), &exemplar);
         let verbatim = ours
@@ -685,7 +685,7 @@ fn bangay_morkel_defaults_are_no_worse_than_wei_levoy_on_every_measure() {
     let mut failures = Vec::new();
     for texture in SHARED_TEXTURES {
         let exemplar =
-            surfsynth::image::load_image(&shared(&format!("textures/{texture}.png"))).unwrap();
+            surfsynth::image::load_image(&data_file(&format!("textures/{texture}.png"))).unwrap();
         let measure = |method: &str| {
             let out = run_at_benchmark_size(method, texture, &dir.path().join(method), &[]);
             let (img, sources) = common::gates::plane_result(&out);

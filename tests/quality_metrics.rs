@@ -20,7 +20,7 @@ use surfsynth::kernels::metrics::{EnergySettings, ImageQuality, SourceMap, image
 
 /// The shared textures, found by listing the folder (new ones join in).
 fn shared_textures() -> Vec<(String, Image)> {
-    let dir = common::shared("textures");
+    let dir = common::data_file("textures");
     let mut names: Vec<_> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
         .flatten()

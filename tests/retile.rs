@@ -12,7 +12,7 @@ use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{LoadOptions, MeshInfo, PolyMesh, Topology, load_mesh};
 
 fn shared_mesh(file: &str) -> PolyMesh {
-    let path = common::shared(&format!("meshes/{file}"));
+    let path = common::data_file(&format!("meshes/{file}"));
     load_mesh(&path, &LoadOptions::default())
         .unwrap_or_else(|e| panic!("loading {}: {e}", path.display()))
         .0

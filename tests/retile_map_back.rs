@@ -141,7 +141,7 @@ fn smooth_colours_come_back_on_the_original_torus() {
 #[test]
 fn smooth_colours_come_back_on_a_mesh_with_a_boundary_and_two_components() {
     // The shared mushroom (open, one boundary loop) and a torus beside it.
-    let path = common::shared("meshes/mushroom.off");
+    let path = common::data_file("meshes/mushroom.off");
     let mushroom = load_mesh(&path, &LoadOptions::default())
         .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
         .0;

@@ -12,7 +12,7 @@ use surfsynth::stages::world::*;
 fn retile_stage_spawns_a_pyramid_and_activates_the_finest_level() {
     let text = format!(
         "seed = 1\n[input]\nmesh = \"{}\"\nexemplar = \"builtin:noise\"\n\n[[stage]]\nkind = \"retile\"\nvertices = 4000\nlevels = 3\n",
-        shared("meshes/bunny_1k8.obj").display()
+        data_file("meshes/bunny_1k8.obj").display()
     );
     let p = Pipeline::from_source(ConfigSource::from_text("t.toml", &text)).unwrap();
     let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();

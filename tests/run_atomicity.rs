@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{bin, files_under, run_cli, shared};
+use common::{bin, files_under, run_cli, data_file};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
@@ -274,7 +274,7 @@ fn start_slow_run(out: &Path) -> Child {
         .arg("--set")
         .arg(format!(
             "input.exemplar={}",
-            shared("textures/stones.png").display()
+            data_file("textures/stones.png").display()
         ))
         .env("RUST_LOG", "warn")
         .env(
@@ -433,7 +433,7 @@ fn sweep_run_folders_stay_complete_and_a_timed_out_run_leaves_no_temporary() {
 
     // A run killed on its timeout after it began writing.
     let slow = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/wei_levoy.toml");
-    let exemplar = format!("input.exemplar={}", shared("textures/stones.png").display());
+    let exemplar = format!("input.exemplar={}", data_file("textures/stones.png").display());
     let out = dir.path().join("slow");
     let (code, _, stderr) = run_cli(&[
         "sweep",

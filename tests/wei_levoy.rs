@@ -53,7 +53,7 @@ fn pyramid(
 
 /// The top-left `size`² crop of a shared texture.
 fn texture_crop(name: &str, size: u32) -> Image {
-    let img = load_image(&common::shared(&format!("textures/{name}.png")))
+    let img = load_image(&common::data_file(&format!("textures/{name}.png")))
         .unwrap_or_else(|e| panic!("shared texture {name}: {e}"));
     let mut out = Image::new(size, size, img.channels);
     for y in 0..size {

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Makes brick_patch.png: a texture-patch mask for ../shared/data/textures/brick.png
+"""Makes brick_patch.png: a texture-patch mask for data/textures/brick.png
 whose outline follows the grout (Praun et al. 2000 §3.1: "the texture patch
 boundaries should ... follow the grout"): whole bricks around the centre, cut
 along the vertical mortar lines and, per column of bricks, along the
@@ -39,7 +39,7 @@ def write_png_grey(path, w, h, rows):
 # Builds a texture-patch mask for brick.png whose outline follows the grout
 # (Praun et al. 2000 §3.1): whole bricks around the centre, cut along the
 # vertical and horizontal mortar lines.
-w,h,ch,rows = read_png(os.path.join(HERE, '../../../shared/data/textures/brick.png'))
+w,h,ch,rows = read_png(os.path.join(HERE, '../../data/textures/brick.png'))
 L = [[sum(r[x*ch:x*ch+3])/3.0 for x in range(w)] for r in rows]
 # Vertical grout: columns whose mean brightness is a local maximum well above the rest.
 col = [sum(L[y][x] for y in range(h))/h for x in range(w)]

@@ -469,7 +469,7 @@ kind = "init_colours"
         src.apply_overrides(&[
             "stage.1.mode=random".into(),
             "seed=3".into(),
-            "input.mesh=../shared/data/meshes/knot.off".into(),
+            "input.mesh=data/meshes/knot.off".into(),
             "input.mesh_options.subdivisions=2".into(),
         ])
         .unwrap();
@@ -477,7 +477,7 @@ kind = "init_colours"
         assert_eq!(raw.seed, 3);
         assert_eq!(
             raw.input.mesh.as_deref(),
-            Some("../shared/data/meshes/knot.off")
+            Some("data/meshes/knot.off")
         );
         assert_eq!(raw.input.mesh_options["subdivisions"].as_integer(), Some(2));
         let mode = raw.stage[0]

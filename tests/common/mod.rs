@@ -13,10 +13,12 @@ pub fn bin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_surfsynth"))
 }
 
-/// Path of a shared data file (`../shared/data/...`, as CI lays it out).
-pub fn shared(rel: &str) -> PathBuf {
+/// Path of a test data file under the repository's `data/` folder
+/// (`data/meshes/...`, `data/textures/...`; sources and licences in
+/// `data/README.md`).
+pub fn data_file(rel: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
+        .join("data")
         .join(rel)
 }
 

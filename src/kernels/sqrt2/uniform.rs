@@ -58,7 +58,7 @@ pub fn sqrt2_subdivide(mesh: &PolyMesh) -> Subdivided {
 /// of 4-8 subdivision (Velho & Zorin 2001), which Li et al. extend, and the C⁴
 /// regular behaviour Li et al. report. Li et al. also give valence-dependent
 /// weights at extraordinary vertices; that table is not reproduced here (the
-/// paper is not in `../shared/papers`), so `α = 1/2` is used at every valence:
+/// paper is not among the four this project reproduces), so `α = 1/2` is used at every valence:
 /// the surface near extraordinary vertices differs from theirs, but planes stay
 /// planes and a regular grid stays regular. Vertices on a boundary or
 /// non-manifold edge, and isolated vertices, keep their position: √2 never
