@@ -25,9 +25,12 @@ use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::world::*;
 
 fn load(name: &str) -> PolyMesh {
-    load_mesh(&data_file(&format!("meshes/{name}")), &LoadOptions::default())
-        .unwrap_or_else(|e| panic!("{name}: {e}"))
-        .0
+    load_mesh(
+        &data_file(&format!("meshes/{name}")),
+        &LoadOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    .0
 }
 
 fn triangles(mesh: &PolyMesh) -> Vec<[u32; 3]> {
@@ -499,7 +502,7 @@ kind = "export"
 formats = ["glb"]
 "#;
     let e = run(text).expect_err("glb without bake fails");
-    assert!(e.contains("add a `bake` stage"), "{e}");
+    assert!(e.contains("add `bake` before it"), "{e}");
     let text = r#"
 [input]
 mesh = "builtin:icosphere"

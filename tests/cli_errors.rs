@@ -148,6 +148,58 @@ fn missing_stage_input_says_what_to_add() {
     );
 }
 
+/// Issue 39: every export format's input is checked with the config, so a
+/// format that cannot be written is refused (exit 2, naming the stage to
+/// add, no output folder) before the synthesis runs, not after it. The
+/// jump map of a 512² exemplar before the export would take seconds; the
+/// refusal names the config line, which only validation knows.
+#[test]
+fn export_formats_that_cannot_be_written_are_refused_up_front() {
+    let pipeline = |formats: &str| {
+        format!(
+            "seed = 1\n[input]\nmesh = \"builtin:icosphere\"\nexemplar = \"builtin:noise\"\n\
+             [input.exemplar_options]\nsize = 512\n\n\
+             [[stage]]\nkind = \"orientation\"\n\n\
+             [[stage]]\nkind = \"jump_map\"\ncache = false\n\n\
+             [[stage]]\nkind = \"jump_surface\"\n\n\
+             [[stage]]\nkind = \"export\"\nformats = {formats}\n"
+        )
+    };
+    for (formats, needles) in [
+        (
+            r#"["obj", "glb"]"#,
+            &[
+                "bad.toml:19:",
+                "stage 4 (export)",
+                "`bake` stage's atlas",
+                "add `bake` before it",
+            ][..],
+        ),
+        (
+            r#"["baked_obj"]"#,
+            &["stage 4 (export)", "add `bake` before it"][..],
+        ),
+        (
+            r#"["pastes"]"#,
+            &[
+                "stage 4 (export)",
+                "lapped-texture pastes",
+                "add `lapped_paste` before it",
+            ][..],
+        ),
+    ] {
+        common::expect_refused(&pipeline(formats), &[], needles);
+    }
+    // `baked` needs per-corner texture coordinates: a vertex-colour result
+    // has none.
+    let colours = BASE.replace(
+        "[[stage]]\nkind = \"export\"",
+        "[[stage]]\nkind = \"export\"\nformats = [\"baked\"]",
+    );
+    assert_ne!(colours, BASE, "the base config has an export stage");
+    common::expect_refused(&colours, &[], &["per-corner texture coordinates"]);
+}
+
 /// A reader that closes the pipe early (`surfsynth stages | head`) ends the
 /// program quietly with success, not with a panic.
 #[test]

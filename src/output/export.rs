@@ -45,22 +45,25 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                     .colours
                     .as_ref()
                     .map(|c| (c.values.as_slice(), c.channels));
-                files.extend(super::obj::write_obj(
-                    dir, &job.stem, &job.mesh, uvs, texture, colours,
-                )?);
+                match (&job.baked, job.obj_blended) {
+                    (Some(image), true) => {
+                        // The blended result as `<stem>.obj`; the raw
+                        // coordinates for a shader that blends itself.
+                        files.extend(write_baked_triangles(dir, &job.stem, &job.mesh, image)?);
+                        let stem = format!("{}_corner_uvs", job.stem);
+                        files.extend(super::obj::write_obj(
+                            dir, &stem, &job.mesh, uvs, texture, colours,
+                        )?);
+                    }
+                    _ => files.extend(super::obj::write_obj(
+                        dir, &job.stem, &job.mesh, uvs, texture, colours,
+                    )?),
+                }
             }
             "baked" => {
                 if let Some(image) = &job.baked {
                     let stem = format!("{}_baked", job.stem);
-                    let (mesh, uvs) = baked_mesh(&job.mesh, image.width);
-                    files.extend(super::obj::write_obj(
-                        dir,
-                        &stem,
-                        &mesh,
-                        Some(uvs.as_slice()),
-                        Some(image),
-                        None,
-                    )?);
+                    files.extend(write_baked_triangles(dir, &stem, &job.mesh, image)?);
                 }
             }
             "glb" => {
@@ -122,6 +125,18 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
     }
     progress.finish();
     Ok(files)
+}
+
+/// Writes `mesh` with `image`, its per-triangle atlas ([`baked_mesh`]), as
+/// `<stem>.obj/.mtl/.png`.
+fn write_baked_triangles(
+    dir: &Path,
+    stem: &str,
+    mesh: &PolyMesh,
+    image: &crate::image::Image,
+) -> Result<Vec<PathBuf>, OutputError> {
+    let (mesh, uvs) = baked_mesh(mesh, image.width);
+    super::obj::write_obj(dir, stem, &mesh, Some(uvs.as_slice()), Some(image), None)
 }
 
 /// The mesh of format `baked`: `mesh` fan-triangulated, with the atlas

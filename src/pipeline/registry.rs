@@ -26,6 +26,9 @@ pub enum Datum {
     FaceField,
     /// A synthesised image (`jump_image`).
     Image,
+    /// The `bake` stage's UV atlas of the original mesh (export formats
+    /// `glb`, `baked_obj`).
+    BakedAtlas,
 }
 
 impl Datum {
@@ -41,6 +44,7 @@ impl Datum {
             Datum::Patches => "lapped-texture pastes",
             Datum::FaceField => "a per-face tangent field",
             Datum::Image => "a synthesised image",
+            Datum::BakedAtlas => "the `bake` stage's atlas (export formats `glb`, `baked_obj`)",
         }
     }
 

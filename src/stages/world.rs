@@ -334,6 +334,12 @@ pub struct ExportJob {
     /// the triangulated mesh and its atlas coordinates from `mesh`
     /// (`output::export::baked_mesh`).
     pub baked: Option<Image>,
+    /// Format `obj` writes `baked` as `<stem>.obj` and the raw per-corner
+    /// texture coordinates as `<stem>_corner_uvs.obj`: set for a result
+    /// whose look needs the jump-map 3-way blend, which an OBJ cannot
+    /// express (its per-corner coordinates alone break at every patch
+    /// boundary in Blender or MeshLab).
+    pub obj_blended: bool,
     /// Lapped-texture pastes for runtime pasting (format `pastes`).
     pub pastes: Option<PasteExport>,
     /// The `bake` stage's atlas of the original mesh (formats `glb`,

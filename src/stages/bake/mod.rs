@@ -149,7 +149,7 @@ impl Stage for Bake {
         vec![Datum::Mesh]
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
-        vec![]
+        vec![Datum::BakedAtlas]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,

@@ -79,7 +79,7 @@ impl StageSettings for ExportSettings {
                 "baked_obj",
                 "plane",
             ]),
-            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex normals and colours (per-corner-UV results such as jump maps: the preview's blended colour at each vertex, averaged over its corners); obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs; plane: the result as an image, plane.png (8-bit RGB, plane_size) sampled over the xy bounding box of a mesh flat in xy (row 0 = max y, so image-up is +y) or a jump_image result as it is, plus plane_sources.png (16-bit RGB: R, G = the exemplar pixel x, y each pixel was copied from, B = 65535 where known, else 0)",
+            doc: "glb: glTF 2.0 binary of the ORIGINAL mesh with the `bake` stage's atlas (textures embedded; needs `bake` before `export`); baked_obj: the same as OBJ+MTL+PNG (STEM_atlas.*); ply: binary PLY with vertex normals and colours (per-corner-UV results such as jump maps: the preview's blended colour at each vertex, averaged over its corners); obj: OBJ+MTL+PNG (per-corner UVs and the texture, or a lapped texture's atlas, when the result has them, else vertex colours; a jump-map result, whose look needs the 3-way blend an OBJ cannot express, is written baked into a per-triangle atlas of bake_size as in `baked`, so it looks like its preview in Blender or MeshLab, and its raw per-corner UVs as STEM_corner_uvs.*); preview: 3 shaded PNG views (jump-map UVs blended 3 ways; lapped pastes composited in order, with an atlas also atlas_preview_*.png); baked: OBJ+MTL+PNG with the per-corner-UV result (incl. the jump-map 3-way blend) baked into a per-triangle atlas; pastes: lapped-texture runtime pasting, OBJ with one group per paste in paste order + MTL + RGBA patch PNGs; plane: the result as an image, plane.png (8-bit RGB, plane_size) sampled over the xy bounding box of a mesh flat in xy (row 0 = max y, so image-up is +y) or a jump_image result as it is, plus plane_sources.png (16-bit RGB: R, G = the exemplar pixel x, y each pixel was copied from, B = 65535 where known, else 0)",
         },
         ParamDoc {
             name: "preview_size",
@@ -191,8 +191,24 @@ impl Stage for Export {
     const PAPER: &'static str = "-";
     type Settings = ExportSettings;
 
-    fn requires(_: &Self::Settings) -> Vec<Datum> {
-        vec![]
+    /// Each format's input, so that a format that cannot be written is
+    /// refused with the config, before any work: `glb` and `baked_obj` need
+    /// the `bake` stage's atlas, `pastes` lapped pastes, `baked` per-corner
+    /// texture coordinates (`plane` is checked through [`Self::plane_role`]).
+    fn requires(settings: &Self::Settings) -> Vec<Datum> {
+        let mut needs = Vec::new();
+        for format in &settings.formats {
+            let need = match format.as_str() {
+                "glb" | "baked_obj" => Datum::BakedAtlas,
+                "pastes" => Datum::Patches,
+                "baked" => Datum::CornerUvs,
+                _ => continue,
+            };
+            if !needs.contains(&need) {
+                needs.push(need);
+            }
+        }
+        needs
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![]
@@ -420,7 +436,12 @@ impl Stage for Export {
             } else {
                 Vec::new()
             };
-            let baked = if settings.formats.iter().any(|f| f == "baked") {
+            // A blended per-corner-UV result's `result.obj` is the baked
+            // one, so that it looks like its preview in any OBJ reader.
+            let obj_blended = settings.formats.iter().any(|f| f == "obj")
+                && uvs.is_some()
+                && blend.and_then(|b| b.of(mesh)).is_some();
+            let baked = if obj_blended || settings.formats.iter().any(|f| f == "baked") {
                 let _span = tracing::info_span!("bake").entered();
                 bake(mesh, uvs, blend, &exemplar, settings.bake_size)
             } else {
@@ -505,6 +526,7 @@ impl Stage for Export {
                 previews,
                 images,
                 baked,
+                obj_blended,
                 pastes: None,
                 baked_asset: None,
                 take_baked_asset: wants_asset,
