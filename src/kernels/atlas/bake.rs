@@ -495,8 +495,11 @@ pub struct VertexColourSource<'a> {
     pub frame_s: Option<&'a [Vec3]>,
 }
 
-impl ContributionSource for VertexColourSource<'_> {
-    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+impl VertexColourSource<'_> {
+    /// The result triangle (vertex ids) under the texel at barycentric `b`
+    /// of original triangle `face`, and the barycentric coordinates of the
+    /// texel's closest point on it (facing the same way).
+    fn result_point(&self, face: u32, b: [f32; 3]) -> Option<([u32; 3], [f32; 3])> {
         let f = face as usize;
         let t = self.tris[f];
         let p = self.positions[t[0] as usize] * b[0]
@@ -507,14 +510,19 @@ impl ContributionSource for VertexColourSource<'_> {
             self.projector.project(p)
         } else {
             self.projector.project_facing(p, normal, u32::MAX)
-        };
-        let Some(hit) = hit else {
+        }?;
+        let rt = self.result_tris.get(hit.face as usize)?;
+        Some((*rt, hit.bary.to_array()))
+    }
+}
+
+impl ContributionSource for VertexColourSource<'_> {
+    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+        let f = face as usize;
+        let Some((rt, w)) = self.result_point(face, b) else {
             return;
         };
-        let Some(rt) = self.result_tris.get(hit.face as usize) else {
-            return;
-        };
-        let w = hit.bary.to_array();
+        let rt = &rt;
         let c = self.channels;
         let mut rgb = [0.0f32; 3];
         for (k, &v) in rt.iter().enumerate() {
@@ -539,6 +547,60 @@ impl ContributionSource for VertexColourSource<'_> {
                     texture: 0,
                 });
             }
+        }
+    }
+}
+
+/// A per-vertex result read at the exemplar's own resolution: every texel
+/// looks the exemplar up where each vertex of the result triangle under it
+/// puts it — the vertex's source texel continued through its tangent frame
+/// to the texel's point at the synthesis scale — and blends the three
+/// look-ups barycentrically (coordinates synthesised coarse, colours read
+/// fine: Lefebvre & Hoppe 2005). Where the three vertices continue one
+/// another (a coherent patch) the texel is the exemplar itself, sharp at any
+/// atlas resolution; vertex-colour interpolation
+/// ([`VertexColourSource`]) is bounded by the vertex density instead.
+pub struct CoordinateSource<'a> {
+    /// The result surface and the projection onto it (its colours unused).
+    pub surface: VertexColourSource<'a>,
+    /// Result-mesh positions.
+    pub result_positions: &'a [Vec3],
+    /// Per result vertex, its source coordinate in exemplar pixels
+    /// (`SourceTexels`).
+    pub sources: &'a [Vec2],
+    /// Per result vertex, its synthesis frame.
+    pub synthesis_frames: &'a [crate::kernels::frames::TangentFrame],
+    /// Exemplar texels per world unit: one per result vertex, or one for
+    /// all.
+    pub texels_per_unit: &'a [f32],
+    /// The exemplar's size, pixels.
+    pub exemplar_size: Vec2,
+}
+
+impl ContributionSource for CoordinateSource<'_> {
+    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+        let Some((rt, w)) = self.surface.result_point(face, b) else {
+            return;
+        };
+        let p: Vec3 = rt
+            .iter()
+            .zip(w)
+            .map(|(&v, w)| self.result_positions[v as usize] * w)
+            .sum();
+        for (k, &v) in rt.iter().enumerate() {
+            let v = v as usize;
+            let frame = &self.synthesis_frames[v];
+            let scale = match self.texels_per_unit {
+                [one] => *one,
+                all => all[v],
+            };
+            let q = self.sources[v] + frame.texel_offset(p - self.result_positions[v], scale);
+            out.contribs.push(Contribution {
+                uv: q / self.exemplar_size,
+                weight: w[k],
+                angle: self.surface.frames.angle_to(face as usize, frame.s),
+                texture: 0,
+            });
         }
     }
 }

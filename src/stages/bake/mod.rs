@@ -18,7 +18,8 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
 use crate::image::Image;
 use crate::kernels::atlas::bake::{
     AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
-    LappedSource, PatchPlacement, VertexColourSource, bake_channels_with_progress,
+    CoordinateSource, LappedSource, PatchPlacement, VertexColourSource,
+    bake_channels_with_progress,
 };
 use crate::kernels::atlas::{
     AtlasSettings, build_uv_atlas_with_progress, distortion, rasterise_faces,
@@ -47,6 +48,26 @@ pub struct BakeSettings {
     pub padding: u32,
     /// Normal cone of a chart, degrees.
     pub normal_cone: f64,
+    /// How a per-vertex result's colour reaches the texels.
+    pub colours: BakeColours,
+}
+
+/// How `bake` reads a per-vertex result (vertex colours on a retiled or
+/// subdivided mesh).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BakeColours {
+    /// `coordinates` where the result records them (source texels and
+    /// frames: Wei–Levoy, Bangay–Morkel, coherent), else `vertex`.
+    #[default]
+    Auto,
+    /// Every texel looks the exemplar up through the exemplar coordinates of
+    /// the result triangle's vertices, continued through their tangent
+    /// frames ([`CoordinateSource`]): the exemplar's own resolution.
+    Coordinates,
+    /// The vertex colours, interpolated across each result triangle:
+    /// detail bounded by the vertex density.
+    Vertex,
 }
 
 impl Default for BakeSettings {
@@ -55,6 +76,7 @@ impl Default for BakeSettings {
             size: 0,
             padding: 4,
             normal_cone: 60.0,
+            colours: BakeColours::Auto,
         }
     }
 }
@@ -78,6 +100,12 @@ impl StageSettings for BakeSettings {
             unit: "degrees",
             range: ParamRange::Float(5.0, 85.0),
             doc: "largest angle between a chart face's normal and its chart seed's: smaller gives more, flatter charts (less distortion, more seams)",
+        },
+        ParamDoc {
+            name: "colours",
+            unit: "",
+            range: ParamRange::OneOf(&["auto", "coordinates", "vertex"]),
+            doc: "how a per-vertex result (vertex colours on a retiled or subdivided mesh) reaches the texels: coordinates = each texel looks the exemplar up where the exemplar coordinates of the result triangle's three vertices, continued through their tangent frames at the synthesis scale, put it, blended barycentrically (the exemplar's own resolution whatever the vertex density; needs source texels and frames, which Wei–Levoy, Bangay–Morkel and coherent record); vertex = the vertex colours interpolated across each triangle (detail bounded by the vertex density; the only choice for a result without coordinates); auto = coordinates where recorded, else vertex. Per-corner UVs and lapped pastes are always read at full resolution",
         },
     ];
 
@@ -123,6 +151,7 @@ type MeshQuery<'w, 's> = Query<
         Option<&'static BlendUvs>,
         Option<&'static SourceTexels>,
         Option<&'static Frames>,
+        Option<&'static VertexScale>,
     ),
 >;
 
@@ -156,6 +185,7 @@ impl Stage for Bake {
                active: Res<ActiveMesh>,
                exemplar: Res<Exemplar>,
                spacing: Res<TexelSpacing>,
+               texture_scale: Option<Res<TextureScale>>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                sources: Query<Entity, With<SourceMesh>>,
@@ -186,6 +216,9 @@ impl Stage for Bake {
                 channels: channels.as_deref(),
                 patches,
                 origins,
+                texels_per_unit: texture_scale
+                    .as_deref()
+                    .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| t.texels_per_unit),
             };
             let mut settings = settings.clone();
             if settings.size == 0 {
@@ -225,6 +258,9 @@ struct BakeInputs<'a> {
     patches: &'a [Image],
     /// Per patch, the exemplar pixel of its top-left pixel (lapped).
     origins: &'a [[i64; 2]],
+    /// The run's exemplar texels per world unit, for coordinates of a
+    /// result that records no per-vertex scale.
+    texels_per_unit: f32,
 }
 
 /// Builds the atlas of `mesh` (the source mesh) and bakes the result.
@@ -272,7 +308,9 @@ fn bake_world(
         size: settings.size,
         padding_px: settings.padding,
     };
-    let Ok((result, colours, uvs, blend, source_texels, result_frames)) = meshes.get(active) else {
+    let Ok((result, colours, uvs, blend, source_texels, result_frames, vertex_scale)) =
+        meshes.get(active)
+    else {
         return Err("the active mesh has no geometry".into());
     };
     let on_source = active == source;
@@ -419,13 +457,43 @@ fn bake_world(
             source_uv: source_uv.as_deref(),
             frame_s: frame_s.as_deref(),
         };
-        method = "vertex_colours";
-        if !maps.is_empty() && source_uv.is_none() {
-            maps_note = "the result records no source texels: maps are flat/neutral";
-        }
+        // The exemplar coordinates, continued per texel, where recorded.
+        let n = result.0.vertex_count();
+        let coordinates = match (source_texels, result_frames) {
+            (Some(t), Some(f)) if t.0.len() == n && f.0.len() == n => Some((&t.0, &f.0)),
+            _ => None,
+        };
+        let one_scale = [inputs.texels_per_unit];
+        let texels_per_unit: &[f32] = match vertex_scale {
+            Some(s) if s.0.len() == n => &s.0,
+            _ => &one_scale,
+        };
+        let source: Box<dyn ContributionSource + '_> = match (settings.colours, coordinates) {
+            (BakeColours::Vertex, _) | (BakeColours::Auto, None) => {
+                method = "vertex_colours";
+                if !maps.is_empty() && source_uv.is_none() {
+                    maps_note = "the result records no source texels: maps are flat/neutral";
+                }
+                Box::new(src)
+            }
+            (BakeColours::Coordinates, None) => {
+                return Err("colours = \"coordinates\" needs the exemplar coordinate and tangent frame of every result vertex, which this result does not record; allowed here: \"vertex\" or \"auto\"".into());
+            }
+            (_, Some((sources, synthesis_frames))) => {
+                method = "coordinates";
+                Box::new(CoordinateSource {
+                    surface: src,
+                    result_positions: &result.0.positions,
+                    sources,
+                    synthesis_frames,
+                    texels_per_unit,
+                    exemplar_size: size,
+                })
+            }
+        };
         bake_channels_with_progress(
             &target,
-            &src as &dyn ContributionSource,
+            source.as_ref(),
             &textures,
             exemplar.wrap,
             &maps,
