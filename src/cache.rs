@@ -118,15 +118,18 @@ fn is_entry_tmp(name: &str) -> bool {
 /// modification time to now: the time is the entry's last use, which
 /// eviction goes by.
 pub fn read(dir: &Path, kind: &str, key: &[u8; 32]) -> Option<Vec<u8>> {
-    use std::io::Read;
     let path = entry_path(dir, kind, key);
-    let mut file = std::fs::File::open(&path).ok()?;
-    let mut bytes = Vec::new();
-    file.read_to_end(&mut bytes).ok()?;
-    if let Err(e) = file.set_modified(SystemTime::now()) {
+    let bytes = std::fs::read(&path).ok()?;
+    if let Err(e) = set_last_use(&path, SystemTime::now()) {
         tracing::debug!("could not refresh the time of {}: {e}", path.display());
     }
     Some(bytes)
+}
+
+/// Sets the last use of a cache file (its modification time), which
+/// eviction goes by. Opens it read-only: the owner may set its times.
+pub fn set_last_use(path: &Path, time: SystemTime) -> std::io::Result<()> {
+    std::fs::File::open(path)?.set_modified(time)
 }
 
 /// Writes an entry atomically, then evicts the least recently used entries
@@ -428,7 +431,6 @@ pub fn payload<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::io::Write;
     use std::time::UNIX_EPOCH;
 
     const KIB: usize = 1024;
@@ -437,14 +439,9 @@ mod tests {
         [i; 32]
     }
 
-    /// Sets the modification time of `path` to `secs` after the epoch.
+    /// Sets the last use of `path` to `secs` after the epoch.
     fn stage_time(path: &Path, secs: u64) {
-        std::fs::File::options()
-            .write(true)
-            .open(path)
-            .unwrap()
-            .set_modified(UNIX_EPOCH + Duration::from_secs(secs))
-            .unwrap();
+        set_last_use(path, UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
     }
 
     /// A `KIB`-kibibyte entry of `key(i)`, last used at `1_000_000 + i` s.

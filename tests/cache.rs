@@ -65,12 +65,7 @@ fn bin_files(dir: &Path) -> Vec<String> {
 }
 
 fn set_time(path: &Path, secs: u64) {
-    std::fs::File::options()
-        .write(true)
-        .open(path)
-        .unwrap()
-        .set_modified(UNIX_EPOCH + Duration::from_secs(secs))
-        .unwrap();
+    surfsynth::cache::set_last_use(path, UNIX_EPOCH + Duration::from_secs(secs)).unwrap();
 }
 
 fn modified(path: &Path) -> SystemTime {
