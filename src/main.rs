@@ -57,6 +57,42 @@ enum Command {
     /// Runs a config over the cartesian product of --grid overrides, each run
     /// in its own folder, then writes summary.csv, summary.json and index.html.
     Sweep(SweepArgs),
+    /// Shows or clears the analysis cache kept between runs (jump maps,
+    /// appearance-space levels, texture patches).
+    #[command(long_about = CACHE_HELP)]
+    Cache {
+        #[command(subcommand)]
+        action: Option<CacheAction>,
+    },
+}
+
+/// The long help of `surfsynth cache`.
+const CACHE_HELP: &str = "\
+Shows or clears the analysis cache kept between runs.
+
+Where: $SURFSYNTH_CACHE, else $XDG_CACHE_HOME/surfsynth, else ~/.cache/surfsynth.
+
+What: one file KIND-HASH.bin per analysis of an exemplar (HASH: of the \
+exemplar's pixels and the analysis parameters): `jumpmap` (jump_map stage), \
+`appearance` (coherent and jump_surface stages), `patches` (lapped_paste \
+stage). Entries are re-validated when read and rebuilt when stale, so deleting \
+them is always safe: the next run just analyses again. A stage's \
+`cache = false` bypasses it.
+
+Size: after each write the least recently used entries (read or written) are \
+deleted while the entries total more than the limit: 1 GiB, or \
+$SURFSYNTH_CACHE_LIMIT (bytes, or with suffix K, M, G: binary units, e.g. 500M, \
+2G; 0 writes no entry). Other files in the folder are never touched.";
+
+/// What `surfsynth cache` does.
+#[derive(Subcommand, Debug)]
+enum CacheAction {
+    /// Prints the folder, its entries per kind, their total and the limit
+    /// (the default).
+    Show,
+    /// Deletes every cache entry (and temporary files of killed writes);
+    /// other files in the folder are kept.
+    Clear,
 }
 
 /// `surfsynth sweep`: see README "Sweeps".
@@ -136,6 +172,7 @@ fn main() -> ExitCode {
             file,
             merge_duplicates,
         } => mesh_info(&file, merge_duplicates),
+        Command::Cache { action } => cache(action.unwrap_or(CacheAction::Show)),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -169,6 +206,7 @@ fn run(
     if let Some(t) = &trace {
         surfsynth::preflight::check_file_target(t).map_err(|m| option_err("--trace", m))?;
     }
+    cache_limit()?;
     surfsynth::output::staging::exit_cleanly_on_signals()
         .map_err(|e| PipelineError::Internal(format!("signal handler: {e}")))?;
     let guard = surfsynth::telemetry::init(trace.as_deref(), quiet);
@@ -208,6 +246,100 @@ fn stages(kind: Option<&str>) -> Result<(), PipelineError> {
     Ok(())
 }
 
+/// `$SURFSYNTH_CACHE_LIMIT`, checked before any work (exit 2 when malformed).
+fn cache_limit() -> Result<u64, PipelineError> {
+    surfsynth::preflight::check_cache_limit().map_err(|message| {
+        PipelineError::Config(surfsynth::config::ConfigError::Value {
+            file: "environment".into(),
+            key: surfsynth::cache::LIMIT_VAR.into(),
+            message,
+        })
+    })
+}
+
+/// `surfsynth cache [show|clear]`.
+fn cache(action: CacheAction) -> Result<(), PipelineError> {
+    use surfsynth::cache::{self, format_size};
+    let limit = cache_limit()?;
+    let Some(dir) = cache::default_dir() else {
+        say(format_args!(
+            "no cache folder: none of SURFSYNTH_CACHE, XDG_CACHE_HOME, HOME is set\n"
+        ));
+        return Ok(());
+    };
+    match action {
+        CacheAction::Show => {
+            let summary = cache::summary(&dir);
+            let missing = if dir.is_dir() {
+                ""
+            } else {
+                " (does not exist yet)"
+            };
+            say(format_args!("cache folder: {}{missing}\n", dir.display()));
+            for (kind, count, bytes) in &summary.kinds {
+                let what = cache::KINDS
+                    .iter()
+                    .find(|(k, _)| k == kind)
+                    .map_or(String::new(), |(_, w)| format!(" ({w})"));
+                say(format_args!(
+                    "  {kind}: {}, {}{what}\n",
+                    entries(*count),
+                    format_size(*bytes)
+                ));
+            }
+            if summary.stale_tmp.0 > 0 {
+                say(format_args!(
+                    "  temporary files of killed writes: {}, {}\n",
+                    summary.stale_tmp.0,
+                    format_size(summary.stale_tmp.1)
+                ));
+            }
+            if summary.other > 0 {
+                say(format_args!(
+                    "  other files (not the cache's, left alone): {}\n",
+                    summary.other
+                ));
+            }
+            let (count, bytes) = summary.total();
+            let limit_from = match std::env::var(cache::LIMIT_VAR) {
+                Ok(v) if !v.trim().is_empty() => cache::LIMIT_VAR,
+                _ => "default; set SURFSYNTH_CACHE_LIMIT to change",
+            };
+            let off = if limit == 0 {
+                ", no entry is written"
+            } else {
+                ""
+            };
+            say(format_args!(
+                "total: {}, {}\nlimit: {} ({limit_from}{off})\n",
+                entries(count),
+                format_size(bytes),
+                format_size(limit)
+            ));
+        }
+        CacheAction::Clear => {
+            let (count, bytes) = cache::clear(&dir);
+            say(format_args!(
+                "cleared {}: {} deleted, {} freed\n",
+                dir.display(),
+                files(count),
+                format_size(bytes)
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// `1 entry`, `2 entries`.
+fn entries(n: usize) -> String {
+    format!("{n} {}", if n == 1 { "entry" } else { "entries" })
+}
+
+/// `1 file`, `2 files`.
+fn files(n: usize) -> String {
+    format!("{n} file{}", if n == 1 { "" } else { "s" })
+}
+
 fn mesh_info(file: &str, merge_duplicates: bool) -> Result<(), PipelineError> {
     let (mesh, report) = if let Some(name) = file.strip_prefix("builtin:") {
         let mesh = surfsynth::mesh::builtin::builtin_mesh(name, &Default::default())?;
@@ -241,6 +373,10 @@ fn sweep(args: SweepArgs) -> ExitCode {
 fn sweep_inner(args: SweepArgs) -> Result<(), surfsynth::sweep::SweepError> {
     use surfsynth::sweep::{SweepError, SweepOptions};
     let _guard = surfsynth::telemetry::init(None, true);
+    surfsynth::preflight::check_cache_limit().map_err(|message| SweepError::Option {
+        flag: surfsynth::cache::LIMIT_VAR.into(),
+        message,
+    })?;
     if let Some(dir) = args.summarise {
         for f in surfsynth::sweep::summarise(&dir)? {
             say(format_args!("{}\n", f.display()));

@@ -4,7 +4,8 @@
 //!
 //! Each check returns the message of the refusal: what is wrong and what is
 //! allowed. The caller names the option (`--out`, `--trace`, `--threads`,
-//! `output.dir`).
+//! `output.dir`), or the message names the environment variable
+//! (`SURFSYNTH_CACHE_LIMIT`).
 
 use std::path::{Path, PathBuf};
 
@@ -22,6 +23,14 @@ pub fn check_threads(n: usize) -> Result<(), String> {
     } else {
         Err(format!("{n} is out of range; allowed: 1..={MAX_THREADS}"))
     }
+}
+
+/// The analysis cache's size limit, `$SURFSYNTH_CACHE_LIMIT`
+/// ([`crate::cache::configured_limit`]): unset, or a size such as `500M`.
+/// The library falls back to the default with a warning; the command line
+/// refuses a malformed value here, before any work.
+pub fn check_cache_limit() -> Result<u64, String> {
+    crate::cache::configured_limit()
 }
 
 /// A file to be written (`--trace FILE`): not a folder, and its parent folder
