@@ -218,7 +218,9 @@ impl Stage for Bake {
                 origins,
                 texels_per_unit: texture_scale
                     .as_deref()
-                    .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| t.texels_per_unit),
+                    .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| {
+                        t.texels_per_unit
+                    }),
             };
             let mut settings = settings.clone();
             if settings.size == 0 {
