@@ -29,6 +29,12 @@ pub const THREE_REVISION: &str = "179";
 /// The page's file name.
 pub const VIEW_FILE: &str = "view.html";
 
+/// Intensity of the hemisphere (sky/ground) light.
+const FILL_LIGHT: f32 = 0.10;
+
+/// Intensity of the directional light that follows the camera.
+const KEY_LIGHT: f32 = 2.3;
+
 const TEMPLATE: &str = include_str!("viewer/view.html");
 
 /// The page showing `glb` (the bytes of the file `glb_name` beside it),
@@ -40,13 +46,13 @@ pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
         Background::Solid(c) => (c, c),
         Background::Gradient { top, bottom } => (top, bottom),
     };
-    // The preview lights sRGB albedo as `a + (1 − a)·max(0, n·l)`; the page
-    // lights linear albedo and encodes sRGB, so a light `L` there shows as
-    // about `L^(1/2.2)` here. The fill is set so unlit sides show as dark
-    // as the preview's ambient, the key so a surface facing it is at full
-    // albedo. three.js lights diffuse surfaces by intensity / π.
-    let fill = options.ambient.clamp(0.0, 1.0).powf(2.2);
-    let key = 1.0 - fill;
+    // The preview lights sRGB albedo as `a + (1 − a)·max(0, n·l)` (a =
+    // 0.25); the page lights linear albedo (three.js: diffuse = albedo ·
+    // intensity · n·l / π) and encodes sRGB, which lifts dim light. These
+    // intensities were fitted with `scripts/viewer/screenshot.py` on
+    // configs/40_bake_bunny.toml: the object's mean brightness within 1 %
+    // of preview_0.png's, the unlit side a little lighter than there.
+    let (fill, key) = (FILL_LIGHT, KEY_LIGHT);
     let light = {
         let (right, up, forward) = (-0.25f32, 0.35f32, 1.0f32);
         let n = (right * right + up * up + forward * forward).sqrt();
@@ -59,8 +65,8 @@ pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
         "elevation_deg": view.elevation_deg,
         "fov_y_deg": options.fov_y_deg,
         "fill": options.fill,
-        "fill_light": fill * std::f32::consts::PI,
-        "key_light": key * std::f32::consts::PI,
+        "fill_light": fill,
+        "key_light": key,
         // Camera space (x right, y up, z toward the viewer), as
         // `Camera::key_light`: from the camera, raised and to the left.
         "key_light_camera": light,
