@@ -26,7 +26,7 @@ npm install --no-audit --no-fund --save-exact \
     "three@$THREE_VERSION" "esbuild@$ESBUILD_VERSION" >/dev/null
 # The banner keeps three's copyright line in the minified file; its text
 # names no address, so no checker takes it for something the page loads.
-npx esbuild entry.js --bundle --minify --format=iife --target=es2020 \
+npx esbuild entry.js --bundle --minify --format=iife --global-name=THREE --target=es2020 \
     --legal-comments=none \
     --banner:js="/* three.js r$revision (three@$THREE_VERSION), GLTFLoader and OrbitControls. Copyright 2010-2025 three.js authors. MIT licence: see THREE_LICENSE beside this file. */" \
     --outfile=bundle.js

@@ -15,7 +15,8 @@ OUT_DIR (default /tmp/surfsynth-view-NAME, NAME = RUN_DIR's name) receives
   chromium.log      the browser's messages
 Exits 1 when the page does not report the model drawn within TIMEOUT seconds
 (environment, default 180), or shows an error. Needs /usr/bin/chromium
-(Debian: apt-get install chromium; CHROMIUM overrides) and cargo for the
+(Debian: apt-get install chromium; CHROMIUM overrides, CHROMIUM_FLAGS adds
+flags, e.g. --disable-3d-apis to see the page without WebGL) and cargo for the
 comparison (or COMPARE=path/to/compare_images; COMPARE=none skips it).
 
 Only Python's standard library: the browser is driven over the DevTools
@@ -74,6 +75,7 @@ class Browser:
             "--force-device-scale-factor=1",
             f"--user-data-dir={profile}",
             "--remote-debugging-pipe",
+            *os.environ.get("CHROMIUM_FLAGS", "").split(),
             "about:blank",
         ]
         shell = f'exec "$0" "$@" 3<&{to_child} 4>&{from_child} {to_child}<&- {from_child}>&-'

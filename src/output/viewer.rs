@@ -17,6 +17,7 @@
 
 use super::OutputError;
 use super::render::{Background, DEFAULT_VIEWS, RenderOptions};
+use crate::sweep::html::escape;
 use std::path::{Path, PathBuf};
 
 /// three.js r179 (npm `three@0.179.1`): core, `GLTFLoader`, `OrbitControls`,
@@ -29,6 +30,11 @@ pub const THREE_REVISION: &str = "179";
 /// The page's file name.
 pub const VIEW_FILE: &str = "view.html";
 
+/// The largest GLB embedded: its base64 (4/3 of it) must fit a browser's
+/// longest string (V8: 2²⁹ − 24 characters, 512 MiB), with room to decode.
+/// A larger GLB gets a page that says so and links to it.
+pub const MAX_EMBEDDED_GLB: usize = 256 << 20;
+
 /// Intensity of the hemisphere (sky/ground) light.
 const FILL_LIGHT: f32 = 0.10;
 
@@ -38,7 +44,8 @@ const KEY_LIGHT: f32 = 2.3;
 const TEMPLATE: &str = include_str!("viewer/view.html");
 
 /// The page showing `glb` (the bytes of the file `glb_name` beside it),
-/// captioned `title` (e.g. the run's config).
+/// captioned `title` (e.g. the run's config). A GLB over
+/// [`MAX_EMBEDDED_GLB`] is not embedded: the page says so.
 pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
     let options = RenderOptions::default();
     let view = DEFAULT_VIEWS[0];
@@ -58,8 +65,11 @@ pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
         let n = (right * right + up * up + forward * forward).sqrt();
         [right / n, up / n, forward / n]
     };
+    let embedded = glb.len() <= MAX_EMBEDDED_GLB;
     let settings = serde_json::json!({
         "title": title,
+        "glb_bytes": glb.len(),
+        "embedded": embedded,
         "glb": glb_name,
         "azimuth_deg": view.azimuth_deg,
         "elevation_deg": view.elevation_deg,
@@ -82,13 +92,14 @@ pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
     let mut out =
         String::with_capacity(TEMPLATE.len() + THREE_BUNDLE.len() + glb.len() / 3 * 4 + 4096);
     fill_template(&mut out, TEMPLATE, |key, out| match key {
-        "TITLE" => out.push_str(&escape_html(title)),
-        "GLB_NAME" => out.push_str(&escape_html(glb_name)),
+        "TITLE" => out.push_str(&escape(title)),
+        "GLB_NAME" => out.push_str(&escape(glb_name)),
         "BACKGROUND_TOP" => out.push_str(&css(top)),
         "BACKGROUND_BOTTOM" => out.push_str(&css(bottom)),
         "THREE_REVISION" => out.push_str(THREE_REVISION),
         "SETTINGS_JSON" => out.push_str(&settings),
-        "GLB_BASE64" => base64_into(out, glb),
+        "GLB_BASE64" if embedded => base64_into(out, glb),
+        "GLB_BASE64" => {}
         "THREE_BUNDLE" => out.push_str(THREE_BUNDLE),
         _ => unreachable!("view.html names an unknown field @@{key}@@"),
     });
@@ -126,22 +137,6 @@ fn fill_template(out: &mut String, template: &str, mut field: impl FnMut(&str, &
         rest = &after[end + 2..];
     }
     out.push_str(rest);
-}
-
-/// `text` safe in HTML text and attribute values.
-fn escape_html(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// Appends standard base64 (RFC 4648, padded) of `bytes`, in lines of 76
@@ -188,6 +183,15 @@ mod tests {
             base64_into(&mut out, input.as_bytes());
             assert_eq!(out.trim(), expected);
         }
+    }
+
+    #[test]
+    fn a_glb_too_large_to_embed_is_named_not_embedded() {
+        let glb = vec![7u8; MAX_EMBEDDED_GLB + 1];
+        let page = view_html(&glb, "result.glb", "big");
+        assert!(page.len() < THREE_BUNDLE.len() + 64 * 1024);
+        assert!(page.contains("\"embedded\":false"));
+        assert!(page.contains("data-glb=\"result.glb\""));
     }
 
     #[test]
