@@ -18,6 +18,7 @@
 use super::OutputError;
 use super::render::{Background, DEFAULT_VIEWS, RenderOptions};
 use crate::sweep::html::escape;
+use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 /// three.js r179 (npm `three@0.179.1`): core, `GLTFLoader`, `OrbitControls`,
@@ -47,6 +48,44 @@ const TEMPLATE: &str = include_str!("viewer/view.html");
 /// captioned `title` (e.g. the run's config). A GLB over
 /// [`MAX_EMBEDDED_GLB`] is not embedded: the page says so.
 pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
+    let mut out =
+        Vec::with_capacity(TEMPLATE.len() + THREE_BUNDLE.len() + glb.len() / 3 * 4 + 4096);
+    let mut reader = glb;
+    stream_view(&mut out, &mut reader, glb.len() as u64, glb_name, title)
+        .expect("writing into memory");
+    String::from_utf8(out).expect("the page is UTF-8")
+}
+
+/// Writes `dir/view.html` for the GLB at `glb_path`, atomically, reading
+/// the GLB as it goes: neither the GLB nor the page (a third larger) is
+/// ever whole in memory, so a dense scan's export peaks no higher; returns
+/// its path.
+pub fn write_view(dir: &Path, glb_path: &Path, title: &str) -> Result<PathBuf, OutputError> {
+    let io_err = |source| OutputError::Io {
+        path: glb_path.to_path_buf(),
+        source,
+    };
+    let file = std::fs::File::open(glb_path).map_err(io_err)?;
+    let len = file.metadata().map_err(io_err)?.len();
+    let name = glb_path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "result.glb".into());
+    let path = dir.join(VIEW_FILE);
+    let mut glb = std::io::BufReader::new(file);
+    super::write_atomic(&path, |w| stream_view(w, &mut glb, len, &name, title))?;
+    Ok(path)
+}
+
+/// Writes the page: the template with its fields filled, the `glb_len`
+/// bytes of `glb` as base64 when at most [`MAX_EMBEDDED_GLB`].
+pub fn stream_view(
+    w: &mut dyn Write,
+    glb: &mut dyn Read,
+    glb_len: u64,
+    glb_name: &str,
+    title: &str,
+) -> std::io::Result<()> {
     let options = RenderOptions::default();
     let view = DEFAULT_VIEWS[0];
     let (top, bottom) = match options.background {
@@ -65,10 +104,10 @@ pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
         let n = (right * right + up * up + forward * forward).sqrt();
         [right / n, up / n, forward / n]
     };
-    let embedded = glb.len() <= MAX_EMBEDDED_GLB;
+    let embedded = glb_len <= MAX_EMBEDDED_GLB as u64;
     let settings = serde_json::json!({
         "title": title,
-        "glb_bytes": glb.len(),
+        "glb_bytes": glb_len,
         "embedded": embedded,
         "glb": glb_name,
         "azimuth_deg": view.azimuth_deg,
@@ -89,79 +128,80 @@ pub fn view_html(glb: &[u8], glb_name: &str, title: &str) -> String {
         let b = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
         format!("rgb({}, {}, {})", b(c[0]), b(c[1]), b(c[2]))
     };
-    let mut out =
-        String::with_capacity(TEMPLATE.len() + THREE_BUNDLE.len() + glb.len() / 3 * 4 + 4096);
-    fill_template(&mut out, TEMPLATE, |key, out| match key {
-        "TITLE" => out.push_str(&escape(title)),
-        "GLB_NAME" => out.push_str(&escape(glb_name)),
-        "BACKGROUND_TOP" => out.push_str(&css(top)),
-        "BACKGROUND_BOTTOM" => out.push_str(&css(bottom)),
-        "THREE_REVISION" => out.push_str(THREE_REVISION),
-        "SETTINGS_JSON" => out.push_str(&settings),
-        "GLB_BASE64" if embedded => base64_into(out, glb),
-        "GLB_BASE64" => {}
-        "THREE_BUNDLE" => out.push_str(THREE_BUNDLE),
+    fill_template(w, TEMPLATE, |key, w| match key {
+        "TITLE" => w.write_all(escape(title).as_bytes()),
+        "GLB_NAME" => w.write_all(escape(glb_name).as_bytes()),
+        "BACKGROUND_TOP" => w.write_all(css(top).as_bytes()),
+        "BACKGROUND_BOTTOM" => w.write_all(css(bottom).as_bytes()),
+        "THREE_REVISION" => w.write_all(THREE_REVISION.as_bytes()),
+        "SETTINGS_JSON" => w.write_all(settings.as_bytes()),
+        "GLB_BASE64" if embedded => stream_base64(w, glb),
+        "GLB_BASE64" => Ok(()),
+        "THREE_BUNDLE" => w.write_all(THREE_BUNDLE.as_bytes()),
         _ => unreachable!("view.html names an unknown field @@{key}@@"),
-    });
-    out
+    })
 }
 
-/// Writes `dir/view.html` for the GLB at `glb_path` (read back from disk:
-/// the GLB is streamed when written), atomically; returns its path.
-pub fn write_view(dir: &Path, glb_path: &Path, title: &str) -> Result<PathBuf, OutputError> {
-    let glb = std::fs::read(glb_path).map_err(|source| OutputError::Io {
-        path: glb_path.to_path_buf(),
-        source,
-    })?;
-    let name = glb_path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "result.glb".into());
-    let page = view_html(&glb, &name, title);
-    drop(glb);
-    let path = dir.join(VIEW_FILE);
-    super::write_bytes_atomic(&path, page.as_bytes())?;
-    Ok(path)
-}
-
-/// Copies `template` into `out`, replacing each `@@KEY@@` by what `field`
-/// appends for `KEY`. Only the template is scanned, so a value holding
-/// `@@` (the bundle, say) is never substituted again.
-fn fill_template(out: &mut String, template: &str, mut field: impl FnMut(&str, &mut String)) {
+/// Copies `template` into `w`, replacing each `@@KEY@@` by what `field`
+/// writes for `KEY`. Only the template is scanned, so a value holding `@@`
+/// (the bundle, say) is never substituted again.
+fn fill_template(
+    w: &mut dyn Write,
+    template: &str,
+    mut field: impl FnMut(&str, &mut dyn Write) -> std::io::Result<()>,
+) -> std::io::Result<()> {
     let mut rest = template;
     while let Some(start) = rest.find("@@") {
-        out.push_str(&rest[..start]);
+        w.write_all(&rest.as_bytes()[..start])?;
         let after = &rest[start + 2..];
         let end = after.find("@@").expect("view.html: an unclosed @@ field");
-        field(&after[..end], out);
+        field(&after[..end], w)?;
         rest = &after[end + 2..];
     }
-    out.push_str(rest);
+    w.write_all(rest.as_bytes())
 }
 
-/// Appends standard base64 (RFC 4648, padded) of `bytes`, in lines of 76
-/// characters.
-fn base64_into(out: &mut String, bytes: &[u8]) {
+/// Writes standard base64 (RFC 4648, padded) of everything `r` holds, in
+/// lines of 76 characters, between two newlines.
+fn stream_base64(w: &mut dyn Write, r: &mut dyn Read) -> std::io::Result<()> {
     const ALPHABET: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
-    out.reserve(bytes.len().div_ceil(3) * 4 + bytes.len() / 57 + 2);
-    out.push('\n');
-    for (i, chunk) in bytes.chunks(3).enumerate() {
-        if i > 0 && i % 19 == 0 {
-            out.push('\n');
+    // 57 bytes make one 76-character line; a whole number of lines a read.
+    const LINE: usize = 57;
+    let mut buf = vec![0u8; LINE * 1024];
+    let mut text = Vec::with_capacity(buf.len() / 3 * 4 + buf.len() / LINE + 1);
+    w.write_all(b"\n")?;
+    loop {
+        let mut filled = 0;
+        while filled < buf.len() {
+            match r.read(&mut buf[filled..]) {
+                Ok(0) => break,
+                Ok(n) => filled += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
         }
-        let b = [
-            chunk[0],
-            chunk.get(1).copied().unwrap_or(0),
-            chunk.get(2).copied().unwrap_or(0),
-        ];
-        let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
-        let sextet = |k: u32| ALPHABET[((n >> (18 - 6 * k)) & 63) as usize] as char;
-        out.push(sextet(0));
-        out.push(sextet(1));
-        out.push(if chunk.len() > 1 { sextet(2) } else { '=' });
-        out.push(if chunk.len() > 2 { sextet(3) } else { '=' });
+        text.clear();
+        for line in buf[..filled].chunks(LINE) {
+            for chunk in line.chunks(3) {
+                let b = [
+                    chunk[0],
+                    chunk.get(1).copied().unwrap_or(0),
+                    chunk.get(2).copied().unwrap_or(0),
+                ];
+                let n = (u32::from(b[0]) << 16) | (u32::from(b[1]) << 8) | u32::from(b[2]);
+                let sextet = |k: u32| ALPHABET[((n >> (18 - 6 * k)) & 63) as usize];
+                text.push(sextet(0));
+                text.push(sextet(1));
+                text.push(if chunk.len() > 1 { sextet(2) } else { b'=' });
+                text.push(if chunk.len() > 2 { sextet(3) } else { b'=' });
+            }
+            text.push(b'\n');
+        }
+        w.write_all(&text)?;
+        if filled < buf.len() {
+            return Ok(());
+        }
     }
-    out.push('\n');
 }
 
 #[cfg(test)]
@@ -179,16 +219,34 @@ mod tests {
             ("fooba", "Zm9vYmE="),
             ("foobar", "Zm9vYmFy"),
         ] {
-            let mut out = String::new();
-            base64_into(&mut out, input.as_bytes());
-            assert_eq!(out.trim(), expected);
+            let mut out = Vec::new();
+            stream_base64(&mut out, &mut input.as_bytes()).unwrap();
+            assert_eq!(String::from_utf8(out).unwrap().trim(), expected);
         }
     }
 
     #[test]
+    fn base64_lines_hold_76_characters_across_reads() {
+        let bytes: Vec<u8> = (0..200_000u32).map(|i| (i * 7 % 251) as u8).collect();
+        let mut out = Vec::new();
+        stream_base64(&mut out, &mut bytes.as_slice()).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        let lines: Vec<&str> = text.trim().lines().collect();
+        assert_eq!(lines.len(), bytes.len().div_ceil(57));
+        assert!(lines[..lines.len() - 1].iter().all(|l| l.len() == 76));
+        assert_eq!(
+            text.trim().replace('\n', "").len(),
+            bytes.len().div_ceil(3) * 4
+        );
+    }
+
+    #[test]
     fn a_glb_too_large_to_embed_is_named_not_embedded() {
-        let glb = vec![7u8; MAX_EMBEDDED_GLB + 1];
-        let page = view_html(&glb, "result.glb", "big");
+        let mut page = Vec::new();
+        let len = MAX_EMBEDDED_GLB as u64 + 1;
+        // The reader is never read: nothing to embed.
+        stream_view(&mut page, &mut std::io::empty(), len, "result.glb", "big").unwrap();
+        let page = String::from_utf8(page).unwrap();
         assert!(page.len() < THREE_BUNDLE.len() + 64 * 1024);
         assert!(page.contains("\"embedded\":false"));
         assert!(page.contains("data-glb=\"result.glb\""));
