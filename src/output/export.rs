@@ -11,7 +11,19 @@ use std::path::{Path, PathBuf};
 /// Writes the job's files into `dir`; returns their paths. Progress (the
 /// stage `export`) counts images and formats, the one being written the
 /// part: a PLY or OBJ of a million vertices takes seconds.
+///
+/// [`write_export_titled`] with the job's stem as the title of `view.html`.
 pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputError> {
+    write_export_titled(dir, job, &job.stem)
+}
+
+/// [`write_export`]; `title` (the run's config, say) captions `view.html`,
+/// the 3D view written beside the GLB (format `glb`).
+pub fn write_export_titled(
+    dir: &Path,
+    job: &ExportJob,
+    title: &str,
+) -> Result<Vec<PathBuf>, OutputError> {
     let mut files = Vec::new();
     let items = job.images.len() + job.formats.len() + usize::from(job.original.is_some());
     let progress = Progress::new(items as u64, "export");
@@ -70,7 +82,9 @@ pub fn write_export(dir: &Path, job: &ExportJob) -> Result<Vec<PathBuf>, OutputE
                 if let Some(asset) = &job.baked_asset {
                     let path = dir.join(format!("{}.glb", job.stem));
                     super::gltf::write_glb(&path, asset)?;
+                    let view = super::viewer::write_view(dir, &path, title)?;
                     files.push(path);
+                    files.push(view);
                 }
             }
             "baked_obj" => {

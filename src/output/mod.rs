@@ -1,5 +1,5 @@
 //! Exporters: meshes (PLY, OBJ+MTL+PNG), images, the preview renderer, metrics,
-//! contact sheets.
+//! contact sheets, the 3D view page (`view.html`).
 //!
 //! Architecture invariant: every file is written through [`write_atomic`], to a
 //! temporary name in the destination folder and renamed, so a failed run never
@@ -14,6 +14,7 @@ pub mod obj;
 pub mod ply;
 pub mod render;
 pub mod staging;
+pub mod viewer;
 
 pub use error::OutputError;
 

@@ -293,7 +293,11 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
     crate::stages::export::finish_export_job(&mut world, crate::stages::export::Transfer::Move)?;
     let job = std::mem::take(&mut *world.resource_mut::<ExportJob>());
     drop(world);
-    files.extend(crate::output::export::write_export(&staged, &job)?);
+    files.extend(crate::output::export::write_export_titled(
+        &staged,
+        &job,
+        &pipeline.source.file,
+    )?);
     drop(job);
     let stages: Vec<serde_json::Value> = pipeline
         .stages
