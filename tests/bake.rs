@@ -1048,3 +1048,129 @@ fn coordinate_bake_is_identical_at_one_and_two_threads() {
         "baked colours differ between 1 and 2 threads"
     );
 }
+
+// ----- issue 40: the triplanar baseline ----------------------------------------
+
+/// A `triplanar` run of `builtin:MESH` at 2 exemplar pixels per world unit,
+/// baked at 512².
+fn triplanar_run(mesh: &str, options: &str) -> World {
+    run(&format!(
+        r#"
+seed = 1
+[input]
+mesh = "builtin:{mesh}"
+exemplar = "data/textures/stones.png"
+texture_scale = 2.0
+texture_scale_unit = "pixels_per_unit"
+[input.mesh_options]
+{options}
+[[stage]]
+kind = "triplanar"
+[[stage]]
+kind = "bake"
+size = 512
+padding = 0
+"#
+    ))
+    .expect("the triplanar bake runs")
+}
+
+/// Every atlas texel whose centre lies inside a triangle: its point on the
+/// original mesh, the triangle's unit normal and the baked colour.
+fn baked_texels(world: &mut World) -> Vec<(Vec3, Vec3, [f32; 3])> {
+    let mut q = world.query_filtered::<&Geometry, With<SourceMesh>>();
+    let source = q.iter(world).next().expect("a source mesh").0.clone();
+    let asset = world.resource::<BakedAsset>();
+    let mesh = asset.mesh_or(&source);
+    let tris = triangles(mesh);
+    let faces: Vec<[Vec2; 3]> = asset
+        .uvs
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    let size = asset.colour.width;
+    let texel_face = rasterise_faces(&faces, size);
+    let mut out = Vec::new();
+    for y in 0..size {
+        for x in 0..size {
+            let f = texel_face[(y * size + x) as usize];
+            if f == u32::MAX {
+                continue;
+            }
+            let t = faces[f as usize].map(|p| p * size as f32);
+            let c = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+            let area = (t[1] - t[0]).perp_dot(t[2] - t[0]);
+            let b0 = (t[1] - c).perp_dot(t[2] - c) / area;
+            let b1 = (t[2] - c).perp_dot(t[0] - c) / area;
+            let b = [b0, b1, 1.0 - b0 - b1];
+            if b.iter().any(|&v| v < 0.0) {
+                continue; // a texel the rasteriser gave to this face at its edge
+            }
+            let p = tris[f as usize].map(|v| mesh.positions[v as usize]);
+            let point = p[0] * b[0] + p[1] * b[1] + p[2] * b[2];
+            let normal = (p[1] - p[0]).cross(p[2] - p[0]).normalize();
+            let px = asset.colour.pixel(x, y);
+            out.push((point, normal, [px[0], px[1], px[2]]));
+        }
+    }
+    out
+}
+
+/// The exemplar repeated, read at image pixel `q` (bilinear).
+fn tiled(exemplar: &Image, q: Vec2) -> [f32; 3] {
+    let mut px = [0.0f32; 3];
+    exemplar.sample_bilinear(q.x, q.y, Wrap::Repeat, &mut px);
+    px
+}
+
+/// Issue 40: a plane facing +z gets the exemplar tiled at the run's scale,
+/// exactly: image pixel `(2x, −2y)` at world `(x, y)`.
+#[test]
+fn triplanar_on_a_plane_facing_z_is_the_exemplar_tiled_at_the_scale() {
+    let exemplar =
+        surfsynth::image::load_image(&data_file("textures/stones.png")).expect("stones photo");
+    let mut world = triplanar_run("plane", "resolution = [5, 5]\nsize = 150.0");
+    let texels = baked_texels(&mut world);
+    assert!(texels.len() > 100_000, "{} texels", texels.len());
+    let mut worst = 0.0f32;
+    for (p, _, got) in &texels {
+        let want = tiled(&exemplar, Vec2::new(p.x, -p.y) * 2.0);
+        for c in 0..3 {
+            worst = worst.max((got[c] - want[c]).abs());
+        }
+    }
+    assert!(
+        worst < 1e-3,
+        "largest difference to the tiled exemplar: {worst}"
+    );
+}
+
+/// Issue 40: each face of a cube gets its own axis' projection alone (the
+/// normals are split at the cube's creases), seamless within the face.
+#[test]
+fn triplanar_on_a_cube_gives_each_face_its_axis_projection() {
+    let exemplar =
+        surfsynth::image::load_image(&data_file("textures/stones.png")).expect("stones photo");
+    let mut world = triplanar_run("cube", "size = 90.0");
+    let texels = baked_texels(&mut world);
+    let mut per_axis = [0usize; 3];
+    let mut worst = 0.0f32;
+    for (p, n, got) in &texels {
+        let axis = n.abs().max_position();
+        assert!(n.abs()[axis] > 0.999, "a cube face normal is an axis: {n}");
+        per_axis[axis] += 1;
+        let q = surfsynth::kernels::triplanar::projections(*p, 2.0)[axis];
+        let want = tiled(&exemplar, q);
+        for c in 0..3 {
+            worst = worst.max((got[c] - want[c]).abs());
+        }
+    }
+    assert!(
+        per_axis.iter().all(|&n| n > 10_000),
+        "texels per axis {per_axis:?}"
+    );
+    assert!(
+        worst < 1e-3,
+        "largest difference to the face's projection: {worst}"
+    );
+}

@@ -25,6 +25,7 @@ pub mod simd_state;
 pub mod sqrt2;
 pub mod surface_sample;
 pub mod sweep;
+pub mod triplanar;
 pub mod vertex_colours_from_uvs;
 pub mod vertex_order;
 pub mod wl_match;

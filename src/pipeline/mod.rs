@@ -55,7 +55,8 @@ impl std::fmt::Debug for Pipeline {
 
 /// Stage parameters that name a file, by stage kind: resolved by the path
 /// rule of [`ConfigSource`] before the stage parses its settings.
-const STAGE_PATH_PARAMS: &[(&str, &str)] = &[("lapped_paste", "mask_image")];
+const STAGE_PATH_PARAMS: &[(&str, &str)] =
+    &[("lapped_paste", "mask_image"), ("triplanar", "image")];
 
 /// Replaces each path-valued parameter of stage `index` (1-based) by the
 /// path resolved against the config's folder (or the current directory for

@@ -29,6 +29,9 @@ pub enum Datum {
     /// The `bake` stage's UV atlas of the original mesh (export formats
     /// `glb`, `baked_obj`).
     BakedAtlas,
+    /// A triplanar projection of an image (`triplanar`), evaluated per
+    /// texel by `bake`.
+    Triplanar,
 }
 
 impl Datum {
@@ -44,6 +47,7 @@ impl Datum {
             Datum::Patches => "lapped-texture pastes",
             Datum::FaceField => "a per-face tangent field",
             Datum::Image => "a synthesised image",
+            Datum::Triplanar => "a triplanar projection",
             Datum::BakedAtlas => "the `bake` stage's atlas (export formats `glb`, `baked_obj`)",
         }
     }
@@ -256,6 +260,7 @@ pub fn registry() -> Vec<StageInfo> {
         entry::<export::Export>(),
         entry::<displace::Displace>(),
         entry::<bake::Bake>(),
+        entry::<triplanar::Triplanar>(),
     ]
 }
 

@@ -21,5 +21,6 @@ pub mod result_metrics;
 pub mod retile;
 pub mod subdivide_sqrt2;
 pub mod tangent_field;
+pub mod triplanar;
 pub mod wl_match;
 pub mod world;

@@ -359,6 +359,19 @@ pub struct ExportJob {
     pub plane: Option<PlaneImage>,
 }
 
+/// A triplanar projection (stage `triplanar`): `image` repeated along the
+/// three world axes at `texels_per_unit`, blended by `|n_axis|^sharpness`
+/// ([`crate::kernels::triplanar`]). `bake` evaluates it per texel.
+#[derive(Resource, Clone, Debug)]
+pub struct TriplanarProjection {
+    /// The projected image (a tile).
+    pub image: Image,
+    /// Image pixels per world unit.
+    pub texels_per_unit: f32,
+    /// The blend exponent.
+    pub sharpness: f32,
+}
+
 /// The result as an image (the `export` format `plane`): the active result
 /// sampled at one pixel per pixel over the xy bounding box of a mesh that is
 /// flat in xy, or a `jump_image` result itself. Inserted by the `export`

@@ -3,6 +3,7 @@
 //! loaded mesh (exported by `export` as `glb` or `baked_obj`).
 //!
 //! What is baked, by what the result holds (first match):
+//! 0. a triplanar projection (stage `triplanar`) — evaluated per texel;
 //! 1. lapped-texture pastes on the original mesh — composited in paste order;
 //! 2. per-corner UVs on the original mesh — with the jump-map 3-way blend
 //!    when `jump_surface` made blend layers;
@@ -26,6 +27,7 @@ use crate::kernels::atlas::{
 };
 use crate::kernels::jump_surface::Blend;
 use crate::kernels::retile::SurfaceProjector;
+use crate::kernels::triplanar::TriplanarSource;
 use crate::mesh::PolyMesh;
 use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
@@ -186,6 +188,7 @@ impl Stage for Bake {
                exemplar: Res<Exemplar>,
                spacing: Res<TexelSpacing>,
                texture_scale: Option<Res<TextureScale>>,
+               triplanar: Option<Res<TriplanarProjection>>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>,
                sources: Query<Entity, With<SourceMesh>>,
@@ -216,6 +219,7 @@ impl Stage for Bake {
                 channels: channels.as_deref(),
                 patches,
                 origins,
+                triplanar: triplanar.as_deref(),
                 texels_per_unit: texture_scale
                     .as_deref()
                     .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| {
@@ -260,6 +264,9 @@ struct BakeInputs<'a> {
     patches: &'a [Image],
     /// Per patch, the exemplar pixel of its top-left pixel (lapped).
     origins: &'a [[i64; 2]],
+    /// A triplanar projection (stage `triplanar`), baked before any other
+    /// result.
+    triplanar: Option<&'a TriplanarProjection>,
     /// The run's exemplar texels per world unit, for coordinates of a
     /// result that records no per-vertex scale.
     texels_per_unit: f32,
@@ -338,7 +345,39 @@ fn bake_world(
     // without recorded source texels have none.
     let mut maps_note = "";
     let method;
-    let (colour, baked_maps) = if !lapped.is_empty() {
+    let (colour, baked_maps) = if let Some(tp) = inputs.triplanar {
+        method = "triplanar";
+        let frames = frames();
+        let normals = crate::kernels::triplanar::crease_corner_normals(&mesh.positions, &tris);
+        let src = TriplanarSource {
+            positions: &mesh.positions,
+            normals: &normals,
+            tris: &tris,
+            frames: &frames,
+            texels_per_unit: tp.texels_per_unit,
+            sharpness: tp.sharpness,
+            image_size: Vec2::new(tp.image.width as f32, tp.image.height as f32),
+        };
+        // The exemplar's maps follow only a projection of the exemplar
+        // itself (the same pixels).
+        let same_image = tp.image.width == exemplar.image.width
+            && tp.image.height == exemplar.image.height
+            && tp.image.data == exemplar.image.data;
+        if !maps.is_empty() && !same_image {
+            maps_note = "the triplanar image is not the exemplar: maps are not baked";
+            maps.clear();
+            roles.clear();
+        }
+        bake_channels_with_progress(
+            &target,
+            &src as &dyn ContributionSource,
+            &[&tp.image],
+            crate::image::sample::Wrap::Repeat,
+            &maps,
+            &[],
+            &progress,
+        )
+    } else if !lapped.is_empty() {
         if !on_source {
             return Err("the lapped pastes lie on a mesh other than the loaded one; bake needs them on the original mesh (no retile before lapped_paste)".into());
         }
@@ -503,7 +542,7 @@ fn bake_world(
             &progress,
         )
     } else {
-        return Err("the result has nothing to bake: no vertex colours, per-corner UVs or lapped pastes; put `bake` after a synthesis stage".into());
+        return Err("the result has nothing to bake: no vertex colours, per-corner UVs, lapped pastes or triplanar projection; put `bake` after a synthesis stage or `triplanar`".into());
     };
     progress.finish();
     drop(texel_face);
