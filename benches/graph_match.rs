@@ -41,8 +41,7 @@ fn quad_grid(n: usize, edge: f32) -> PolyMesh {
 }
 
 fn exemplar() -> Image {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/water.png");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/water.png");
     surfsynth::image::load_image(&path).unwrap_or_else(|_| {
         surfsynth::image::builtin_exemplar("noise", &Default::default()).expect("builtin exemplar")
     })

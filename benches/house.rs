@@ -12,9 +12,7 @@ use surfsynth::output::render::{RenderOptions, Shading, render_views};
 use surfsynth::pipeline::{Pipeline, RunOptions, run};
 
 fn data_file(rel: &str) -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(rel)
 }
 
 fn house(c: &mut Criterion) {

@@ -29,8 +29,7 @@ use surfsynth::mesh::PolyMesh;
 use surfsynth::progress::Progress;
 
 fn bunny() -> PolyMesh {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("data/meshes/bunny_1k8.obj");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes/bunny_1k8.obj");
     surfsynth::mesh::load_mesh(&path, &Default::default())
         .expect("data/meshes/bunny_1k8.obj")
         .0

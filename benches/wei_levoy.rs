@@ -52,8 +52,7 @@ use surfsynth::mesh::{PolyMesh, Topology};
 /// The 64² exemplar: the top-left of the shared stones photograph, or the
 /// builtin bricks when the shared data is not beside the clone.
 fn exemplar() -> Image {
-    let path =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/stones.png");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/textures/stones.png");
     match load_image(&path) {
         Ok(img) => {
             let mut out = Image::new(64, 64, img.channels);

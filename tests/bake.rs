@@ -25,9 +25,12 @@ use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::world::*;
 
 fn load(name: &str) -> PolyMesh {
-    load_mesh(&data_file(&format!("meshes/{name}")), &LoadOptions::default())
-        .unwrap_or_else(|e| panic!("{name}: {e}"))
-        .0
+    load_mesh(
+        &data_file(&format!("meshes/{name}")),
+        &LoadOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    .0
 }
 
 fn triangles(mesh: &PolyMesh) -> Vec<[u32; 3]> {

@@ -409,8 +409,9 @@ fn plane_image(mesh: &PolyMesh, st: &SynthesisState) -> Image {
 fn gate_plane(textures: &[&str]) {
     let mut results = Vec::new();
     for &name in textures {
-        let full = surfsynth::image::load_image(&common::data_file(&format!("textures/{name}.png")))
-            .unwrap_or_else(|e| panic!("shared texture {name}: {e}"));
+        let full =
+            surfsynth::image::load_image(&common::data_file(&format!("textures/{name}.png")))
+                .unwrap_or_else(|e| panic!("shared texture {name}: {e}"));
         let ex = common::gates::to_rgb(&common::gates::crop(&full, 32, 32, 64, 64));
         let peer = common::gates::peer_quality(&ex, GATE_SIDE, GATE_SIDE);
         for graph_cut in [false, true] {

@@ -38,9 +38,12 @@ const SHARED_CLOSED: [&str; 5] = [
 ];
 
 fn load(name: &str) -> PolyMesh {
-    load_mesh(&data_file(&format!("meshes/{name}")), &LoadOptions::default())
-        .unwrap_or_else(|e| panic!("{name}: {e}"))
-        .0
+    load_mesh(
+        &data_file(&format!("meshes/{name}")),
+        &LoadOptions::default(),
+    )
+    .unwrap_or_else(|e| panic!("{name}: {e}"))
+    .0
 }
 
 fn diagonal(m: &PolyMesh) -> f32 {

@@ -2,8 +2,8 @@
 //! back correctly and is reproducible at one thread.
 
 mod common;
-use common::peer::peer_synthesis;
 use common::data_file;
+use common::peer::peer_synthesis;
 use surfsynth::image::{Image, load_image};
 
 /// The top-left `side`² block of a shared texture (small, so the test is fast).

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{bin, files_under, run_cli, data_file};
+use common::{bin, data_file, files_under, run_cli};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Stdio};
@@ -433,7 +433,10 @@ fn sweep_run_folders_stay_complete_and_a_timed_out_run_leaves_no_temporary() {
 
     // A run killed on its timeout after it began writing.
     let slow = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/plane/wei_levoy.toml");
-    let exemplar = format!("input.exemplar={}", data_file("textures/stones.png").display());
+    let exemplar = format!(
+        "input.exemplar={}",
+        data_file("textures/stones.png").display()
+    );
     let out = dir.path().join("slow");
     let (code, _, stderr) = run_cli(&[
         "sweep",

@@ -475,10 +475,7 @@ kind = "init_colours"
         .unwrap();
         let raw = src.parse().unwrap();
         assert_eq!(raw.seed, 3);
-        assert_eq!(
-            raw.input.mesh.as_deref(),
-            Some("data/meshes/knot.off")
-        );
+        assert_eq!(raw.input.mesh.as_deref(), Some("data/meshes/knot.off"));
         assert_eq!(raw.input.mesh_options["subdivisions"].as_integer(), Some(2));
         let mode = raw.stage[0]
             .get_ref()

@@ -9,6 +9,9 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The 3D viewer page a run writes beside its `result.glb`.
+pub const VIEWER: &str = "view.html";
+
 /// One run folder, read back.
 #[derive(Clone, Debug)]
 pub struct RunRow {
@@ -32,6 +35,8 @@ pub struct RunRow {
     pub previews: Vec<String>,
     /// Last lines of the log of a failed run.
     pub log_tail: Vec<String>,
+    /// `<name>/view.html`, the run's 3D viewer, when the folder holds one.
+    pub viewer: Option<String>,
 }
 
 /// A metric column: sorted by group, then stage index, then name.
@@ -110,6 +115,10 @@ fn read_row(dir: &Path, record: RunRecord) -> RunRow {
         })
         .collect();
     previews.sort();
+    let viewer = dir
+        .join(VIEWER)
+        .is_file()
+        .then(|| format!("{name}/{VIEWER}"));
     RunRow {
         index: record.index,
         status: status.to_string(),
@@ -122,6 +131,7 @@ fn read_row(dir: &Path, record: RunRecord) -> RunRow {
         log_tail: completion.map(|c| c.log_tail).unwrap_or_default(),
         metrics,
         previews,
+        viewer,
         name,
     }
 }
@@ -357,6 +367,7 @@ pub fn to_json(rows: &[RunRow], t: &Table, record: Option<&SweepRecord>) -> Valu
                 "overrides": overrides,
                 "metrics": metrics,
                 "previews": r.previews,
+                "viewer": r.viewer,
                 "log": format!("{}/{LOG}", r.name),
                 "log_tail": r.log_tail,
             })
@@ -454,6 +465,7 @@ mod tests {
             metrics: flatten_metrics(&m),
             previews: vec![],
             log_tail: vec![],
+            viewer: None,
         };
         let t = table(std::slice::from_ref(&row));
         assert_eq!(

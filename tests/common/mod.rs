@@ -17,9 +17,7 @@ pub fn bin() -> Command {
 /// (`data/meshes/...`, `data/textures/...`; sources and licences in
 /// `data/README.md`).
 pub fn data_file(rel: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("data")
-        .join(rel)
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(rel)
 }
 
 /// Runs the CLI, returning (exit code, stdout, stderr).
