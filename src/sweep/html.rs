@@ -111,11 +111,12 @@ h1 { font-size: 1.25em; margin: 0 0 .2em; }
 .exemplars figcaption { font-size: 11px; color: #555; max-width: 140px; overflow-wrap: anywhere; }
 .hint { color: #777; font-size: 12px; margin-top: .2em; }
 .hint b { color: #444; }
-.chooser { position: relative; display: inline-block; margin-top: .3em; }
+.top { position: relative; }
+.chooser { display: inline-block; margin-top: .3em; }
 .chooser summary { cursor: pointer; color: #1a4fa0; }
-.chooser .panel { position: absolute; z-index: 20; top: 1.6em; left: 0; background: #fff; border: 1px solid #bbb;
-  box-shadow: 0 4px 14px rgba(0,0,0,.2); padding: .5em .8em; max-height: 70vh; overflow: auto;
-  display: flex; gap: 1.2em; align-items: flex-start; width: max-content; max-width: 90vw; flex-wrap: wrap; }
+.chooser .panel { position: absolute; z-index: 20; top: 100%; left: 1em; right: 1em; background: #fff;
+  border: 1px solid #bbb; box-shadow: 0 4px 14px rgba(0,0,0,.2); padding: .5em .8em; max-height: 70vh;
+  overflow: auto; display: flex; gap: .8em 1.2em; align-items: flex-start; flex-wrap: wrap; }
 .chooser fieldset { border: 0; border-left: 3px solid #ddd; margin: 0; padding: 0 .6em; max-width: 22em; }
 .chooser legend { font-weight: bold; padding: 0; }
 .chooser label { display: block; white-space: nowrap; overflow: hidden; text-overflow: ellipsis; }
@@ -134,7 +135,7 @@ th .unit { display: block; font-weight: normal; color: #777; font-size: 11px; }
 th .dir { color: #1a7f37; font-weight: bold; white-space: nowrap; }
 th.asc::after { content: " \25B2"; } th.desc::after { content: " \25BC"; }
 th.gs, td.gs { border-left: 2px solid #999; }
-.c-run { position: sticky; left: 0; z-index: 2; min-width: 9em; max-width: 13em; white-space: normal;
+.c-run { position: sticky; left: 0; z-index: 2; min-width: 11.5em; max-width: 13em; white-space: normal;
   overflow-wrap: anywhere; }
 .c-prev { position: sticky; left: var(--prev-left, 13em); z-index: 2; box-shadow: 3px 0 4px -2px rgba(0,0,0,.25); }
 th.c-run, th.c-prev { z-index: 4; }
@@ -145,7 +146,8 @@ tr.failed td { background: #fff0f0; } tr.incomplete td { background: #fffbe6; }
 tbody tr:hover td { background: #eef4ff; }
 a.v3d { display: inline-block; margin-left: .3em; padding: 0 .35em; border-radius: 3px; background: #1a4fa0;
   color: #fff; font-size: 11px; font-weight: bold; text-decoration: none; }
-.badge { display: inline-block; margin-left: .3em; color: #b00020; font-weight: bold; }
+.badge { color: #b00020; font-weight: bold; }
+.why { color: #b00020; font-size: 11px; }
 details.log pre { margin: .3em 0 0; font-size: 11px; white-space: pre-wrap; max-width: 40em; }
 "#;
 
@@ -341,7 +343,7 @@ impl Column {
             let _ = write!(out, "<span class=\"pre\">{}</span>", escape(&prefix));
         }
         // Break long names after dots.
-        out.push_str(&escape(&name).replace('.', ".<wbr>"));
+        out.push_str(&breakable(&name));
         if !mark.is_empty() {
             let _ = write!(out, " <span class=\"dir\">{}</span>", escape(&mark));
         }
@@ -471,11 +473,27 @@ fn chooser(out: &mut String, cols: &[Column]) {
     out.push_str("</style>\n");
 }
 
+/// Escaped text that may wrap after `.`, `_` and `=` unless a digit
+/// follows (long dotted keys and run names; `0.2` stays whole).
+fn breakable(text: &str) -> String {
+    let mut out = String::with_capacity(text.len() * 2);
+    let mut chars = text.chars().peekable();
+    while let Some(c) = chars.next() {
+        out.push_str(&escape(c.encode_utf8(&mut [0; 4])));
+        let next = chars.peek().copied();
+        if matches!(c, '.' | '_' | '=') && next.is_some_and(|n| !n.is_ascii_digit() && n != '_') {
+            out.push_str("<wbr>");
+        }
+    }
+    out
+}
+
 /// The run cell: folder link, 3D viewer link, status badge and log.
 fn run_cell(out: &mut String, r: &RunRow) {
     let _ = write!(
         out,
-        "<td class=\"c-run\" data-v=\"{n}\"><a href=\"{u}/\">{n}</a>",
+        "<td class=\"c-run\" data-v=\"{n}\"><a href=\"{u}/\">{}</a>",
+        breakable(&r.name),
         n = escape(&r.name),
         u = escape(&url_path(&r.name))
     );
@@ -487,7 +505,12 @@ fn run_cell(out: &mut String, r: &RunRow) {
         );
     }
     if r.status != "ok" {
-        let _ = write!(out, "<span class=\"badge\">{}</span>", escape(&r.status));
+        let _ = write!(
+            out,
+            " <span class=\"badge\">{}</span> <span class=\"why\">{}</span>",
+            escape(&r.status),
+            escape(&r.reason)
+        );
     }
     if !r.log_tail.is_empty() || r.status != "ok" {
         let _ = write!(
