@@ -1,7 +1,15 @@
 //! `index.html`: one self-contained page (inline CSS and JS, no network)
 //! with the exemplar, every run's previews as thumbnails linking to the
-//! full images, and the metrics in a table that sorts by any column header
+//! full images, a link to each run's 3D viewer (`view.html`) when its folder
+//! holds one, and the metrics in a table that sorts by any column header
 //! (numerically when every value of the column is a number).
+//!
+//! The table scrolls inside a box the size of the window, with the header
+//! row and the run and thumbnail columns sticky. Columns run: swept
+//! parameters, quality measures, time and memory, the rest; each header
+//! carries its unit and which way is better ([`super::columns`]). A column
+//! chooser shows a default set that fits a laptop screen; the reader's
+//! choice is kept in the URL hash (`#cols=+key,-key`) and in localStorage.
 
 use super::SweepRecord;
 use super::columns::{ColumnMeta, Group, column_meta, group, label, page_order, shown_by_default};
@@ -352,13 +360,13 @@ impl Column {
 }
 
 /// The columns after `run`, in page order.
-fn columns(t: &Table) -> Vec<Column> {
+fn columns(t: &Table, any_previews: bool) -> Vec<Column> {
     let mut cols = vec![Column {
         key: "previews".into(),
         source: Source::Previews,
         group: Group::Run,
         meta: None,
-        shown: true,
+        shown: any_previews,
     }];
     cols.extend(t.override_columns.iter().map(|p| Column {
         key: p.clone(),
@@ -598,7 +606,7 @@ pub fn render(
          docs/metrics.md explains the measures. Thumbnails open the full image, a run name its folder, \
          <b>3D</b> its viewer. summary.csv and summary.json hold every column.</div>\n",
     );
-    let cols = columns(t);
+    let cols = columns(t, rows.iter().any(|r| !r.previews.is_empty()));
     chooser(&mut s, &cols);
     s.push_str("</div>\n</div>\n");
     s.push_str("<div class=\"wrap\"><table id=\"runs\">\n<thead><tr>");
@@ -738,7 +746,7 @@ mod tests {
                 wall_seconds: Some(2.0),
                 overrides: vec![("seed".into(), "1".into())],
                 metrics: super::super::summary::flatten_metrics(&m),
-                previews: vec![],
+                previews: vec![format!("{name}/preview_0.png")],
                 log_tail: vec![],
                 viewer: viewer.then(|| format!("{name}/view.html")),
             }

@@ -9,6 +9,10 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The result images shown as thumbnails of a run without `preview*.png`:
+/// the planar result, the jump-map image.
+pub const RESULT_IMAGES: [&str; 2] = ["plane.png", "jump_image.png"];
+
 /// The 3D viewer page a run writes beside its `result.glb`.
 pub const VIEWER: &str = "view.html";
 
@@ -31,7 +35,9 @@ pub struct RunRow {
     pub overrides: Vec<(String, String)>,
     /// Flattened metrics, keyed by [`MetricKey`].
     pub metrics: Vec<(MetricKey, Value)>,
-    /// Preview images, paths relative to the sweep folder.
+    /// Preview images (`preview*.png`, else the result image of a run that
+    /// has no shaded views: [`RESULT_IMAGES`]), paths relative to the sweep
+    /// folder.
     pub previews: Vec<String>,
     /// Last lines of the log of a failed run.
     pub log_tail: Vec<String>,
@@ -115,6 +121,15 @@ fn read_row(dir: &Path, record: RunRecord) -> RunRow {
         })
         .collect();
     previews.sort();
+    if previews.is_empty() {
+        // Runs without shaded views: their result image, when they wrote one.
+        previews.extend(
+            RESULT_IMAGES
+                .iter()
+                .filter(|f| dir.join(f).is_file())
+                .map(|f| format!("{name}/{f}")),
+        );
+    }
     let viewer = dir
         .join(VIEWER)
         .is_file()
