@@ -423,9 +423,7 @@ fn best_value(col: &Column, rows: &[RunRow]) -> Option<f64> {
     Some(best)
 }
 
-/// The column chooser: one checkbox per column, grouped, and a style
-/// element hiding the columns not shown by default (the script keeps it
-/// in step with the boxes).
+/// The column chooser: one checkbox per column, grouped.
 fn chooser(out: &mut String, cols: &[Column]) {
     let shown = 1 + cols.iter().filter(|c| c.shown).count();
     let _ = write!(
@@ -474,7 +472,13 @@ fn chooser(out: &mut String, cols: &[Column]) {
         }
         out.push_str("</fieldset>");
     }
-    out.push_str("</div></details>\n<style id=\"colvis\">");
+    out.push_str("</div></details>\n");
+}
+
+/// A style element (for the head) hiding the columns not shown by default;
+/// the script keeps it in step with the chooser's boxes.
+fn hidden_columns_style(out: &mut String, cols: &[Column]) {
+    out.push_str("<style id=\"colvis\">\n");
     for (i, _) in cols.iter().enumerate().filter(|(_, c)| !c.shown) {
         let _ = writeln!(out, "#runs tr > :nth-child({}) {{ display: none; }}", i + 2);
     }
@@ -547,9 +551,12 @@ pub fn render(
         s,
         "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
          <meta name=\"viewport\" content=\"width=device-width, initial-scale=1\">\n\
-         <title>{}</title>\n<style>{STYLE}</style>\n</head>\n<body>\n<div class=\"top\">\n",
+         <title>{}</title>\n<style>{STYLE}</style>\n",
         escape(&title),
     );
+    let cols = columns(t, rows.iter().any(|r| !r.previews.is_empty()));
+    hidden_columns_style(&mut s, &cols);
+    s.push_str("</head>\n<body>\n<div class=\"top\">\n");
     if !exemplars.is_empty() {
         s.push_str("<div class=\"exemplars\">\n");
         for (file, caption) in exemplars {
@@ -606,7 +613,6 @@ pub fn render(
          docs/metrics.md explains the measures. Thumbnails open the full image, a run name its folder, \
          <b>3D</b> its viewer. summary.csv and summary.json hold every column.</div>\n",
     );
-    let cols = columns(t, rows.iter().any(|r| !r.previews.is_empty()));
     chooser(&mut s, &cols);
     s.push_str("</div>\n</div>\n");
     s.push_str("<div class=\"wrap\"><table id=\"runs\">\n<thead><tr>");
@@ -826,6 +832,7 @@ mod tests {
         // The chooser: a checkbox per column after `run`, grouped; the
         // defaults hide the rest with one rule each.
         assert!(page.contains("<details class=\"chooser\">"));
+        assert!(page.find("<style id=\"colvis\">").unwrap() < page.find("</head>").unwrap());
         for g in ["parameters", "quality", "time &amp; memory", "other"] {
             assert!(page.contains(&format!("<legend>{g}</legend>")), "{g}");
         }
