@@ -240,6 +240,26 @@ fn grid_2x2_gives_four_folders_a_csv_of_four_rows_and_a_page_with_their_previews
     );
     assert_eq!(json["sweep"]["last_invocation"]["ran"], 4);
     assert!(!html.contains("http://") && !html.contains("https://"));
+    // Quality columns come before time columns; no run has a 3D viewer yet.
+    let at = |key: &str| html.find(&format!("data-key=\"{key}\"")).unwrap();
+    assert!(at("quality.coherence.mean") < at("run_seconds"));
+    assert!(!html.contains("class=\"v3d\""));
+
+    // A run folder holding view.html gets a 3D link in the rebuilt page.
+    std::fs::write(
+        s.out.join("seed=2__stage.3.scale=20/view.html"),
+        "<!DOCTYPE html>",
+    )
+    .unwrap();
+    let (code, _, stderr) = run_cli(&["sweep", "--summarise", s.out.to_str().unwrap()]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = std::fs::read_to_string(s.out.join("index.html")).unwrap();
+    assert_eq!(html.matches("class=\"v3d\"").count(), 1);
+    assert!(html.contains("class=\"v3d\" href=\"seed%3D2__stage.3.scale%3D20/view.html\""));
+    assert_eq!(
+        s.summary_json()["runs"][2]["viewer"],
+        "seed=2__stage.3.scale=20/view.html"
+    );
 }
 
 #[test]

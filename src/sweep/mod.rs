@@ -6,6 +6,7 @@
 //! * [`plan`]: grid parsing, the run list, folder names, shards.
 //! * [`execute`]: the worker pool of child processes, completion markers.
 //! * [`summary`]: reading the run folders back, flattening `metrics.json`.
+//! * [`columns`]: each column's unit, direction and group on the page.
 //! * [`html`]: the report page.
 //!
 //! Layout of a sweep folder `DIR`:
@@ -19,9 +20,10 @@
 //! DIR/<name>/log.txt          the child's command line, stdout, stderr, exit status
 //! DIR/<name>/done.json        completion marker, written last (exit 0 only)
 //! DIR/<name>/failed.json      exit status and log tail of a failed run
-//! DIR/<name>/...              the run's own outputs (metrics.json, preview_*.png, ...)
+//! DIR/<name>/...              the run's own outputs (metrics.json, preview_*.png, view.html linked from the page, ...)
 //! ```
 
+pub mod columns;
 pub mod execute;
 pub mod html;
 pub mod plan;

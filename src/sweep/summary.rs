@@ -9,6 +9,13 @@ use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// The result images shown as thumbnails of a run without `preview*.png`:
+/// the planar result, the jump-map image.
+pub const RESULT_IMAGES: [&str; 2] = ["plane.png", "jump_image.png"];
+
+/// The 3D viewer page a run writes beside its `result.glb`.
+pub const VIEWER: &str = "view.html";
+
 /// One run folder, read back.
 #[derive(Clone, Debug)]
 pub struct RunRow {
@@ -28,10 +35,14 @@ pub struct RunRow {
     pub overrides: Vec<(String, String)>,
     /// Flattened metrics, keyed by [`MetricKey`].
     pub metrics: Vec<(MetricKey, Value)>,
-    /// Preview images, paths relative to the sweep folder.
+    /// Preview images (`preview*.png`, else the result image of a run that
+    /// has no shaded views: [`RESULT_IMAGES`]), paths relative to the sweep
+    /// folder.
     pub previews: Vec<String>,
     /// Last lines of the log of a failed run.
     pub log_tail: Vec<String>,
+    /// `<name>/view.html`, the run's 3D viewer, when the folder holds one.
+    pub viewer: Option<String>,
 }
 
 /// A metric column: sorted by group, then stage index, then name.
@@ -110,6 +121,19 @@ fn read_row(dir: &Path, record: RunRecord) -> RunRow {
         })
         .collect();
     previews.sort();
+    if previews.is_empty() {
+        // Runs without shaded views: their result image, when they wrote one.
+        previews.extend(
+            RESULT_IMAGES
+                .iter()
+                .filter(|f| dir.join(f).is_file())
+                .map(|f| format!("{name}/{f}")),
+        );
+    }
+    let viewer = dir
+        .join(VIEWER)
+        .is_file()
+        .then(|| format!("{name}/{VIEWER}"));
     RunRow {
         index: record.index,
         status: status.to_string(),
@@ -122,6 +146,7 @@ fn read_row(dir: &Path, record: RunRecord) -> RunRow {
         log_tail: completion.map(|c| c.log_tail).unwrap_or_default(),
         metrics,
         previews,
+        viewer,
         name,
     }
 }
@@ -357,6 +382,7 @@ pub fn to_json(rows: &[RunRow], t: &Table, record: Option<&SweepRecord>) -> Valu
                 "overrides": overrides,
                 "metrics": metrics,
                 "previews": r.previews,
+                "viewer": r.viewer,
                 "log": format!("{}/{LOG}", r.name),
                 "log_tail": r.log_tail,
             })
@@ -454,6 +480,7 @@ mod tests {
             metrics: flatten_metrics(&m),
             previews: vec![],
             log_tail: vec![],
+            viewer: None,
         };
         let t = table(std::slice::from_ref(&row));
         assert_eq!(
