@@ -801,3 +801,56 @@ fn timing() {
         );
     }
 }
+
+/// Issue 40: `Shading::Coordinates` continues each vertex's exemplar
+/// coordinate through its frame. On a jittered plane whose vertices all
+/// carry the coordinates of one coherent mapping (x right, y up, 10 texels
+/// per unit), the three continued look-ups agree everywhere, so the drawing
+/// equals the same mapping given as per-corner texture coordinates.
+#[test]
+fn coordinate_shading_continues_vertex_coordinates_through_their_frames() {
+    let opts = surfsynth::mesh::builtin::BuiltinOptions {
+        resolution: [5, 5],
+        size: 2.0,
+        jitter: 0.2,
+        ..Default::default()
+    };
+    let mesh = surfsynth::mesh::builtin::builtin_mesh("jittered_plane", &opts).unwrap();
+    let texture = checker();
+    let size = Vec2::new(texture.width as f32, texture.height as f32);
+    let scale = 10.0f32;
+    let origin = Vec2::new(3.0, 5.0);
+    // Image x = world x, image y = −world y (image rows grow downwards).
+    let coordinate = |p: Vec3| origin + Vec2::new(p.x, -p.y) * scale;
+    let sources: Vec<Vec2> = mesh.positions.iter().map(|&p| coordinate(p)).collect();
+    let frames = vec![
+        surfsynth::kernels::frames::TangentFrame::from_direction(Vec3::Z, Vec3::X);
+        mesh.vertex_count()
+    ];
+    let uvs: Vec<Vec2> = mesh
+        .corner_vertex
+        .iter()
+        .map(|&v| coordinate(mesh.positions[v as usize]) / size)
+        .collect();
+    let options = RenderOptions::default();
+    let draw = |shading: &Shading| render(&mesh, shading, &FRONT, 96, &options);
+    let by_coordinates = draw(&Shading::Coordinates {
+        sources: &sources,
+        frames: &frames,
+        texels_per_unit: &[scale],
+        texture: &texture,
+        wrap: Wrap::Repeat,
+    });
+    let by_uvs = draw(&Shading::CornerUvs {
+        uvs: &uvs,
+        texture: &texture,
+        wrap: Wrap::Repeat,
+    });
+    let worst = by_coordinates
+        .data
+        .iter()
+        .zip(&by_uvs.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-3, "largest difference {worst}");
+}

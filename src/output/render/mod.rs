@@ -119,6 +119,19 @@ pub enum Shading<'a> {
         texture: &'a Image,
         wrap: Wrap,
     },
+    /// A per-vertex result read at the exemplar's resolution: at every pixel
+    /// each vertex of the triangle continues its source coordinate
+    /// (`sources`, exemplar pixels) through its tangent frame to the pixel's
+    /// surface point at `texels_per_unit` (one value for all vertices, or
+    /// one per vertex), and the three look-ups are blended barycentrically —
+    /// what `bake` does with `colours = "coordinates"`.
+    Coordinates {
+        sources: &'a [Vec2],
+        frames: &'a [crate::kernels::frames::TangentFrame],
+        texels_per_unit: &'a [f32],
+        texture: &'a Image,
+        wrap: Wrap,
+    },
     /// Lapped-texture layers, composited in order (later ones on top) with
     /// alpha blending over the base colour.
     ///
@@ -268,6 +281,25 @@ impl Shading<'_> {
             Shading::CornerUvs { uvs, texture, .. } => {
                 check_texture("texture", texture)?;
                 check_length("corner uvs", mesh.corner_count(), uvs.len())
+            }
+            Shading::Coordinates {
+                sources,
+                frames,
+                texels_per_unit,
+                texture,
+                ..
+            } => {
+                check_texture("texture", texture)?;
+                check_length("source coordinates", mesh.vertex_count(), sources.len())?;
+                check_length("frames", mesh.vertex_count(), frames.len())?;
+                if texels_per_unit.len() != 1 {
+                    check_length(
+                        "texels per unit",
+                        mesh.vertex_count(),
+                        texels_per_unit.len(),
+                    )?;
+                }
+                Ok(())
             }
             Shading::BlendedUvs {
                 layers, texture, ..

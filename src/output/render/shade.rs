@@ -329,6 +329,31 @@ impl<'a> Scene<'a> {
                 let uv = uvs[c[0]] * b[0] + uvs[c[1]] * b[1] + uvs[c[2]] * b[2];
                 over(base, sample(texture, uv, wrap))
             }
+            Shading::Coordinates {
+                sources,
+                frames,
+                texels_per_unit,
+                texture,
+                wrap,
+            } => {
+                let v = c.map(|c| self.mesh.corner_vertex[c] as usize);
+                let p: Vec3 = (0..3).map(|i| self.mesh.positions[v[i]] * b[i]).sum();
+                let size = Vec2::new(texture.width as f32, texture.height as f32);
+                let mut rgba = [0.0f32; 4];
+                for i in 0..3 {
+                    let scale = match texels_per_unit {
+                        [one] => *one,
+                        all => all[v[i]],
+                    };
+                    let q = sources[v[i]]
+                        + frames[v[i]].texel_offset(p - self.mesh.positions[v[i]], scale);
+                    let col = sample(texture, q / size, wrap);
+                    for k in 0..4 {
+                        rgba[k] += b[i] * col[k];
+                    }
+                }
+                over(base, rgba)
+            }
             Shading::BlendedUvs {
                 layers,
                 texture,

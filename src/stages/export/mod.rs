@@ -272,6 +272,20 @@ impl Stage for Export {
                 && lapped
                     .iter()
                     .all(|p| (p.2.0 as usize) < patch_textures.len());
+            // A per-vertex result's exemplar coordinates, frames and scale
+            // (texels per unit: per vertex, or the run's), where recorded.
+            let n = mesh.vertex_count();
+            let run_scale = texture_scale.as_deref().map(|t| [t.texels_per_unit]);
+            let coordinates = match (source_texels, frames) {
+                (Some(st), Some(f)) if st.0.len() == n && f.0.len() == n => {
+                    let scale: Option<&[f32]> = match vertex_scale {
+                        Some(s) if s.0.len() == n => Some(&s.0),
+                        _ => run_scale.as_ref().map(|s| s.as_slice()),
+                    };
+                    scale.map(|scale| (st.0.as_slice(), f.0.as_slice(), scale))
+                }
+                _ => None,
+            };
             let plane_image = if settings.formats.iter().any(|f| f == "plane") {
                 let _span = tracing::info_span!("plane_image").entered();
                 let ex = &exemplar.image;
@@ -285,25 +299,16 @@ impl Stage for Export {
                     })
                     .collect();
                 let background = crate::image::pixel_rgb(&ex.mean());
-                let n = mesh.vertex_count();
-                let scale_of_run = texture_scale.as_deref().map(|t| [t.texels_per_unit]);
                 let wants_sources = settings.plane_colours == PlaneColours::Sources;
-                let coordinates = match (source_texels, frames) {
-                    (Some(st), Some(f)) if wants_sources && st.0.len() == n && f.0.len() == n => {
-                        let scale: Option<&[f32]> = match vertex_scale {
-                            Some(s) if s.0.len() == n => Some(&s.0),
-                            _ => scale_of_run.as_ref().map(|s| s.as_slice()),
-                        };
-                        scale.map(|scale| plane::PlaneSignal::Coordinates {
-                            sources: &st.0,
-                            frames: &f.0,
-                            scale,
-                            texture: ex,
-                            wrap: exemplar.wrap,
-                        })
-                    }
-                    _ => None,
-                };
+                let coordinates = coordinates.filter(|_| wants_sources).map(
+                    |(sources, frames, scale)| plane::PlaneSignal::Coordinates {
+                        sources,
+                        frames,
+                        scale,
+                        texture: ex,
+                        wrap: exemplar.wrap,
+                    },
+                );
                 let signal = match (uvs, colours) {
                     (Some(u), _) => Some(Ok(plane::PlaneSignal::Uvs {
                         uvs: &u.0,
@@ -376,6 +381,14 @@ impl Stage for Export {
                     Vec::new()
                 };
                 let blend_layers = blend.and_then(|b| b.of(mesh));
+                let coordinate_shading =
+                    coordinates.map(|(sources, frames, texels_per_unit)| Shading::Coordinates {
+                        sources,
+                        frames,
+                        texels_per_unit,
+                        texture: &exemplar.image,
+                        wrap: exemplar.wrap,
+                    });
                 let shading = match (uvs, colours, atlas) {
                     _ if lapped_ok => Shading::Layers(&layers),
                     _ if blend_layers.is_some() => Shading::BlendedUvs {
@@ -393,6 +406,11 @@ impl Stage for Export {
                         texture: &a.image,
                         wrap: crate::image::sample::Wrap::Clamp,
                     },
+                    // A per-vertex result with exemplar coordinates is
+                    // drawn at the exemplar's resolution, as `bake` reads it.
+                    (None, Some(_), None) if coordinate_shading.is_some() => {
+                        coordinate_shading.unwrap_or(Shading::Plain)
+                    }
                     (None, Some(c), None) => Shading::VertexColours {
                         values: &c.values,
                         channels: c.channels,
