@@ -2,7 +2,9 @@
 //! 2005) and histogram distance of the result against the exemplar, written
 //! to `metrics.json` under `result.quality`.
 //!
-//! The result is whichever signal the active mesh carries: per-corner UVs
+//! The result is what the run delivers: after a `bake`, the baked atlas on
+//! the original mesh (what `result.glb` shows, whatever the method);
+//! otherwise whichever signal the active mesh carries: per-corner UVs
 //! (jump maps), vertex colours (Wei–Levoy, Bangay–Morkel), or lapped-texture
 //! pastes (Praun et al.), which are composited in paste order with alpha at
 //! every template point (the renderer's compositing) and measured in the
@@ -61,7 +63,9 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
            meshes: ResultQuery,
            pastes: PasteQuery,
            patch_textures: Option<Res<TexturePatches>>,
-           plane: Option<Res<PlaneImage>>| {
+           plane: Option<Res<PlaneImage>>,
+           baked: Option<Res<BakedAsset>>,
+           source: Query<(&Geometry, Option<&Frames>), With<SourceMesh>>| {
         let _span = tracing::info_span!("result_metrics").entered();
         // Phases: plane image, composite, texture energy, quality,
         // histogram (about 1.1-1.5 s at a million vertices on 2 cores).
@@ -84,6 +88,19 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                     "skipped: exemplar smaller than the {n}x{n} metric neighbourhood"
                 )),
             );
+            return;
+        }
+        if let (Some(asset), Ok((source, source_frames))) = (baked.as_deref(), source.single()) {
+            baked_quality(
+                asset,
+                &source.0,
+                source_frames,
+                &exemplar.image,
+                spacing.0,
+                &settings,
+                &mut metrics,
+            );
+            progress.inc(4);
             return;
         }
         // Lapped pastes on the active mesh, in paste order.
@@ -166,13 +183,6 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             &exemplar.image,
             &settings,
         );
-        metrics.result.insert(
-            "texture_energy".into(),
-            serde_json::json!({
-                "mean": to_json(&stats.mean), "p90": to_json(&stats.p90), "samples": stats.samples,
-                "neighbourhood": n, "spacing_world_units": to_json(&spacing.0),
-            }),
-        );
         progress.inc(1);
         progress.set_part("quality");
         // The measures that see what the energy forgives (kernels/metrics).
@@ -191,24 +201,9 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             &settings,
             sources,
         );
-        let json = |v: f32| to_json(&v.is_finite().then_some(v));
-        metrics.result.insert(
-            "coherence".into(),
-            serde_json::json!({ "mean": to_json(&stats.mean), "p90": to_json(&stats.p90) }),
-        );
-        metrics
-            .result
-            .insert("completeness".into(), json(q.completeness));
-        metrics.result.insert("sharpness".into(), json(q.sharpness));
-        metrics.result.insert("structure".into(), json(q.structure));
-        metrics.result.insert(
-            "templates".into(),
-            serde_json::json!({ "small": to_json(&q.templates), "structure": to_json(&q.structure_templates) }),
-        );
+        record_surface_measures(&mut metrics, &stats, &q, n, spacing.0);
         if let Some(v) = q.verbatim {
-            metrics
-                .result
-                .insert("verbatim".into(), to_json(&v));
+            metrics.result.insert("verbatim".into(), to_json(&v));
         }
         progress.inc(1);
         progress.set_part("histogram");
@@ -235,14 +230,91 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                 metrics
                     .result
                     .insert("histogram_wasserstein".into(), to_json(&w));
-                metrics
-                    .result
-                    .insert("histogram".into(), to_json(&mean));
+                metrics.result.insert("histogram".into(), to_json(&mean));
             }
         }
         progress.inc(1);
     })
     .into_configs()
+}
+
+/// The surface measures of the baked atlas on the original mesh (what
+/// `result.glb` shows), against the exemplar in RGB (the atlas is RGB):
+/// coherence, completeness, sharpness and structure, as for any result.
+fn baked_quality(
+    asset: &BakedAsset,
+    source: &crate::mesh::PolyMesh,
+    source_frames: Option<&Frames>,
+    exemplar: &Image,
+    spacing: f32,
+    settings: &EnergySettings,
+    metrics: &mut Metrics,
+) {
+    let mesh = asset.mesh_or(source);
+    let rgb = exemplar.to_rgb();
+    let signal = SurfaceSignal::CornerUvs {
+        uvs: &asset.uvs,
+        texture: &asset.colour,
+        wrap: crate::image::sample::Wrap::Clamp,
+    };
+    let owned;
+    let frames = match source_frames {
+        Some(f) if f.0.len() == mesh.vertex_count() => &f.0,
+        _ => {
+            owned = frames_from_global_direction(&mesh.vertex_normals(), glam::Vec3::X);
+            &owned
+        }
+    };
+    let topo = Topology::build_edges_and_vertex_faces(mesh);
+    let stats = surface_texture_energy(mesh, &topo, frames, spacing, &signal, &rgb, settings);
+    let q = surface_quality(
+        &SurfaceResult {
+            mesh,
+            topo: &topo,
+            frames,
+            spacing,
+            signal: &signal,
+        },
+        &rgb,
+        settings,
+        None,
+    );
+    record_surface_measures(metrics, &stats, &q, settings.neighbourhood, spacing);
+    metrics
+        .result
+        .insert("measured_on".into(), "baked atlas".into());
+}
+
+/// Writes the texture energy (as `texture_energy` and `coherence`) and the
+/// surface measures under `result`.
+fn record_surface_measures(
+    metrics: &mut Metrics,
+    stats: &crate::kernels::metrics::EnergyStats,
+    q: &crate::kernels::metrics::surface_quality::SurfaceQuality,
+    neighbourhood: u32,
+    spacing: f32,
+) {
+    let json = |v: f32| to_json(&v.is_finite().then_some(v));
+    metrics.result.insert(
+        "texture_energy".into(),
+        serde_json::json!({
+            "mean": to_json(&stats.mean), "p90": to_json(&stats.p90), "samples": stats.samples,
+            "neighbourhood": neighbourhood, "spacing_world_units": to_json(&spacing),
+        }),
+    );
+    metrics.result.insert(
+        "coherence".into(),
+        serde_json::json!({ "mean": to_json(&stats.mean), "p90": to_json(&stats.p90) }),
+    );
+    metrics
+        .result
+        .insert("completeness".into(), json(q.completeness));
+    metrics.result.insert("sharpness".into(), json(q.sharpness));
+    metrics.result.insert("structure".into(), json(q.structure));
+    metrics.result.insert(
+        "templates".into(),
+        serde_json::json!({ "small": to_json(&q.templates), "structure": to_json(&q.structure_templates) }),
+    );
 }
 
 /// Every image measure of the planar result (`plane.png`) against the
