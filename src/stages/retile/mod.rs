@@ -28,6 +28,8 @@ pub struct RetileStageSettings {
     pub levels: u32,
     /// Remeshing iterations per level.
     pub iterations: u32,
+    /// Exemplar texels (pixel²) per finest vertex when `vertices` is derived.
+    pub texels_per_vertex: f64,
 }
 
 impl Default for RetileStageSettings {
@@ -37,6 +39,7 @@ impl Default for RetileStageSettings {
             edge_length: 0.0,
             levels: 4,
             iterations: 10,
+            texels_per_vertex: 1.0,
         }
     }
 }
@@ -48,6 +51,12 @@ impl StageSettings for RetileStageSettings {
             unit: "vertices",
             range: ParamRange::Int(0, 50_000_000),
             doc: "vertices of the finest level (the density sets the texture scale of `match`, Wei & Levoy Fig. 2); 0 = derived from `[input] texture_scale`: surface area × (exemplar pixels per unit)², one exemplar pixel per finest vertex spacing; 1..=11 is refused",
+        },
+        ParamDoc {
+            name: "texels_per_vertex",
+            unit: "exemplar pixels² per vertex",
+            range: ParamRange::Float(1.0, 1024.0),
+            doc: "with `vertices` derived (0): surface area × (exemplar pixels per unit)² / texels_per_vertex vertices. 1 = one vertex per exemplar pixel, Wei & Levoy's density, which per-vertex colours need; a method that records exemplar coordinates (coherent) and is baked or previewed through them keeps the exemplar's resolution at 16 (one vertex per 4 × 4 pixels) for a 16th of the vertices",
         },
         ParamDoc {
             name: "edge_length",
@@ -136,7 +145,7 @@ impl Stage for Retile {
             } else if settings.vertices > 0 {
                 RetileTarget::Vertices(settings.vertices)
             } else {
-                let area = f64::from(source.0.area());
+                let area = f64::from(source.0.area()) / settings.texels_per_vertex;
                 match texture_scale.derived_vertices(area, "retile.vertices") {
                     Ok(n) => {
                         metrics.record(ctx.index, "vertices_from_texture_scale", n);
