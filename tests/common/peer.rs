@@ -55,12 +55,36 @@ pub fn try_peer_synthesis(
     seed: u64,
     threads: usize,
 ) -> Result<PeerResult, ts::Error> {
+    peer_session(exemplar, width, height, seed, threads, false)
+}
+
+/// [`try_peer_synthesis`] in Embark's tiling mode: the output repeats
+/// seamlessly (what an artist makes for a triplanar or box projection).
+pub fn try_peer_tile(
+    exemplar: &Image,
+    width: u32,
+    height: u32,
+    seed: u64,
+    threads: usize,
+) -> Result<PeerResult, ts::Error> {
+    peer_session(exemplar, width, height, seed, threads, true)
+}
+
+fn peer_session(
+    exemplar: &Image,
+    width: u32,
+    height: u32,
+    seed: u64,
+    threads: usize,
+    tiling: bool,
+) -> Result<PeerResult, ts::Error> {
     let example = ts::image::DynamicImage::ImageRgba8(to_rgba8(exemplar));
     let started = Instant::now();
     let generated = ts::Session::builder()
         .add_example(example)
         .output_size(ts::Dims::new(width, height))
         .seed(seed)
+        .tiling_mode(tiling)
         .max_thread_count(threads.max(1))
         .build()?
         .run(None);

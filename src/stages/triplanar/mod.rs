@@ -7,7 +7,7 @@
 //! texel density as every method.
 //!
 //! Reads: `Exemplar`, `TextureScale`. Writes: the `TriplanarProjection`
-//! resource, metrics.
+//! resource, `TexelSpacing` (one image pixel), metrics.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::pipeline::{Datum, Stage, StageCtx};
@@ -88,7 +88,7 @@ impl Stage for Triplanar {
         (move |mut commands: Commands,
                exemplar: Res<Exemplar>,
                texture_scale: Option<Res<TextureScale>>,
-               spacing: Res<TexelSpacing>,
+               mut spacing: ResMut<TexelSpacing>,
                mut metrics: ResMut<Metrics>,
                mut failure: ResMut<StageFailure>| {
             let image = match &image {
@@ -104,6 +104,8 @@ impl Stage for Triplanar {
                 .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| {
                     t.texels_per_unit
                 });
+            // The result metrics resample the surface at one image pixel.
+            spacing.0 = 1.0 / texels_per_unit.max(f32::MIN_POSITIVE);
             metrics.record(ctx.index, "texels_per_unit", texels_per_unit);
             metrics.record(ctx.index, "image_size", [image.width, image.height]);
             commands.insert_resource(TriplanarProjection {
