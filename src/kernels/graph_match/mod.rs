@@ -441,7 +441,8 @@ pub fn match_pass(
 /// 553–735 µs per vertex (two runs) for 18, 42, 163, 198 and 471
 /// comparisons per vertex, a comparison costing more in a larger region
 /// (the finest level 2.8–3.4 times the next for 2.4 times the
-/// comparisons): the work is `R^1.4` for a region of `R` vertices. With
+/// comparisons): the work is `R^1.2` for a region of `R` vertices (`R`
+/// gave ETAs 0.6× the real time left, `R^1.4` 1.3–1.7×). With
 /// graph cut a match colours its region and the vertices it covers are
 /// skipped, so larger regions mean fewer, larger matches: `configs/23_…`
 /// took 25 to 50 µs per vertex on every level whatever its `k`, so the
@@ -466,7 +467,7 @@ pub fn pass_work_per_vertex(
         k
     };
     let r = f64::from((k + 1) * (k + 1) + k * k);
-    if settings.graph_cut { 1.0 } else { r.powf(1.4) }
+    if settings.graph_cut { 1.0 } else { r.powf(1.2) }
 }
 
 /// The share of a pass's work done after `planned` of its `total` vertices
