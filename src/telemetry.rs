@@ -109,7 +109,7 @@ pub fn init(trace: Option<&Path>, quiet: bool) -> Option<TraceGuard> {
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
     let fmt = tracing_subscriber::fmt::layer()
-        .with_writer(std::io::stderr)
+        .with_writer(crate::progress::stderr_above_bars)
         .with_target(false)
         .with_ansi(use_colour(
             std::io::stderr().is_terminal(),

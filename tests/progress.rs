@@ -1,7 +1,10 @@
 //! Issue 15, progress: off a terminal every long stage logs
 //! `<stage> <part>: <pos>/<len> (<pct>%), <eta> left` at most every
 //! `SURFSYNTH_PROGRESS_INTERVAL_MS` (10 s by default), nothing with `-q`,
-//! and progress never changes a result.
+//! and progress never changes a result. Issue 39: a stage that plans its
+//! parts says `(<pct>% of the stage)`, and a pyramid level is called the
+//! same (`level 2 of 5 (0 = finest)`, the pyramid index) in the progress
+//! line as in the `level` field of the stage's log spans.
 
 mod common;
 
@@ -88,12 +91,46 @@ fn run_config(
     (stderr, std::fs::read(ply).expect("read the PLY"))
 }
 
-/// The progress lines of `stderr` (`... (NN%), ... left`).
+/// The progress lines of `stderr` (`... (NN%), ... left` or `... (NN% of
+/// the stage), ... left`).
 fn progress_lines(stderr: &str) -> Vec<&str> {
     stderr
         .lines()
-        .filter(|l| l.contains("%), ") && l.contains(" left"))
+        .filter(|l| l.contains('%') && l.contains("), ") && l.contains(" left"))
         .collect()
+}
+
+/// The pyramid level a progress line names (`level N of M (0 = finest)`)
+/// and the `level=K` field of the span it was logged in, when it has both.
+fn level_pair(line: &str) -> Option<(u32, u32)> {
+    let named = line.split("level ").nth(1)?;
+    let (n, rest) = named.split_once(' ')?;
+    if !rest.starts_with("of ") || !rest.contains("(0 = finest)") {
+        return None;
+    }
+    let field = line.split(" level=").nth(1)?;
+    let k: String = field.chars().take_while(char::is_ascii_digit).collect();
+    Some((n.parse().ok()?, k.parse().ok()?))
+}
+
+/// Checks that every progress line of `stage` naming a level inside a
+/// level's span names the span's level, and that there is one.
+fn assert_levels_agree(stderr: &str, stage: &str) {
+    let pairs: Vec<(u32, u32)> = progress_lines(stderr)
+        .into_iter()
+        .filter(|l| l.contains(&format!("{stage} level ")))
+        .filter_map(level_pair)
+        .collect();
+    assert!(
+        !pairs.is_empty(),
+        "no {stage} progress line with a level field:\n{stderr}"
+    );
+    for (named, field) in pairs {
+        assert_eq!(
+            named, field,
+            "{stage}: the bar says level {named}, the log level={field}"
+        );
+    }
 }
 
 /// Checks that some progress line names `stage` with a part and a percent.
@@ -115,9 +152,9 @@ fn assert_logged(stderr: &str, stage: &str, part: &str) {
 fn long_stages_log_progress_off_a_terminal_and_not_with_quiet() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let (logged, ply) = run(dir.path(), &wei_levoy(), "0", &[]);
-    assert_logged(&logged, "retile", "level 1/2");
-    assert_logged(&logged, "retile", "level 2/2");
-    assert_logged(&logged, "match", "level 1/2");
+    assert_logged(&logged, "retile", "level 0 of 2 (0 = finest)");
+    assert_logged(&logged, "retile", "level 1 of 2 (0 = finest)");
+    assert_logged(&logged, "match", "level 1 of 2 (0 = finest)");
     assert_logged(&logged, "map_back", "");
     assert_logged(&logged, "result_metrics", "texture energy");
     assert_logged(&logged, "result_metrics", "quality");
@@ -149,8 +186,8 @@ fn graph_match_logs_levels_and_passes() {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let (logged, ply) = run(dir.path(), &graph_match(), "0", &[]);
     assert_logged(&logged, "subdivide_sqrt2", "step 1");
-    assert_logged(&logged, "diffuse_orientation", "level 1/");
-    assert_logged(&logged, "graph_match", "level 1/");
+    assert_logged(&logged, "diffuse_orientation", "level 0 of ");
+    assert_logged(&logged, "graph_match", "level 0 of ");
     assert!(
         progress_lines(&logged)
             .iter()
@@ -188,4 +225,27 @@ fn displace_logs_its_steps() {
     let (stderr, _) = run_config(dir.path(), &config, Some("0"), &[]);
     assert_logged(&stderr, "displace", "smoothing");
     assert_logged(&stderr, "displace", "displacing");
+}
+
+/// Issue 39: one level numbering. Every progress line of the pyramid stages
+/// (`retile`, `match`, `diffuse_orientation`, `graph_match`) logged inside
+/// a level's span names the level the span's
+/// `level` field does: the pyramid index, 0 the finest.
+#[test]
+fn level_labels_agree_with_the_log_fields() {
+    let dir = tempfile::tempdir().expect("a temporary folder");
+    let (wl, _) = run(dir.path(), &wei_levoy(), "0", &[]);
+    assert_levels_agree(&wl, "retile");
+    assert_levels_agree(&wl, "match");
+    let (gm, _) = run(dir.path(), &graph_match(), "0", &[]);
+    assert_levels_agree(&gm, "graph_match");
+    assert_levels_agree(&gm, "diffuse_orientation");
+    // The finest level is level 0 in the text too, and a planned stage
+    // reports the share of the whole stage.
+    assert!(
+        progress_lines(&gm)
+            .iter()
+            .any(|l| l.contains("graph_match level 0 of ") && l.contains("% of the stage), ")),
+        "{gm}"
+    );
 }

@@ -32,7 +32,7 @@ use super::flatten::{TriangleAdjacency, template_spacing};
 use super::frames::TangentFrame;
 use super::wl_match::parents::{SurfacePoint, TriangleBvh};
 use crate::mesh::Topology;
-use crate::progress::Progress;
+use crate::progress::{Progress, level_label};
 
 /// How `s` directions are chosen.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -115,7 +115,7 @@ pub fn relax_orientation_with_progress(
     };
     for l in (0..count).rev() {
         let _span = tracing::info_span!("relax_level", level = l).entered();
-        progress.set_part(&format!("level {}/{count}", count - l));
+        progress.set_part(&level_label(l, count));
         let level = &levels[l];
         let coarser = (l + 1 < count).then(|| {
             let c = &levels[l + 1];

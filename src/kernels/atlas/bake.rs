@@ -222,7 +222,8 @@ pub fn bake_channels_with_patches(
 }
 
 /// [`bake_channels_with_patches`], reporting to `progress` as the part
-/// `"texels"`: one step per atlas row baked.
+/// `"texels"`, one step per atlas row baked, then `"gutters"`, one step per
+/// output padded.
 pub fn bake_channels_with_progress(
     target: &BakeTarget,
     source: &dyn ContributionSource,
@@ -341,6 +342,8 @@ pub fn bake_channels_with_progress(
         progress.inc(1);
     });
     drop(rows);
+    // The gutters of every output, one step each.
+    progress.start_part("gutters", 1 + maps.len() as u64);
     let filled: Vec<bool> = target.texel_face.iter().map(|&f| f != u32::MAX).collect();
     let mut mask = filled.clone();
     super::raster::dilate(
@@ -351,6 +354,7 @@ pub fn bake_channels_with_progress(
         target.padding_px,
     );
     fill_background(&mut colour.data, 3, &mask, None);
+    progress.inc(1);
     for (out, m) in outs.iter_mut().zip(maps) {
         let mut mask = filled.clone();
         let c = out.channels as usize;
@@ -359,6 +363,7 @@ pub fn bake_channels_with_progress(
         // mip levels stay neutral instead of darkening chart borders.
         let neutral = matches!(m.kind, ChannelKind::Normal).then_some([0.5, 0.5, 1.0]);
         fill_background(&mut out.data, c, &mask, neutral.as_ref().map(|v| &v[..]));
+        progress.inc(1);
     }
     (colour, outs)
 }

@@ -60,7 +60,7 @@ use super::wl_match::schedule::{dependency_batches_of, random_order};
 use super::wl_match::{SynthesisLevel, WlError, validate_levels};
 use crate::image::{Image, pyramid::gaussian_stack, sample::Wrap};
 use crate::mesh::Topology;
-use crate::progress::Progress;
+use crate::progress::{Progress, level_label};
 
 /// Neighbours compared per vertex at most (the nearest of its rings).
 pub const MAX_NEIGHBOURS: usize = 24;
@@ -664,7 +664,7 @@ fn synthesis(
     let mut out: Vec<CoherentLevel> = vec![CoherentLevel::default(); levels.len()];
     for l in (0..levels.len()).rev() {
         let _span = tracing::info_span!("coherent_level", level = l).entered();
-        progress.set_part(&format!("level {}/{}", levels.len() - l, levels.len()));
+        progress.set_part(&level_label(l, levels.len()));
         let started = Instant::now();
         let lv = &levels[l];
         let positions = &lv.mesh.positions;

@@ -89,9 +89,9 @@ pub use project::{
 };
 
 use crate::mesh::PolyMesh;
-use crate::progress::Progress;
+use crate::progress::{Progress, level_label};
 use glam::Vec3;
-use remesh::{LevelPlan, Pieces, remesh_level, snap_to_surface};
+use remesh::{LevelPlan, LevelWork, Pieces, remesh_level, snap_to_surface};
 
 /// How fine level 0 should be.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -339,8 +339,9 @@ pub fn retile(input: &PolyMesh, settings: &RetileSettings) -> Result<RetiledPyra
     retile_with_progress(input, settings, &Progress::hidden())
 }
 
-/// [`retile`], reporting to `progress`: its length is set to the vertex
-/// iterations of all levels, and each level is a part (`"level 2/4"`).
+/// [`retile`], reporting to `progress`: the levels are planned as parts
+/// weighed by their remeshing work (`LevelWork`), each labelled by
+/// [`level_label`] (`"level 0 of 4 (0 = finest)"` first).
 ///
 /// # Errors
 /// As [`retile`].
@@ -373,16 +374,22 @@ pub fn retile_with_progress(
             floor,
         });
     }
-    progress.set_length(
-        (0..settings.levels)
-            .map(|l| level_target(v0, l).max(1) as u64 * (u64::from(settings.iterations) + 1))
-            .sum(),
-    );
-
     let pieces = Pieces::of(&prep.mesh);
     let mut counts = Vec::new();
     let mut mesh = prep.mesh.clone();
     remesh::attach_to_input(&mut mesh, &proj);
+    // One part per level, weighed by its remeshing work: the finest level,
+    // grown from the input, is most of it.
+    let label = |level: u32| level_label(level as usize, settings.levels as usize);
+    progress.plan((0..settings.levels).map(|level| {
+        let start = if level == 0 {
+            mesh.live_vertices
+        } else {
+            level_target(v0, level - 1)
+        };
+        let work = LevelWork::of(level_target(v0, level), start, settings.iterations);
+        (label(level), work.total() as f64)
+    }));
     let mut len = equilateral_edge_length(area, v0);
     let mut levels = Vec::with_capacity(settings.levels as usize);
     for level in 0..settings.levels {
@@ -399,14 +406,15 @@ pub fn retile_with_progress(
             );
             break;
         }
-        let _span = tracing::debug_span!("retile_level", level, target).entered();
-        progress.set_part(&format!("level {}/{}", level + 1, settings.levels));
+        let _span = tracing::info_span!("retile_level", level, target).entered();
         let plan = LevelPlan {
             target_vertices: target,
             edge_length: len,
             iterations: settings.iterations,
             seed: splitmix(settings.seed ^ splitmix(level as u64 + 1)),
         };
+        let work = LevelWork::of(target, mesh.live_vertices, settings.iterations);
+        progress.start_part(&label(level), work.total());
         let (l, target) = remesh_level(&mut mesh, &proj, &pieces, &plan, progress);
         len = l;
         if target > plan.target_vertices {

@@ -56,7 +56,7 @@ use super::flatten::{
 use super::frames::TangentFrame;
 use crate::image::{Image, pyramid::gaussian_pyramid, sample::Wrap};
 use crate::mesh::PolyMesh;
-use crate::progress::Progress;
+use crate::progress::{Progress, level_label};
 
 /// A neighbourhood `{size×size, levels}` (Wei & Levoy Table 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -333,7 +333,7 @@ pub fn wei_levoy_synthesis_with_progress(
     let mut results: Vec<LevelResult> = vec![LevelResult::default(); count];
     for l in (0..count).rev() {
         let _span = tracing::info_span!("wl_level", level = l).entered();
-        progress.set_part(&format!("level {}/{count}", count - l));
+        progress.set_part(&level_label(l, count));
         let level = &levels[l];
         let geo = &geometry[l];
         let nv = level.mesh.vertex_count();

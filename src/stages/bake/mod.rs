@@ -272,6 +272,23 @@ struct BakeInputs<'a> {
     texels_per_unit: f32,
 }
 
+/// The bake's parts and their work, for one progress bar: `"atlas"` (per
+/// face, and packing per atlas texel), `"texels"` (per texel, more with
+/// each exemplar map) and `"gutters"` (padding each output). In
+/// microseconds as measured on the bunny (`configs/41_…` at 3072², 3 674
+/// faces, three maps: 1.2 s of atlas, mostly packing, 12.5 s of texels,
+/// 1.3 s of gutters; packing took 0.3 µs a texel at 1024² in
+/// `lapped_paste`, 0.12 at 3072²).
+fn progress_plan(faces: usize, size: u32, maps: usize) -> [(&'static str, f64); 3] {
+    let texels = f64::from(size) * f64::from(size);
+    let outputs = 1.0 + maps as f64;
+    [
+        ("atlas", 6.0 * faces as f64 + 0.15 * texels),
+        ("texels", 0.35 * outputs * texels),
+        ("gutters", 0.03 * outputs * texels),
+    ]
+}
+
 /// Builds the atlas of `mesh` (the source mesh) and bakes the result.
 fn bake_world(
     settings: &BakeSettings,
@@ -297,6 +314,20 @@ fn bake_world(
     };
     let progress = Progress::new(0, Bake::KIND);
     let _finish = progress.finish_on_drop();
+    progress.plan(progress_plan(
+        tris.len(),
+        settings.size,
+        inputs.channels.map_or(0, |ch| {
+            [
+                ch.normal.is_some(),
+                ch.roughness.is_some(),
+                ch.height.is_some(),
+            ]
+            .iter()
+            .filter(|&&m| m)
+            .count()
+        }),
+    ));
     let mut atlas =
         build_uv_atlas_with_progress(&mesh.positions, &tris, &atlas_settings, &progress)
             .map_err(|e| e.to_string())?;

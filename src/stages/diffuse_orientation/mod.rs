@@ -29,7 +29,7 @@ use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::sweep::{relax_sweep, sweep_field};
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
-use crate::progress::Progress;
+use crate::progress::{Progress, level_label};
 use crate::stages::position;
 use crate::stages::subdivide_sqrt2::carry_attribute;
 use crate::stages::world::*;
@@ -325,9 +325,12 @@ impl Stage for DiffuseOrientation {
                     return;
                 };
                 let mesh = &geometry.0;
+                // The pyramid index: the levels run coarsest first.
+                let level = levels.len() - 1 - i;
                 let _span =
-                    tracing::info_span!("diffuse_level", vertices = mesh.vertex_count()).entered();
-                progress.set_part(&format!("level {}/{}", i + 1, levels.len()));
+                    tracing::info_span!("diffuse_level", level, vertices = mesh.vertex_count())
+                        .entered();
+                progress.set_part(&level_label(level, levels.len()));
                 let (topo, normals) = match coarsest_cache.take() {
                     Some(cached) if i == 0 => cached,
                     _ => (Topology::build(mesh), mesh.vertex_normals()),

@@ -46,12 +46,12 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::frames::TangentFrame;
 use crate::kernels::graph_match::{
     BatchRule, Candidates, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats,
-    SynthesisState, match_pass_with_progress, mean_edge_lengths,
+    SynthesisState, match_pass_with_progress, mean_edge_lengths, pass_work_per_vertex,
 };
 use crate::kernels::sweep::{sweep_field, sweep_order};
 use crate::mesh::Topology;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
-use crate::progress::Progress;
+use crate::progress::{Progress, level_label};
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -427,17 +427,29 @@ impl Stage for GraphMatch {
             metrics.record(idx, "k_max", k_max);
             metrics.record(idx, "image_levels", images.levels());
             let ch = img.channels as usize;
-            // One step per vertex and pass over all levels.
-            let steps: u64 = levels
-                .iter()
-                .enumerate()
-                .filter_map(|(li, &e)| {
-                    let nv = meshes.get(e).ok()?.0.0.vertex_count() as u64;
-                    Some(nv * u64::from(settings.passes_for(li)))
-                })
-                .sum();
-            let progress = Progress::new(steps, Self::KIND);
+            // One bar for the stage: each level's passes weighed by the
+            // level's vertices times a vertex's work at the level's mean
+            // edge (without graph cut its region's size), so the finest
+            // levels, with the most vertices and the largest regions, take
+            // their share of the ETA.
+            let part = |li: usize, pass: u32, passes: u32| {
+                format!(
+                    "{} pass {}/{passes}",
+                    level_label(levels.len() - 1 - li, levels.len()),
+                    pass + 1
+                )
+            };
+            let progress = Progress::new(0, Self::KIND);
             let _finish = progress.finish_on_drop();
+            progress.plan(levels.iter().enumerate().flat_map(|(li, &e)| {
+                let passes = settings.passes_for(li);
+                let work = meshes.get(e).map_or(0.0, |m| {
+                    let mesh = &m.0.0;
+                    let per_vertex = pass_work_per_vertex(&images, &kernel, mesh.average_edge_length());
+                    mesh.vertex_count() as f64 * per_vertex
+                });
+                (0..passes).map(move |pass| (part(li, pass, passes), work))
+            }));
             let mut state: Option<SynthesisState> = None;
             let mut per_level = Vec::new();
             let mut total = PassStats::default();
@@ -499,12 +511,7 @@ impl Stage for GraphMatch {
                 let passes = settings.passes_for(li);
                 let mut level_stats = PassStats::default();
                 for pass in 0..passes {
-                    progress.set_part(&format!(
-                        "level {}/{} pass {}/{passes}",
-                        li + 1,
-                        levels.len(),
-                        pass + 1
-                    ));
+                    progress.start_part(&part(li, pass, passes), nv as u64);
                     let (order, rule) = if li == 0 && pass == 0 && settings.coarse_order == CoarseOrder::Sweep {
                         let values = match sweep {
                             Some(s) if s.0.len() == nv => s.0.clone(),
