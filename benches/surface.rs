@@ -127,9 +127,7 @@ fn run(
     let started = Instant::now();
     let output = cmd.output().map_err(|e| e.to_string())?;
     let wall = started.elapsed().as_secs_f64();
-    let cpu = children_cpu_seconds()
-        .zip(cpu_before)
-        .map(|(a, b)| a - b);
+    let cpu = children_cpu_seconds().zip(cpu_before).map(|(a, b)| a - b);
     if !output.status.success() {
         let err = String::from_utf8_lossy(&output.stderr);
         return Err(err.lines().last().unwrap_or("failed").to_string());
@@ -212,9 +210,14 @@ fn main() {
     let cache = out.join("cache");
     std::fs::create_dir_all(&runs).expect("the bench's output folder");
     let meshes = list_env("SURFACE_MESHES").unwrap_or_else(|| {
-        ["bunny_1k8.obj", "mushroom.off", "teapot_open.obj", "fandisk.off"]
-            .map(String::from)
-            .to_vec()
+        [
+            "bunny_1k8.obj",
+            "mushroom.off",
+            "teapot_open.obj",
+            "fandisk.off",
+        ]
+        .map(String::from)
+        .to_vec()
     });
     let texture = std::env::var("SURFACE_TEXTURE").unwrap_or_else(|_| "brick".into());
     let methods = list_env("SURFACE_METHODS").unwrap_or_else(|| {
@@ -236,7 +239,8 @@ fn main() {
     let mut rows = Vec::new();
     for mesh in &meshes {
         let mesh_path = manifest.join("data/meshes").join(mesh);
-        let mut sheet: Vec<(String, Image)> = vec![(format!("exemplar\n{texture}"), exemplar.clone())];
+        let mut sheet: Vec<(String, Image)> =
+            vec![(format!("exemplar\n{texture}"), exemplar.clone())];
         for method in &methods {
             let (config, extra) = if method == PEER {
                 (
@@ -244,11 +248,21 @@ fn main() {
                     vec![format!("stage.1.image={}", tile_path.display())],
                 )
             } else {
-                (manifest.join(format!("configs/surface/{method}.toml")), vec![])
+                (
+                    manifest.join(format!("configs/surface/{method}.toml")),
+                    vec![],
+                )
             };
             let run_dir = runs.join(format!("{mesh}_{texture}_{method}"));
             eprintln!("surface: {mesh} × {method} …");
-            let result = run(&config, &mesh_path, &exemplar_path, &extra, &run_dir, &cache);
+            let result = run(
+                &config,
+                &mesh_path,
+                &exemplar_path,
+                &extra,
+                &run_dir,
+                &cache,
+            );
             let label = if method == PEER {
                 "peer: triplanar of\nEmbark's tile".to_string()
             } else {

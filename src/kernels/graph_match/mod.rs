@@ -444,9 +444,13 @@ pub fn match_pass(
 /// comparisons): the work is `R^1.2` for a region of `R` vertices (`R`
 /// gave ETAs 0.6× the real time left, `R^1.4` 1.3–1.7×). With
 /// graph cut a match colours its region and the vertices it covers are
-/// skipped, so larger regions mean fewer, larger matches: `configs/23_…`
-/// took 25 to 50 µs per vertex on every level whatever its `k`, so the
-/// work is 1 per vertex (how it is spread over a pass: [`pass_fraction`]).
+/// skipped, so larger regions mean fewer, larger matches, but the finer
+/// levels still cost more per vertex (`configs/23_…` at texture scale 0.15:
+/// 6.7, 8.6 and 13.8 µs per vertex on levels 3, 1 and 0, whose matches
+/// compare 209 and 358 region vertices on levels 1 and 0): the work is
+/// `R^0.5` per vertex (1 per vertex gave ETAs 0.5× the time left there;
+/// `R^0.5` 0.77–1.13×, and 0.69–1.37× on the eight and the fandisk; how it is
+/// spread over a pass: [`pass_fraction`]).
 pub fn pass_work_per_vertex(
     images: &MatchImages,
     settings: &GraphMatchSettings,
@@ -467,7 +471,11 @@ pub fn pass_work_per_vertex(
         k
     };
     let r = f64::from((k + 1) * (k + 1) + k * k);
-    if settings.graph_cut { 1.0 } else { r.powf(1.2) }
+    if settings.graph_cut {
+        r.sqrt()
+    } else {
+        r.powf(1.2)
+    }
 }
 
 /// The share of a pass's work done after `planned` of its `total` vertices

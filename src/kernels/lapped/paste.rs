@@ -79,6 +79,34 @@ pub struct PasteSettings {
     /// paste keeps the shift whose band matches best. 0 = no shift.
     /// Default 0.
     pub match_shift: u32,
+    /// The pastes the caller expects (from a patch's size on the surface),
+    /// for the progress estimate only ([`pasting_progress`]); 0 = unknown.
+    /// Never changes a result.
+    pub expected_pastes: f64,
+}
+
+/// Steps of the `"pasting"` progress part that [`paste_until_covered`]
+/// reports: the caller starts the part with this length.
+pub const PASTING_PROGRESS_STEPS: u64 = 10_000;
+
+/// The share of the pasting time done, from two estimates that err in
+/// opposite directions. Measured on the bunny (texture scale 0.03 and
+/// 0.06: 12 750 and 2 900 pastes): the share of the expected pastes `p`
+/// leads the time (later pastes grow larger and cost more: 42 % and 40 % of
+/// them at a quarter of the time), and the settled share of the surface `c`
+/// (by area, so that meshes of uneven triangles count alike) lags it (9 %
+/// and 19 %). The mean of `p^1.5` and `c^(2/3)` kept the stage's ETA within
+/// 0.96–1.36× of the time left at a quarter, half and three quarters of the
+/// stage on the bunny, the knot and the fandisk at 0.03 (12–17 s stages);
+/// the face count alone gave 2–4.6×. `p` is capped below one, so an
+/// expectation that is too low cannot end the estimate early.
+pub fn pasting_progress(pastes: usize, expected: f64, covered_share: f64) -> f64 {
+    let c = covered_share.clamp(0.0, 1.0);
+    if expected <= 0.0 {
+        return c;
+    }
+    let p = (pastes as f64 / expected).min(0.99);
+    0.5 * p.powf(1.5) + 0.5 * c.powf(2.0 / 3.0)
 }
 
 impl Default for PasteSettings {
@@ -97,6 +125,7 @@ impl Default for PasteSettings {
             pixel_aligned: false,
             matched: false,
             match_shift: 0,
+            expected_pastes: 0.0,
         }
     }
 }
@@ -344,7 +373,18 @@ pub fn paste_until_covered(
     let mut grown_faces = 0usize;
     let mut report = PasteReport::default();
     let mut covered_count = fc - open_count;
-    progress.inc(covered_count as u64);
+    // The settled share of the surface, by area, for progress only.
+    let total_area: f64 = (0..fc).map(|f| f64::from(mesh.area(f))).sum();
+    let mut settled_area: f64 = (0..fc)
+        .filter(|&f| !open[f])
+        .map(|f| f64::from(mesh.area(f)))
+        .sum();
+    let report_progress = |pastes: usize, settled_area: f64| {
+        let share = settled_area / total_area.max(f64::MIN_POSITIVE);
+        let done = pasting_progress(pastes, settings.expected_pastes, share);
+        progress.set_position((done * PASTING_PROGRESS_STEPS as f64) as u64);
+    };
+    report_progress(0, settled_area);
     // A face's seed weight: its area, times `1 + boost · difficulty` early
     // on. The difficulties are let go when the early phase ends (the
     // weight is then the area, exactly: `x · 1.0 = x`).
@@ -505,11 +545,12 @@ pub fn paste_until_covered(
                 open[f] = false;
                 tree.add(f, -weight(f, boost, &difficulty));
                 settled += 1;
+                settled_area += f64::from(mesh.area(f));
             }
         }
         open_count -= settled;
         covered_count += settled;
-        progress.inc(settled as u64);
+        report_progress(pastes.len(), settled_area);
     }
     drop(grower);
     drop(tree);
@@ -551,6 +592,23 @@ mod tests {
     use crate::kernels::lapped::tangent_field::global_up_field;
     use crate::kernels::lapped::test_meshes::sphere;
     use glam::Vec3;
+
+    #[test]
+    fn pasting_progress_runs_from_zero_to_one_and_never_goes_back() {
+        assert_eq!(pasting_progress(0, 100.0, 0.0), 0.0);
+        assert_eq!(
+            pasting_progress(0, 0.0, 0.25),
+            0.25,
+            "no expectation: the covered share"
+        );
+        let mut last = 0.0;
+        for i in 0..=200 {
+            let done = pasting_progress(i, 100.0, (i as f64 / 150.0).min(1.0));
+            assert!(done >= last && done <= 1.0, "{i}: {done} after {last}");
+            last = done;
+        }
+        assert!(last > 0.99, "{last}");
+    }
 
     #[test]
     fn fenwick_picks_like_a_linear_scan_of_the_open_faces() {

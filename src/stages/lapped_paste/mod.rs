@@ -35,7 +35,9 @@ use crate::kernels::lapped::mask::{
     Mask, TexturePatch, circle_mask, mask_from_image, patch_image, splotch_mask,
 };
 use crate::kernels::lapped::param::SolveSettings;
-use crate::kernels::lapped::paste::{LappedTexture, PasteSettings, paste_until_covered};
+use crate::kernels::lapped::paste::{
+    LappedTexture, PASTING_PROGRESS_STEPS, PasteSettings, paste_until_covered,
+};
 use crate::mesh::PolyMesh;
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
@@ -327,6 +329,7 @@ impl LappedPasteSettings {
             pixel_aligned: self.pixel_aligned,
             matched: self.choice == "matched",
             match_shift: self.match_shift,
+            expected_pastes: 0.0,
         }
     }
 }
@@ -808,10 +811,9 @@ fn progress_plan(
     side_world: f64,
     atlas_size: u32,
 ) -> Vec<(&'static str, f64)> {
+    let pastes = expected_pastes(faces, area, side_world);
     let faces = faces as f64;
     let texels = f64::from(atlas_size) * f64::from(atlas_size);
-    let splotch = (side_world * side_world * SPLOTCH_FILL).max(f64::MIN_POSITIVE);
-    let pastes = (PASTE_OVERLAP * area / splotch).clamp(1.0, 4.0 * faces + 64.0);
     let mut parts = Vec::with_capacity(3);
     if atlas_size > 0 {
         parts.push(("atlas", 6.0 * faces + 0.15 * texels));
@@ -819,6 +821,14 @@ fn progress_plan(
     parts.push(("pasting", 1200.0 * pastes + 10.0 * faces));
     parts.push(("drawing", 50.0 * faces + 0.6 * texels));
     parts
+}
+
+/// The pastes expected on a surface of `area` with patches of side
+/// `side_world` (world units): the area over a splotch's, times
+/// [`PASTE_OVERLAP`], within 1 and the kernel's cap of `4 × faces + 64`.
+fn expected_pastes(faces: usize, area: f64, side_world: f64) -> f64 {
+    let splotch = (side_world * side_world * SPLOTCH_FILL).max(f64::MIN_POSITIVE);
+    (PASTE_OVERLAP * area / splotch).clamp(1.0, 4.0 * faces as f64 + 64.0)
 }
 
 /// Returns the heap pages freed so far to the system (glibc's
@@ -968,7 +978,12 @@ impl Stage for LappedPaste {
                 }
             };
             drop(texture_span);
-            let paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
+            let mut paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
+            paste_settings.expected_pastes = expected_pastes(
+                geometry.0.face_count(),
+                f64::from(geometry.0.area()),
+                side_world,
+            );
             let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
             // A field in world units per pixel is read in patch units
             // (scaled as it is read, not copied).
@@ -990,7 +1005,7 @@ impl Stage for LappedPaste {
                     return;
                 }
             };
-            progress.start_part("pasting", tri.face_count() as u64);
+            progress.start_part("pasting", PASTING_PROGRESS_STEPS);
             let out = paste_until_covered(&tri, view, &textures, &paste_settings, &progress);
             progress.start_part("drawing", 2);
             let drawn_span = tracing::info_span!("drawn_faces").entered();
