@@ -119,6 +119,14 @@ fn is_entry_tmp(name: &str) -> bool {
 /// eviction goes by.
 pub fn read(dir: &Path, kind: &str, key: &[u8; 32]) -> Option<Vec<u8>> {
     let path = entry_path(dir, kind, key);
+    // Only a regular file, no larger than a non-zero limit, can be an
+    // entry this cache wrote; anything else (a symlink, a device such as
+    // /dev/zero) is a miss, decided before a byte is read.
+    let meta = std::fs::symlink_metadata(&path).ok()?;
+    let limit = limit();
+    if !meta.file_type().is_file() || (limit > 0 && meta.len() > limit) {
+        return None;
+    }
     let bytes = std::fs::read(&path).ok()?;
     if let Err(e) = set_last_use(&path, SystemTime::now()) {
         tracing::debug!("could not refresh the time of {}: {e}", path.display());
@@ -431,6 +439,28 @@ pub fn payload<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Issue 43: an entry that is not a regular file of ours (a symlink, to
+    /// a valid entry or to `/dev/zero`, or a device) is a miss, not read:
+    /// a symlink to `/dev/zero` was read to 2 GB before it was rejected.
+    #[cfg(unix)]
+    #[test]
+    fn an_entry_that_is_not_a_regular_file_is_a_miss_and_is_not_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let key = [7u8; 32];
+        let real = dir.path().join("elsewhere.bin");
+        std::fs::write(&real, b"bytes of a valid-looking entry").unwrap();
+        std::os::unix::fs::symlink(&real, entry_path(dir.path(), "jumpmap", &key)).unwrap();
+        assert_eq!(
+            read(dir.path(), "jumpmap", &key),
+            None,
+            "a symlink is not an entry"
+        );
+        let zero_key = [8u8; 32];
+        std::os::unix::fs::symlink("/dev/zero", entry_path(dir.path(), "jumpmap", &zero_key))
+            .unwrap();
+        assert_eq!(read(dir.path(), "jumpmap", &zero_key), None);
+    }
     use std::time::UNIX_EPOCH;
 
     const KIB: usize = 1024;

@@ -33,10 +33,21 @@ pub(super) fn parse_obj(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
             }
             Some(b"f") | Some(b"fo") => {
                 let nv = raw.positions.len() as i64;
+                let mut corners = 0usize;
                 for tok in toks {
                     let index = parse_reference(tok, nv)
                         .map_err(|m| parse_error(path, format!("line {line_no}"), m))?;
                     raw.push_corner(index);
+                    corners += 1;
+                }
+                if corners < 3 {
+                    return Err(parse_error(
+                        path,
+                        format!("line {line_no}"),
+                        format!(
+                            "a face needs at least 3 vertex references, this one has {corners} (a line cut short? a polyline is written `l`)"
+                        ),
+                    ));
                 }
                 raw.end_face();
             }
@@ -130,6 +141,21 @@ mod tests {
             super::super::MeshFormat::Obj,
             Path::new("t.obj"),
         )
+    }
+
+    /// Issue 43: a face line cut short is an error naming the line, not a
+    /// face dropped without a word.
+    #[test]
+    fn a_face_with_fewer_than_three_references_names_its_line() {
+        for (face, found) in [("f 1 2", 2), ("f 3", 1), ("f", 0)] {
+            let text = format!("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n{face}\n");
+            let e = parse(&text).expect_err(face).to_string();
+            assert!(e.contains("line 5"), "{face}: {e}");
+            assert!(
+                e.contains("at least 3") && e.contains(&format!("{found}")),
+                "{face}: {e}"
+            );
+        }
     }
 
     #[test]
