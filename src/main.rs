@@ -207,6 +207,18 @@ fn run(
         surfsynth::preflight::check_file_target(t).map_err(|m| option_err("--trace", m))?;
     }
     cache_limit()?;
+    // The config is read before the trace starts: a trace file inside the
+    // output folder would be replaced with it when the run commits.
+    let mut source = ConfigSource::from_file(&config)?;
+    source.apply_overrides(&set)?;
+    let pipeline = Pipeline::from_source(source)?;
+    if let Some(t) = &trace {
+        let out_dir = out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(&pipeline.output.dir));
+        surfsynth::preflight::check_file_outside(t, &out_dir)
+            .map_err(|m| option_err("--trace", m))?;
+    }
     surfsynth::output::staging::exit_cleanly_on_signals()
         .map_err(|e| PipelineError::Internal(format!("signal handler: {e}")))?;
     let guard = surfsynth::telemetry::init(trace.as_deref(), quiet);
@@ -219,9 +231,6 @@ fn run(
             .build_global()
             .map_err(|e| PipelineError::Internal(format!("thread pool: {e}")))?;
     }
-    let mut source = ConfigSource::from_file(&config)?;
-    source.apply_overrides(&set)?;
-    let pipeline = Pipeline::from_source(source)?;
     let report = surfsynth::pipeline::run(&pipeline, &RunOptions { out_dir: out })?;
     if let Some(g) = guard {
         g.finish()

@@ -57,6 +57,24 @@ pub fn check_file_target(path: &Path) -> Result<(), String> {
     })
 }
 
+/// A file to be written during a run (`--trace FILE`) must not lie inside
+/// its output folder `dir`: the run replaces that folder as a whole when it
+/// commits, so the file would vanish with the earlier result. Paths are
+/// compared absolute, through symlinks where they exist.
+pub fn check_file_outside(path: &Path, dir: &Path) -> Result<(), String> {
+    let resolve = |p: &Path| std::fs::canonicalize(p).unwrap_or_else(|_| absolute(p));
+    let parent = resolve(&parent_or_current(path));
+    let dir = resolve(dir);
+    if parent.starts_with(&dir) {
+        return Err(format!(
+            "{} lies inside the output folder {}, which the run replaces as a whole; allowed: a file outside it",
+            path.display(),
+            dir.display()
+        ));
+    }
+    Ok(())
+}
+
 /// A folder to be created or filled (`--out DIR`, `[output] dir`, the sweep
 /// folder): not an existing file, and its nearest existing ancestor lets us
 /// create files (probed by creating and removing a temporary file).

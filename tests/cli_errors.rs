@@ -200,6 +200,46 @@ fn export_formats_that_cannot_be_written_are_refused_up_front() {
     common::expect_refused(&colours, &[], &["per-corner texture coordinates"]);
 }
 
+/// Issue 43: `--trace` inside the `--out` folder of an earlier run was
+/// found only after the new result was committed (the run replaces the
+/// folder the trace file was open in: exit 1, "internal error"). It is
+/// refused before any work, and the earlier result is untouched.
+#[test]
+fn a_trace_inside_the_output_folder_is_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("c.toml");
+    std::fs::write(&cfg, BASE).unwrap();
+    let out = dir.path().join("out");
+    let args = |extra: &[&str]| {
+        let mut a = vec!["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        a.extend_from_slice(extra);
+        a.iter().map(|s| s.to_string()).collect::<Vec<_>>()
+    };
+    let first = args(&[]);
+    let first: Vec<&str> = first.iter().map(String::as_str).collect();
+    let (code, _, stderr) = run_cli(&first);
+    assert_eq!(code, 0, "{stderr}");
+    let before = std::fs::read(out.join("metrics.json")).unwrap();
+    let trace = out.join("trace.json");
+    let second = args(&["--trace", trace.to_str().unwrap()]);
+    let second: Vec<&str> = second.iter().map(String::as_str).collect();
+    let (code, _, stderr) = run_cli(&second);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(
+        stderr.contains("--trace") && stderr.contains("output folder"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read(out.join("metrics.json")).unwrap(),
+        before,
+        "earlier result kept"
+    );
+    assert!(
+        !trace.exists(),
+        "no trace file was created in the earlier result"
+    );
+}
+
 /// A reader that closes the pipe early (`surfsynth stages | head`) ends the
 /// program quietly with success, not with a panic.
 #[test]
