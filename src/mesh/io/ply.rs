@@ -196,6 +196,20 @@ fn header_problem(bytes: &[u8], line: Option<usize>, parser_message: &str) -> St
 }
 
 /// Parses PLY bytes into a raw mesh (indices unchecked).
+/// Names the first value of an ASCII element line that is not a finite
+/// number (the PLY parser's own message shows only a character position).
+fn ascii_value_message(line: &str) -> Option<String> {
+    let bad = line
+        .split_whitespace()
+        .find(|t| t.parse::<f64>().map_or(true, |v| !v.is_finite()))?;
+    Some(match bad.parse::<f64>() {
+        Ok(_) => format!(
+            "`{bad}` is not a finite number; allowed: finite decimal numbers (no NaN or infinity)"
+        ),
+        Err(_) => format!("`{bad}` is not a number; allowed: decimal numbers"),
+    })
+}
+
 pub(super) fn parse_ply(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError> {
     let parser = Parser::<Element>::new();
     let mut reader = Reader::new(Cursor::new(bytes));
@@ -268,7 +282,7 @@ pub(super) fn parse_ply(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
                         parse_error(
                             path,
                             format!("line {line_no} ({} {k})", def.name),
-                            e.to_string(),
+                            ascii_value_message(text).unwrap_or_else(|| e.to_string()),
                         )
                     })?
                 }
@@ -352,6 +366,21 @@ mod tests {
             });
         }
         b
+    }
+
+    /// Issue 43: NaN or infinity in an ASCII PLY names the value, not only
+    /// "Couldn't parse element line".
+    #[test]
+    fn a_non_finite_ascii_value_is_named() {
+        for bad in ["nan", "inf", "-Infinity"] {
+            let text = ASCII.replace("1 0 0 2", &format!("1 {bad} 0 2"));
+            let e = parse(text.as_bytes()).expect_err(bad).to_string();
+            assert!(e.contains("line 14"), "{bad}: {e}");
+            assert!(
+                e.contains(&format!("`{bad}`")) && e.contains("finite"),
+                "{bad}: {e}"
+            );
+        }
     }
 
     #[test]
