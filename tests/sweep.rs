@@ -448,6 +448,11 @@ fn bad_arguments_exit_2_naming_the_problem_before_any_run() {
             &["run seed=1__stage.3.scale=-5", "scale"],
         ),
         (&["--grid", "stage.9.x=1,2"], &["stage 9 does not exist"]),
+        // Issue 43: a grid file that does not exist is found before any run.
+        (
+            &["--grid", "input.exemplar=builtin:bricks,no_such_photo.png"],
+            &["no_such_photo.png", "does not exist", "input.exemplar"],
+        ),
         (&["--grid", "stage.2.bogus=1,2"], &["bogus"]),
     ];
     for (args, needles) in cases {

@@ -285,6 +285,9 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         };
         source.apply_overrides(&assignments).map_err(invalid)?;
         let pipeline = Pipeline::from_source(source).map_err(invalid)?;
+        // Input files too (a grid over exemplars or meshes), as `run` checks
+        // them before it loads anything.
+        crate::pipeline::check_input_files(&pipeline.input, &pipeline.source).map_err(invalid)?;
         let config_hash = blake3::hash(pipeline.resolved_toml().as_bytes())
             .to_hex()
             .to_string();
