@@ -240,6 +240,18 @@ fn a_trace_inside_the_output_folder_is_refused_up_front() {
     );
 }
 
+/// Issue 43: memory grew with the square of the stage count (10,000
+/// stages reached 24 GB); the count is capped up front, naming the count
+/// and the limit.
+#[test]
+fn too_many_stages_are_refused_up_front() {
+    let many = format!(
+        "{BASE}{}",
+        "\n[[stage]]\nkind = \"orientation\"\n".repeat(300)
+    );
+    common::expect_refused(&many, &[], &["303 stages", "at most 256"]);
+}
+
 /// A reader that closes the pipe early (`surfsynth stages | head`) ends the
 /// program quietly with success, not with a panic.
 #[test]
