@@ -144,6 +144,12 @@ fn out_that_is_a_file_unwritable_or_foreign_is_refused_before_any_work() {
     let foreign = dir.path().join("documents");
     std::fs::create_dir(&foreign).unwrap();
     std::fs::write(foreign.join("notes.txt"), b"mine").unwrap();
+    // Issue 43: a metrics.json (even `{}`) beside the user's own files was
+    // taken for an earlier run, and a thesis was deleted with exit 0.
+    let thesis = dir.path().join("thesis");
+    std::fs::create_dir(&thesis).unwrap();
+    std::fs::write(thesis.join("metrics.json"), b"{}").unwrap();
+    std::fs::write(thesis.join("thesis.tex"), b"\\documentclass{book}").unwrap();
     let before = snapshot(dir.path());
     let cases = [
         (file.clone(), "is a file"),
@@ -153,6 +159,7 @@ fn out_that_is_a_file_unwritable_or_foreign_is_refused_before_any_work() {
             "cannot create files in",
         ),
         (foreign.clone(), "not the output of a run"),
+        (thesis.clone(), "thesis.tex"),
     ];
     for (out, what) in cases {
         let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
@@ -204,14 +211,22 @@ fn a_rerun_replaces_the_folder_as_a_whole() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = quick_config(dir.path());
     let out = dir.path().join("out");
-    let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
+    // An earlier run with another format (obj) into the same folder.
+    let (code, _, stderr) = run_cli(&[
+        "run",
+        s(&cfg),
+        "--out",
+        s(&out),
+        "--set",
+        r#"stage.3.formats=["ply", "preview", "obj"]"#,
+    ]);
     assert_eq!(code, 0, "{stderr}");
-    // A file of an earlier run with other formats must not survive into the new set.
-    std::fs::write(out.join("result.glb"), b"stale").unwrap();
+    assert!(out.join("result.obj").is_file());
+    // Its files must not survive into the new set.
     let (code, stdout, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
     assert_eq!(code, 0, "{stderr}");
     assert!(
-        !out.join("result.glb").exists(),
+        !out.join("result.obj").exists(),
         "the old folder is replaced, not merged"
     );
     for name in ["config.toml", "metrics.json", "result.ply", "preview_0.png"] {

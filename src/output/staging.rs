@@ -179,9 +179,66 @@ pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
     Ok(())
 }
 
-/// Whether a run may replace `dir`: it does not exist, is an empty folder, or
-/// holds an earlier run's output (`metrics.json`, a `config.toml` written by
-/// a run, or a sweep's `run.json`).
+/// The file a run writes last into its output folder: the format's name and
+/// every file the run wrote. Only a folder it describes is replaced.
+pub const RUN_MARKER: &str = "surfsynth_run.json";
+
+/// The `format` field of [`RUN_MARKER`].
+const RUN_MARKER_FORMAT: &str = "surfsynth run output";
+
+/// The files a sweep writes into a run's folder around the run
+/// (`sweep::execute`): allowed beside a run's output when the folder's
+/// `run.json` is a sweep's record.
+const SWEEP_FILES: [&str; 4] = ["run.json", "log.txt", "done.json", "failed.json"];
+
+/// Writes [`RUN_MARKER`] into `staged`, listing `files` (paths inside it)
+/// and itself; returns its path.
+pub fn write_run_marker(
+    staged: &Path,
+    files: &[PathBuf],
+) -> Result<PathBuf, crate::output::OutputError> {
+    let mut names: Vec<String> = files
+        .iter()
+        .filter_map(|f| f.strip_prefix(staged).ok())
+        .map(|rel| rel.to_string_lossy().into_owned())
+        .collect();
+    names.push(RUN_MARKER.to_string());
+    names.sort();
+    names.dedup();
+    let json = serde_json::json!({ "format": RUN_MARKER_FORMAT, "version": 1, "files": names });
+    let path = staged.join(RUN_MARKER);
+    crate::output::write_bytes_atomic(&path, json.to_string().as_bytes())?;
+    Ok(path)
+}
+
+/// The files a run's marker in `dir` lists, if it is one.
+fn marked_files(dir: &Path) -> Option<Vec<String>> {
+    let text = std::fs::read_to_string(dir.join(RUN_MARKER)).ok()?;
+    let json: serde_json::Value = serde_json::from_str(&text).ok()?;
+    (json["format"] == RUN_MARKER_FORMAT).then(|| {
+        json["files"]
+            .as_array()
+            .map(|a| {
+                a.iter()
+                    .filter_map(|f| f.as_str().map(String::from))
+                    .collect()
+            })
+            .unwrap_or_default()
+    })
+}
+
+/// Whether `dir`'s `run.json` is a sweep's record of a run.
+fn holds_sweep_record(dir: &Path) -> bool {
+    std::fs::read_to_string(dir.join(SWEEP_FILES[0]))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .is_some_and(|j| j.get("config_hash").is_some() && j.get("overrides").is_some())
+}
+
+/// Whether a run may replace `dir`: it does not exist, is an empty folder,
+/// or holds nothing but files an earlier run listed in its [`RUN_MARKER`]
+/// (and, in a sweep's run folder, the sweep's own records). Anything else,
+/// marker or not, is refused: a run replaces the whole folder.
 pub fn check_replaceable(dir: &Path) -> Result<(), String> {
     if !dir.exists() {
         return Ok(());
@@ -192,24 +249,38 @@ pub fn check_replaceable(dir: &Path) -> Result<(), String> {
             dir.display()
         ));
     }
-    let empty = std::fs::read_dir(dir)
-        .map_err(|e| format!("cannot read {}: {e}", dir.display()))?
-        .next()
-        .is_none();
-    let config_is_ours = std::fs::read_to_string(dir.join("config.toml"))
-        .is_ok_and(|t| t.starts_with("# Resolved configuration of this run"));
-    if empty
-        || config_is_ours
-        || dir.join("metrics.json").is_file()
-        || dir.join("run.json").is_file()
-    {
-        return Ok(());
+    let mut allowed = marked_files(dir).unwrap_or_default();
+    if holds_sweep_record(dir) {
+        allowed.extend(SWEEP_FILES.map(String::from));
     }
-    Err(format!(
-        "{} holds files that are not the output of a run, and a run replaces the whole folder; \
-         allowed: a new folder, an empty one, or the folder of an earlier run (with metrics.json or config.toml)",
-        dir.display()
-    ))
+    let entries =
+        std::fs::read_dir(dir).map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+    let mut foreign = Vec::new();
+    for entry in entries {
+        let entry = entry.map_err(|e| format!("cannot read {}: {e}", dir.display()))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let is_file = entry.file_type().is_ok_and(|t| t.is_file());
+        if !(is_file && allowed.contains(&name)) {
+            foreign.push(name);
+        }
+    }
+    if !foreign.is_empty() {
+        foreign.sort();
+        let more = foreign.len().saturating_sub(5);
+        foreign.truncate(5);
+        let more = if more > 0 {
+            format!(" and {more} more")
+        } else {
+            String::new()
+        };
+        return Err(format!(
+            "{} holds files that are not the output of a run ({}{more}), and a run replaces the whole folder; \
+             allowed: a new folder, an empty one, or the folder of an earlier run (which lists its files in {RUN_MARKER}; a folder written by an older surfsynth has none: delete it or choose another)",
+            dir.display(),
+            foreign.join(", ")
+        ));
+    }
+    Ok(())
 }
 
 /// Removes the stale temporary siblings of `dir` now (e.g. after a child run
@@ -388,8 +459,19 @@ mod tests {
                 .unwrap_err()
                 .contains("not the output of a run")
         );
+        std::fs::remove_file(dir.join("notes.txt")).unwrap();
         std::fs::write(dir.join("metrics.json"), b"{}").unwrap();
+        assert!(
+            check_replaceable(&dir).is_err(),
+            "a metrics.json alone is not a run's marker (issue 43)"
+        );
+        write_run_marker(&dir, &[dir.join("metrics.json")]).unwrap();
         assert!(check_replaceable(&dir).is_ok(), "an earlier run");
+        std::fs::write(dir.join("notes.txt"), b"mine").unwrap();
+        assert!(
+            check_replaceable(&dir).unwrap_err().contains("notes.txt"),
+            "a run's folder with a file of the user's beside it"
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 }

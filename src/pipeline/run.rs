@@ -331,6 +331,9 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         .map_err(|e| PipelineError::Internal(format!("metrics.json: {e}")))?;
     crate::output::write_bytes_atomic(&metrics_path, text.as_bytes())?;
     files.push(metrics_path);
+    // Last: the marker that makes the folder provably a run's, so that the
+    // next run may replace it (`staging::check_replaceable`).
+    files.push(crate::output::staging::write_run_marker(&staged, &files)?);
     folder.commit()?;
     let files = files
         .into_iter()
