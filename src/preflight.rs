@@ -75,6 +75,63 @@ pub fn check_file_outside(path: &Path, dir: &Path) -> Result<(), String> {
     Ok(())
 }
 
+/// The output folder a run really writes: `dir` itself, or, when `dir` is a
+/// symlink to a folder, that folder (the run writes through the link,
+/// which stays). A symlink to nothing, or to something other than a
+/// folder, is refused; so is a mount point, which a run cannot replace by
+/// renaming (its result would be lost at the very end).
+pub fn resolve_output_folder(dir: &Path) -> Result<PathBuf, String> {
+    let allowed = "allowed: a folder (existing or new) whose nearest existing parent is writable, or a symlink to one";
+    let Ok(meta) = std::fs::symlink_metadata(dir) else {
+        return Ok(dir.to_path_buf());
+    };
+    let target = if meta.file_type().is_symlink() {
+        let to = std::fs::read_link(dir).unwrap_or_default();
+        match std::fs::canonicalize(dir) {
+            Ok(t) if t.is_dir() => t,
+            Ok(t) => {
+                return Err(format!(
+                    "{} is a symlink to {}, which is not a folder; {allowed}",
+                    dir.display(),
+                    t.display()
+                ));
+            }
+            Err(_) => {
+                return Err(format!(
+                    "{} is a symlink to {}, which does not exist; {allowed}",
+                    dir.display(),
+                    to.display()
+                ));
+            }
+        }
+    } else {
+        dir.to_path_buf()
+    };
+    if is_mount_point(&target) {
+        return Err(format!(
+            "{} is a mount point (a file system of its own), which a run cannot replace as a whole; allowed: a folder inside it",
+            target.display()
+        ));
+    }
+    Ok(target)
+}
+
+/// Whether `dir` is an existing folder on another device than its parent.
+#[cfg(unix)]
+fn is_mount_point(dir: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    let full = std::fs::canonicalize(dir).unwrap_or_else(|_| absolute(dir));
+    let (Ok(own), Some(parent)) = (std::fs::metadata(&full), full.parent()) else {
+        return false;
+    };
+    own.is_dir() && std::fs::metadata(parent).is_ok_and(|p| p.dev() != own.dev())
+}
+
+#[cfg(not(unix))]
+fn is_mount_point(_dir: &Path) -> bool {
+    false
+}
+
 /// A folder to be created or filled (`--out DIR`, `[output] dir`, the sweep
 /// folder): not an existing file, and its nearest existing ancestor lets us
 /// create files (probed by creating and removing a temporary file).

@@ -477,3 +477,43 @@ fn sweep_run_folders_stay_complete_and_a_timed_out_run_leaves_no_temporary() {
     let failed = std::fs::read_to_string(out.join("seed=1/failed.json")).unwrap();
     assert!(failed.contains("timed out"), "{failed}");
 }
+
+/// Issue 43: `--out` as a dangling symlink, or as a mount point, was found
+/// only after the computation (exit 1: the final rename failed). Both are
+/// refused before any work; a symlink to a folder is written through (the
+/// result lands in the folder it points to, the link stays).
+#[cfg(unix)]
+#[test]
+fn out_as_a_symlink_or_a_mount_point_is_written_through_or_refused_up_front() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = quick_config(dir.path());
+    let dangling = dir.path().join("dangling");
+    std::os::unix::fs::symlink(dir.path().join("nowhere"), &dangling).unwrap();
+    let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&dangling)]);
+    assert_refused(
+        code,
+        &stderr,
+        &["--out", "symlink", "does not exist", "allowed:"],
+    );
+    // /proc is a mount point (its own file system).
+    let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", "/proc"]);
+    assert_refused(code, &stderr, &["--out", "mount point", "allowed:"]);
+    // A symlink to a folder: written through.
+    let target = dir.path().join("target");
+    std::fs::create_dir(&target).unwrap();
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&link)]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(
+        std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink(),
+        "the link stays a link"
+    );
+    assert!(
+        target.join("metrics.json").is_file(),
+        "the result is in the target"
+    );
+}

@@ -214,7 +214,7 @@ pub fn peak_rss_bytes() -> Option<u64> {
 /// folder, or not at all.
 pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, PipelineError> {
     let started = Instant::now();
-    let out_dir = options
+    let requested = options
         .out_dir
         .clone()
         .unwrap_or_else(|| PathBuf::from(&pipeline.output.dir));
@@ -222,8 +222,12 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         Some(_) => ("command line".to_string(), "--out"),
         None => (pipeline.source.file.clone(), "output.dir"),
     };
-    crate::preflight::check_folder_target(&out_dir)
-        .and_then(|()| crate::output::staging::check_replaceable(&out_dir))
+    let out_dir = crate::preflight::resolve_output_folder(&requested)
+        .and_then(|dir| {
+            crate::preflight::check_folder_target(&dir)?;
+            crate::output::staging::check_replaceable(&dir)?;
+            Ok(dir)
+        })
         .map_err(|message| crate::config::ConfigError::Value {
             file,
             key: key.into(),
