@@ -23,6 +23,27 @@ pub struct TangentFrame {
     pub n: Vec3,
 }
 
+/// Vertex `v`'s exemplar coordinate (`sources`, pixels) continued through
+/// its frame to the surface point `p`, at `texels_per_unit` (one value for
+/// every vertex, or one per vertex): how a per-vertex result is read at the
+/// exemplar's resolution (the coordinate bake, the previews and the plane
+/// image drawn from sources all use it).
+#[inline]
+pub fn continued_source(
+    sources: &[glam::Vec2],
+    frames: &[TangentFrame],
+    texels_per_unit: &[f32],
+    positions: &[Vec3],
+    v: usize,
+    p: Vec3,
+) -> glam::Vec2 {
+    let scale = match texels_per_unit {
+        [one] => *one,
+        all => all[v],
+    };
+    sources[v] + frames[v].texel_offset(p - positions[v], scale)
+}
+
 impl TangentFrame {
     /// The frame whose `s` is `dir` projected onto the plane of `n`. When `dir`
     /// is (nearly) parallel to `n`, any perpendicular direction is used.

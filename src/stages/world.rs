@@ -134,6 +134,14 @@ pub struct ActiveMesh(pub Entity);
 #[derive(Resource, Clone, Copy, Debug)]
 pub struct TexelSpacing(pub f32);
 
+/// Exemplar texels per world unit of the run: the texture scale's, else
+/// the active mesh's texel spacing inverted.
+pub fn run_texels_per_unit(scale: Option<&TextureScale>, spacing: &TexelSpacing) -> f32 {
+    scale.map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| {
+        t.texels_per_unit
+    })
+}
+
 /// The run's one texture scale: `[input] texture_scale` resolved against the
 /// input mesh's bounding-box diagonal and the exemplar's width. Every stage
 /// whose own scale parameter is left at its default takes its scale from

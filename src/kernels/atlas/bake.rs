@@ -595,11 +595,14 @@ impl ContributionSource for CoordinateSource<'_> {
         for (k, &v) in rt.iter().enumerate() {
             let v = v as usize;
             let frame = &self.synthesis_frames[v];
-            let scale = match self.texels_per_unit {
-                [one] => *one,
-                all => all[v],
-            };
-            let q = self.sources[v] + frame.texel_offset(p - self.result_positions[v], scale);
+            let q = crate::kernels::frames::continued_source(
+                self.sources,
+                self.synthesis_frames,
+                self.texels_per_unit,
+                self.result_positions,
+                v,
+                p,
+            );
             out.contribs.push(Contribution {
                 uv: q / self.exemplar_size,
                 weight: w[k],

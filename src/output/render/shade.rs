@@ -341,12 +341,14 @@ impl<'a> Scene<'a> {
                 let size = Vec2::new(texture.width as f32, texture.height as f32);
                 let mut rgba = [0.0f32; 4];
                 for i in 0..3 {
-                    let scale = match texels_per_unit {
-                        [one] => *one,
-                        all => all[v[i]],
-                    };
-                    let q = sources[v[i]]
-                        + frames[v[i]].texel_offset(p - self.mesh.positions[v[i]], scale);
+                    let q = crate::kernels::frames::continued_source(
+                        sources,
+                        frames,
+                        texels_per_unit,
+                        &self.mesh.positions,
+                        v[i],
+                        p,
+                    );
                     let col = sample(texture, q / size, wrap);
                     for k in 0..4 {
                         rgba[k] += b[i] * col[k];

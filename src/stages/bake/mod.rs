@@ -220,11 +220,7 @@ impl Stage for Bake {
                 patches,
                 origins,
                 triplanar: triplanar.as_deref(),
-                texels_per_unit: texture_scale
-                    .as_deref()
-                    .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| {
-                        t.texels_per_unit
-                    }),
+                texels_per_unit: run_texels_per_unit(texture_scale.as_deref(), &spacing),
             };
             let mut settings = settings.clone();
             if settings.size == 0 {

@@ -158,9 +158,14 @@ pub fn plane_from_surface_at(
                 let mut near_src = Vec2::ZERO;
                 for (k, &v) in tri.iter().enumerate() {
                     let v = v as usize;
-                    let texels_per_unit = if scale.len() == 1 { scale[0] } else { scale[v] };
-                    let q =
-                        sources[v] + frames[v].texel_offset(p - mesh.positions[v], texels_per_unit);
+                    let q = crate::kernels::frames::continued_source(
+                        sources,
+                        frames,
+                        scale,
+                        &mesh.positions,
+                        v,
+                        p,
+                    );
                     texture.sample_bilinear(q.x, q.y, *wrap, &mut out);
                     let px = pixel_rgb(&out);
                     for i in 0..3 {

@@ -99,11 +99,7 @@ impl Stage for Triplanar {
                     return;
                 }
             };
-            let texels_per_unit = texture_scale
-                .as_deref()
-                .map_or(1.0 / spacing.0.max(f32::MIN_POSITIVE), |t| {
-                    t.texels_per_unit
-                });
+            let texels_per_unit = run_texels_per_unit(texture_scale.as_deref(), &spacing);
             // The result metrics resample the surface at one image pixel.
             spacing.0 = 1.0 / texels_per_unit.max(f32::MIN_POSITIVE);
             metrics.record(ctx.index, "texels_per_unit", texels_per_unit);
