@@ -437,20 +437,26 @@ fn surface_quality_on_a_flat_grid_agrees_with_the_image_measures() {
     // A verbatim copy: complete, as sharp as the exemplar, same structure,
     // one copied region covering the exemplar.
     assert!(copy.completeness < 2e-3, "{copy:?}");
-    assert!((copy.sharpness - 1.0).abs() < 0.02, "{copy:?}");
+    // The surface sharpness reads the continuous texture: here the vertex
+    // colours interpolated over the grid's triangles, whose creases make it
+    // steeper than the exemplar's bilinear interpolant (1.12 here).
+    assert!((copy.sharpness - 1.0).abs() < 0.15, "{copy:?}");
     assert!(copy.structure < 0.05, "{copy:?}");
     let v = copy.verbatim.unwrap();
     assert!(
         v.source_coverage > 0.99 && v.mean_region_fraction > 0.9,
         "{v:?}"
     );
-    // The blurred copy: the surface sees the blur as the image measures do
-    // (sharpness within 10 %, completeness and structure worse than the copy).
+    // The blurred copy: the surface sees the blur at least as plainly as
+    // the image measures do (the continuous texture's gradient drops more
+    // under a blur than the pixel-scale Sobel's: 0.37 against 0.52 here),
+    // and completeness and structure are worse than the copy's.
     let image_sharp = sharpness(&soft, &ex);
     assert!(
-        (soft_q.sharpness / image_sharp - 1.0).abs() < 0.1,
-        "surface {} vs image {image_sharp}",
-        soft_q.sharpness
+        soft_q.sharpness / copy.sharpness <= image_sharp,
+        "surface {} (copy {}) vs image {image_sharp}",
+        soft_q.sharpness,
+        copy.sharpness
     );
     assert!(soft_q.sharpness < 0.8 * copy.sharpness);
     assert!(soft_q.completeness > 2.0 * copy.completeness.max(1e-4));
@@ -460,4 +466,138 @@ fn surface_quality_on_a_flat_grid_agrees_with_the_image_measures() {
         completeness(&soft, &ex, 7),
         structure_distance(&soft, &ex)
     );
+}
+
+/// `img` beside its mirror image, over both mirrored: twice the size and
+/// tileable without a seam.
+fn mirrored(img: &Image) -> Image {
+    let (w, h) = (img.width, img.height);
+    let mut out = Image::new(2 * w, 2 * h, img.channels);
+    for y in 0..2 * h {
+        for x in 0..2 * w {
+            let sx = if x < w { x } else { 2 * w - 1 - x };
+            let sy = if y < h { y } else { 2 * h - 1 - y };
+            out.pixel_mut(x, y).copy_from_slice(img.pixel(sx, sy));
+        }
+    }
+    out
+}
+
+/// A copy of `texture` (the exemplar or a resampling of it) laid on a flat
+/// grid of vertex spacing `step` exemplar pixels, turned by `angle` and
+/// shifted by `offset` pixels: per-corner UVs, repeating. Measured against
+/// `ex`.
+fn turned_copy_quality(
+    ex: &Image,
+    texture: &Image,
+    step: f32,
+    angle: f32,
+    offset: Vec2,
+) -> surfsynth::kernels::metrics::surface_quality::SurfaceQuality {
+    use surfsynth::kernels::metrics::surface_quality::{SurfaceResult, surface_quality};
+    let n = (ex.width as f32 / step) as u32;
+    let positions: Vec<Vec3> = (0..n)
+        .flat_map(|y| (0..n).map(move |x| Vec3::new(x as f32 * step, -(y as f32 * step), 0.0)))
+        .collect();
+    let mut faces = Vec::new();
+    for y in 0..n - 1 {
+        for x in 0..n - 1 {
+            let v = y * n + x;
+            faces.push([v, v + n, v + n + 1, v + 1]);
+        }
+    }
+    let mesh = PolyMesh::from_polygons(positions, faces.iter().map(|f| &f[..]));
+    let (s, c) = angle.sin_cos();
+    let size = Vec2::new(ex.width as f32, ex.height as f32);
+    let uvs: Vec<Vec2> = mesh
+        .corner_vertex
+        .iter()
+        .map(|&v| {
+            let p = mesh.positions[v as usize];
+            let (x, y) = (p.x, -p.y);
+            (Vec2::new(c * x - s * y, s * x + c * y) + offset) / size
+        })
+        .collect();
+    let topo = Topology::build(&mesh);
+    let frames = plane_frames(&mesh);
+    let signal = SurfaceSignal::CornerUvs {
+        uvs: &uvs,
+        texture,
+        wrap: Wrap::Repeat,
+    };
+    let r = SurfaceResult {
+        mesh: &mesh,
+        topo: &topo,
+        frames: &frames,
+        spacing: 1.0,
+        signal: &signal,
+    };
+    let settings = EnergySettings {
+        samples: 1500,
+        seed: 3,
+        ..Default::default()
+    };
+    surface_quality(&r, ex, &settings, None)
+}
+
+/// `img` resampled bilinearly to `factor` times its size (an atlas denser
+/// than the exemplar, as a bake makes).
+fn upsampled(img: &Image, factor: f32) -> Image {
+    let (w, h) = (
+        (img.width as f32 * factor) as u32,
+        (img.height as f32 * factor) as u32,
+    );
+    let mut up = Image::new(w, h, img.channels);
+    for y in 0..h {
+        for x in 0..w {
+            let (u, v) = ((x as f32 + 0.5) / w as f32, (y as f32 + 0.5) / h as f32);
+            img.sample_uv(u, v, Wrap::Repeat, up.pixel_mut(x, y));
+        }
+    }
+    up
+}
+
+/// The surface sharpness reads the texture, not how the measuring lattice
+/// happens to fall on its pixels: a copy of the exemplar, at any turn and
+/// sub-pixel shift, directly or through an atlas 2.7 times denser (a bake),
+/// is as sharp as the exemplar — resampling a copy between its pixels must
+/// not read as blur (at one sample per pixel it read 0.81-0.94) — and a
+/// blurred copy reads blurred.
+#[test]
+fn surface_sharpness_of_a_copy_is_one_at_any_turn_and_shift() {
+    for name in ["brick", "planks"] {
+        // Mirrored 2 × 2: tileable without a seam, so the repeats of the
+        // turned copy add no edges of their own.
+        let ex = mirrored(&texture(name));
+        let soft = blurred(&ex);
+        let atlas = upsampled(&ex, 2.7);
+        for (angle, offset) in [
+            (0.0, Vec2::ZERO),
+            (0.0, Vec2::new(0.5, 0.5)),
+            (0.3, Vec2::new(0.25, 0.7)),
+            (std::f32::consts::FRAC_PI_4, Vec2::new(0.5, 0.0)),
+            (1.2, Vec2::new(0.9, 0.4)),
+        ] {
+            let copy = turned_copy_quality(&ex, &ex, 1.7, angle, offset);
+            let baked = turned_copy_quality(&ex, &atlas, 1.7, angle, offset);
+            let soft_q = turned_copy_quality(&ex, &soft, 1.7, angle, offset);
+            println!(
+                "{name} angle {angle} offset {offset}: copy {:.3} through an atlas {:.3} blurred {:.3}",
+                copy.sharpness, baked.sharpness, soft_q.sharpness
+            );
+            for (what, q) in [("copy", copy), ("baked copy", baked)] {
+                assert!(
+                    (q.sharpness - 1.0).abs() < 0.07,
+                    "{name} turned {angle} shifted {offset}: {what} reads {}",
+                    q.sharpness
+                );
+            }
+            assert!(
+                soft_q.sharpness < 0.85 * baked.sharpness.min(copy.sharpness),
+                "{name} turned {angle} shifted {offset}: blurred {} vs copy {}",
+                soft_q.sharpness,
+                copy.sharpness
+            );
+        }
+    }
 }

@@ -27,6 +27,14 @@ use crate::mesh::{PolyMesh, Topology};
 /// exemplar's smaller side when that is less.
 pub const STRUCTURE_TEMPLATE: u32 = 32;
 
+/// Sharpness templates sample the result this many times denser than one
+/// exemplar pixel, and the exemplar is read the same way (its bilinear
+/// interpolant): the sharpness is then that of the continuous texture,
+/// whatever the turn and sub-pixel shift of the measuring lattice against
+/// the result's pixels. At one sample per pixel a copy of the exemplar read
+/// between its pixels measured as blurred (0.81-0.94 by alignment).
+pub const SHARPNESS_OVERSAMPLING: u32 = 3;
+
 /// Smallest covered fraction of a structure template (uncovered points take
 /// the exemplar's mean colour).
 pub const STRUCTURE_MIN_COVERAGE: f32 = 0.9;
@@ -104,6 +112,54 @@ fn templates(
     kept.into_iter().flatten().flatten().collect()
 }
 
+/// Mean Sobel gradient magnitude, per pixel, of the luminance of `img`'s
+/// bilinear interpolant sampled `k` times per pixel over its interior
+/// (the exemplar read as [`SHARPNESS_OVERSAMPLING`]-dense templates read a
+/// result). 0 for images under 2×2.
+pub fn continuous_mean_gradient(img: &Image, k: u32) -> f32 {
+    let (w, h) = (img.width as usize, img.height as usize);
+    if w < 2 || h < 2 || k == 0 {
+        return 0.0;
+    }
+    let l = luminance(img);
+    // Sample j of a row sits (j + ½) / k pixels in: half a step off the
+    // pixel centres, where a template at a random shift sits on average
+    // (a Sobel step straddles a pixel boundary — a kink of the
+    // interpolant — as often).
+    let kf = k as f32;
+    let (fw, fh) = ((w - 1) * k as usize, (h - 1) * k as usize);
+    let lerp_at = |f: usize, n: usize| -> (usize, usize, f32) {
+        let t = (f as f32 + 0.5) / kf;
+        let i = (t.floor() as usize).min(n - 2);
+        (i, i + 1, t - i as f32)
+    };
+    let at = |fx: usize, fy: usize| -> f32 {
+        let (x, x1, tx) = lerp_at(fx, w);
+        let (y, y1, ty) = lerp_at(fy, h);
+        let top = l[y * w + x] * (1.0 - tx) + l[y * w + x1] * tx;
+        let bottom = l[y1 * w + x] * (1.0 - tx) + l[y1 * w + x1] * tx;
+        top * (1.0 - ty) + bottom * ty
+    };
+    let sum: f64 = (1..fh - 1)
+        .into_par_iter()
+        .map(|y| {
+            let mut row = 0.0f64;
+            for x in 1..fw - 1 {
+                let v = |dx: isize, dy: isize| {
+                    at((x as isize + dx) as usize, (y as isize + dy) as usize)
+                };
+                let gx =
+                    (v(1, -1) + 2.0 * v(1, 0) + v(1, 1)) - (v(-1, -1) + 2.0 * v(-1, 0) + v(-1, 1));
+                let gy =
+                    (v(-1, 1) + 2.0 * v(0, 1) + v(1, 1)) - (v(-1, -1) + 2.0 * v(0, -1) + v(1, -1));
+                row += f64::from((gx * gx + gy * gy).sqrt() / 8.0);
+            }
+            row
+        })
+        .sum();
+    (sum / ((fw - 2) * (fh - 2)) as f64 * f64::from(kf)) as f32
+}
+
 /// Every surface measure of a result. Samples the same vertices as the
 /// surface texture energy (`settings.samples` vertices with faces, drawn
 /// with `settings.seed`); `sources` are per-vertex level-0 exemplar pixel
@@ -142,24 +198,33 @@ pub fn surface_quality(
         completeness_against(&small, n as usize, exemplar)
     };
 
-    // Sharpness: Sobel over each template's interior.
+    // Sharpness: the continuous texture's gradient, from templates sampled
+    // SHARPNESS_OVERSAMPLING times denser over the same footprint.
     let sharpness = if count == 0 {
         f32::NAN
     } else {
-        let g_ex = mean_gradient(exemplar);
-        let side = n as usize;
-        let per = side * side * ch;
-        let sum: f64 = (0..count)
-            .map(|t| {
-                let img = Image::from_data(n, n, ch as u32, small[t * per..(t + 1) * per].to_vec())
-                    .expect("template size");
-                mean_gradient(&img) as f64
-            })
-            .sum();
-        if g_ex > 0.0 {
-            (sum / count as f64) as f32 / g_ex
-        } else {
+        let k = SHARPNESS_OVERSAMPLING;
+        let side = (n - 1) * k + 1;
+        let dense = SurfaceResult {
+            spacing: r.spacing / k as f32,
+            ..*r
+        };
+        let fine = templates(&dense, &picks, side, 1.0, &default);
+        let per = (side * side) as usize * ch;
+        let fcount = fine.len() / per.max(1);
+        let g_ex = continuous_mean_gradient(exemplar, k);
+        if fcount == 0 || g_ex <= 0.0 {
             f32::NAN
+        } else {
+            let sum: f64 = fine
+                .chunks_exact(per)
+                .map(|t| {
+                    let img =
+                        Image::from_data(side, side, ch as u32, t.to_vec()).expect("template size");
+                    f64::from(mean_gradient(&img)) * f64::from(k)
+                })
+                .sum();
+            (sum / fcount as f64) as f32 / g_ex
         }
     };
 
