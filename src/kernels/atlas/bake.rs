@@ -23,6 +23,7 @@
 //! Rows are baked in parallel; every texel depends only on its inputs, so
 //! the result is the same at any thread count.
 
+use super::autocorrelation::Autocorrelation;
 use super::raster::barycentric;
 use crate::image::{Image, pixel_rgb, sample::Wrap};
 use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
@@ -60,10 +61,19 @@ pub struct TexelSamples {
     /// When true the colour channel is `direct` alone (vertex colours);
     /// the contributions then serve the other channels.
     pub colour_direct_only: bool,
+    /// When set, `(mean, gain)`: the look-ups' blended colour `c` (weights
+    /// summing to `total`) becomes `mean·total + (c − mean·total)·gain`,
+    /// restoring the exemplar's contrast ([`AgreeingLookups::preserve_variance`]).
+    pub variance: Option<([f32; 3], f32)>,
     /// The last face's blend layers ([`BlendUvSource`] makes them from the
     /// compact form; neighbouring texels mostly share a face). Kept by
     /// `clear`.
     pub layers: Option<(u32, [[Vec2; 3]; 3])>,
+    /// The result triangle the last texel projected onto, where the next
+    /// search starts ([`VertexColourSource`]; neighbouring texels mostly
+    /// share it). Kept by `clear`; each atlas row starts without one, so
+    /// the bake is the same at any thread count.
+    pub hint: Option<u32>,
 }
 
 impl TexelSamples {
@@ -72,6 +82,7 @@ impl TexelSamples {
         self.direct = [0.0; 3];
         self.direct_weight = 0.0;
         self.colour_direct_only = false;
+        self.variance = None;
     }
 }
 
@@ -294,6 +305,13 @@ pub fn bake_channels_with_progress(
                         c[i] += k.weight * rgb[i];
                     }
                 }
+                if let Some((mean, gain)) = samples.variance {
+                    let total: f32 = samples.contribs.iter().map(|k| k.weight).sum();
+                    for i in 0..3 {
+                        let m = mean[i] * total;
+                        c[i] = (m + (c[i] - m) * gain).clamp(0.0, total);
+                    }
+                }
             }
             crow[3 * x..3 * x + 3].copy_from_slice(&c);
             // Maps, through the exemplar's look-ups only.
@@ -504,7 +522,12 @@ impl VertexColourSource<'_> {
     /// The result triangle (vertex ids) under the texel at barycentric `b`
     /// of original triangle `face`, and the barycentric coordinates of the
     /// texel's closest point on it (facing the same way).
-    fn result_point(&self, face: u32, b: [f32; 3]) -> Option<([u32; 3], [f32; 3])> {
+    fn result_point(
+        &self,
+        face: u32,
+        b: [f32; 3],
+        hint: &mut Option<u32>,
+    ) -> Option<([u32; 3], [f32; 3])> {
         let f = face as usize;
         let t = self.tris[f];
         let p = self.positions[t[0] as usize] * b[0]
@@ -514,8 +537,10 @@ impl VertexColourSource<'_> {
         let hit = if normal == Vec3::ZERO {
             self.projector.project(p)
         } else {
-            self.projector.project_facing(p, normal, u32::MAX)
+            self.projector
+                .project_facing(p, normal, hint.unwrap_or(u32::MAX))
         }?;
+        *hint = Some(hit.face);
         let rt = self.result_tris.get(hit.face as usize)?;
         Some((*rt, hit.bary.to_array()))
     }
@@ -524,7 +549,7 @@ impl VertexColourSource<'_> {
 impl ContributionSource for VertexColourSource<'_> {
     fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
         let f = face as usize;
-        let Some((rt, w)) = self.result_point(face, b) else {
+        let Some((rt, w)) = self.result_point(face, b, &mut out.hint) else {
             return;
         };
         let rt = &rt;
@@ -584,7 +609,7 @@ pub struct CoordinateSource<'a> {
 
 impl ContributionSource for CoordinateSource<'_> {
     fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
-        let Some((rt, w)) = self.surface.result_point(face, b) else {
+        let Some((rt, w)) = self.surface.result_point(face, b, &mut out.hint) else {
             return;
         };
         let p: Vec3 = rt
@@ -610,6 +635,134 @@ impl ContributionSource for CoordinateSource<'_> {
                 texture: 0,
             });
         }
+    }
+}
+
+/// Blends the exemplar look-ups of a texel sharply. Those that agree are
+/// read as one: the look-ups
+/// of `inner` on the exemplar (texture 0) whose coordinates lie within
+/// `within` exemplar pixels of one another are each moved to the weighted
+/// mean of those they agree with, fading back to their own coordinate
+/// between `within` and `2 · within` (a smoothstep), so the decision is
+/// continuous across the atlas.
+///
+/// Blending the colours of look-ups that nearly agree — the three vertices
+/// of a coherent patch continued through slightly different frames, or
+/// sources rounded to whole pixels — draws every feature two or three
+/// times, a pixel apart: a blur. Blending their coordinates draws it once,
+/// sharp. Look-ups that disagree (a jump, a patch seam) keep the colour
+/// blend of the source (Zelinka & Garland 2004 §6.5; Lefebvre & Hoppe 2005
+/// §7), which hides the seam — optionally preserving the exemplar's
+/// contrast there ([`AgreeingLookups::preserve_variance`]). With `within`
+/// 0 nothing is merged.
+pub struct AgreeingLookups<'a> {
+    /// The source whose look-ups are merged.
+    pub inner: &'a dyn ContributionSource,
+    /// The exemplar's size, pixels.
+    pub exemplar_size: Vec2,
+    /// Agreement distance, exemplar pixels (0: none merged).
+    pub within: f32,
+    /// The exemplar's addressing: with `Repeat`, coordinates a whole
+    /// exemplar apart are the same place.
+    pub wrap: Wrap,
+    /// The exemplar's mean colour and luminance autocorrelation, when the
+    /// colours of the look-ups are blended preserving their variance
+    /// (Heitz & Neyret 2018; Burley 2019): `mean + Σ wᵢ (cᵢ − mean) / s`
+    /// with `s² = Σᵢⱼ wᵢ wⱼ ρ(qᵢ − qⱼ)` the blend's variance over the
+    /// exemplar's for look-ups at coordinates `qᵢ` — `√Σ wᵢ²` for unrelated
+    /// look-ups, `Σ wᵢ` (no change) for one place — so a cross-fade keeps
+    /// the exemplar's contrast instead of washing out towards the mean.
+    pub preserve_variance: Option<([f32; 3], &'a Autocorrelation)>,
+}
+
+impl AgreeingLookups<'_> {
+    /// The shortest lag equivalent to `d` (pixels): modulo the exemplar
+    /// when it repeats.
+    fn lag(&self, d: Vec2) -> Vec2 {
+        if self.wrap == Wrap::Repeat {
+            d - (d / self.exemplar_size).round() * self.exemplar_size
+        } else {
+            d
+        }
+    }
+}
+
+/// Most exemplar look-ups of one texel that [`AgreeingLookups`] merges
+/// (the sources make three).
+const MAX_MERGED: usize = 8;
+
+impl ContributionSource for AgreeingLookups<'_> {
+    fn texel(&self, face: u32, b: [f32; 3], out: &mut TexelSamples) {
+        self.inner.texel(face, b, out);
+        let mut idx = [0usize; MAX_MERGED];
+        let mut n = 0;
+        for (i, c) in out.contribs.iter().enumerate() {
+            if c.texture == 0 && c.weight > 0.0 && n < MAX_MERGED {
+                idx[n] = i;
+                n += 1;
+            }
+        }
+        if n < 2 {
+            return;
+        }
+        let size = self.exemplar_size;
+        let q: [Vec2; MAX_MERGED] = std::array::from_fn(|k| {
+            if k < n {
+                out.contribs[idx[k]].uv * size
+            } else {
+                Vec2::ZERO
+            }
+        });
+        let w: [f32; MAX_MERGED] = std::array::from_fn(|k| {
+            if k < n {
+                out.contribs[idx[k]].weight
+            } else {
+                0.0
+            }
+        });
+        let (lo, hi) = (self.within, 2.0 * self.within);
+        let mut moved = q;
+        let within = self.within > 0.0;
+        for k in (0..n).filter(|_| within) {
+            let (mut shift, mut total) = (Vec2::ZERO, w[k]);
+            for j in (0..n).filter(|&j| j != k) {
+                let d = self.lag(q[j] - q[k]);
+                let t = ((d.length() - lo) / (hi - lo)).clamp(0.0, 1.0);
+                let agree = 1.0 - t * t * (3.0 - 2.0 * t);
+                shift += d * (agree * w[j]);
+                total += agree * w[j];
+            }
+            moved[k] = q[k] + shift / total;
+        }
+        for k in 0..n {
+            out.contribs[idx[k]].uv = moved[k] / size;
+        }
+        // Look-ups now at one coordinate are read once, their weights summed.
+        for a in 0..n {
+            for b in a + 1..n {
+                let (ia, ib) = (idx[a], idx[b]);
+                if out.contribs[ib].weight > 0.0
+                    && self.lag(moved[a] - moved[b]).length_squared() < 1e-6
+                {
+                    out.contribs[ia].weight += out.contribs[ib].weight;
+                    out.contribs[ib].weight = 0.0;
+                }
+            }
+        }
+        if let Some((mean, rho)) = self.preserve_variance {
+            let (mut total, mut var) = (0.0f32, 0.0f32);
+            for a in 0..n {
+                total += w[a];
+                var += w[a] * w[a];
+                for b in a + 1..n {
+                    var += 2.0 * w[a] * w[b] * rho.at(self.lag(moved[b] - moved[a]));
+                }
+            }
+            if var > 0.0 {
+                out.variance = Some((mean, total / var.sqrt()));
+            }
+        }
+        out.contribs.retain(|c| c.weight > 0.0);
     }
 }
 
@@ -749,5 +902,185 @@ impl ContributionSource for LappedSource<'_> {
         out.contribs[first..].reverse();
         out.direct = self.base;
         out.direct_weight = remaining;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three fixed look-ups (exemplar pixels, weights), as a source.
+    struct Fixed([(Vec2, f32); 3]);
+
+    impl ContributionSource for Fixed {
+        fn texel(&self, _: u32, _: [f32; 3], out: &mut TexelSamples) {
+            for (q, w) in self.0 {
+                out.contribs.push(Contribution {
+                    uv: q / 64.0,
+                    weight: w,
+                    angle: 0.0,
+                    texture: 0,
+                });
+            }
+        }
+    }
+
+    /// White noise in `[0.3, 0.7]` (a restored blend stays inside `[0, 1]`).
+    fn noise(seed: u64) -> Image {
+        let mut img = Image::new(64, 64, 1);
+        let mut s = seed;
+        for v in img.data.iter_mut() {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            *v = 0.3 + 0.4 * (s >> 40) as f32 / (1u64 << 24) as f32;
+        }
+        img
+    }
+
+    fn merged(source: &Fixed, within: f32, rho: Option<&Autocorrelation>) -> TexelSamples {
+        let lookups = AgreeingLookups {
+            inner: source,
+            exemplar_size: Vec2::splat(64.0),
+            within,
+            wrap: Wrap::Repeat,
+            preserve_variance: rho.map(|r| ([0.5; 3], r)),
+        };
+        let mut out = TexelSamples::default();
+        lookups.texel(0, [1.0 / 3.0; 3], &mut out);
+        out
+    }
+
+    #[test]
+    fn look_ups_that_agree_are_read_once_at_their_mean() {
+        let near = Fixed([
+            (Vec2::new(10.0, 10.0), 0.5),
+            (Vec2::new(10.6, 10.0), 0.25),
+            (Vec2::new(10.0, 10.8), 0.25),
+        ]);
+        let out = merged(&near, 2.0, None);
+        assert_eq!(out.contribs.len(), 1, "{:?}", out.contribs);
+        let mean = Vec2::new(10.15, 10.2) / 64.0;
+        assert!((out.contribs[0].uv - mean).length() < 1e-5);
+        assert!((out.contribs[0].weight - 1.0).abs() < 1e-6);
+        // Across the repeat: 63.5 and 0.3 are 0.8 pixel apart.
+        let wrapped = Fixed([
+            (Vec2::new(63.5, 5.0), 0.5),
+            (Vec2::new(0.3, 5.0), 0.5),
+            (Vec2::new(30.0, 30.0), 0.0),
+        ]);
+        let out = merged(&wrapped, 2.0, None);
+        assert_eq!(out.contribs.len(), 1, "{:?}", out.contribs);
+        let x = (out.contribs[0].uv.x * 64.0).rem_euclid(64.0);
+        assert!((x - 63.9).abs() < 1e-3, "{x}");
+    }
+
+    #[test]
+    fn look_ups_that_disagree_keep_their_places() {
+        let far = Fixed([
+            (Vec2::new(10.0, 10.0), 0.5),
+            (Vec2::new(30.0, 12.0), 0.25),
+            (Vec2::new(50.0, 40.0), 0.25),
+        ]);
+        let out = merged(&far, 2.0, None);
+        assert_eq!(out.contribs.len(), 3);
+        for (c, (q, w)) in out.contribs.iter().zip(far.0) {
+            assert!((c.uv - q / 64.0).length() < 1e-6 && c.weight == w);
+        }
+        assert!(out.variance.is_none());
+        // Between 2 and 4 pixels apart the merge fades out continuously.
+        let at = |d: f32| {
+            let two = Fixed([
+                (Vec2::new(10.0, 10.0), 0.5),
+                (Vec2::new(10.0 + d, 10.0), 0.5),
+                (Vec2::new(40.0, 40.0), 0.0),
+            ]);
+            merged(&two, 2.0, None).contribs[0].uv.x * 64.0 - 10.0
+        };
+        // At 3 pixels each agrees half: moved to (1·q + ½·q')/(1 + ½).
+        assert!((at(3.0) - 1.0).abs() < 1e-4, "{}", at(3.0));
+        assert!(at(4.0).abs() < 1e-5 && at(5.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn variance_gain_is_one_for_one_place_and_restores_unrelated_blends() {
+        let img = noise(7);
+        let rho = Autocorrelation::of_luminance(&img, 8, Wrap::Repeat);
+        // Unrelated look-ups, equal weights: gain √3.
+        let far = Fixed([
+            (Vec2::new(10.0, 10.0), 1.0 / 3.0),
+            (Vec2::new(30.0, 12.0), 1.0 / 3.0),
+            (Vec2::new(50.0, 40.0), 1.0 / 3.0),
+        ]);
+        let (_, gain) = merged(&far, 0.0, Some(&rho)).variance.unwrap();
+        assert!((gain - 3f32.sqrt()).abs() < 0.1, "{gain}");
+        // One place, unmerged: no change.
+        let same = Fixed([(Vec2::new(20.0, 20.0), 1.0 / 3.0); 3]);
+        let (_, gain) = merged(&same, 0.0, Some(&rho)).variance.unwrap();
+        assert!((gain - 1.0).abs() < 1e-5, "{gain}");
+    }
+
+    /// Blending unrelated noise linearly shrinks its spread to `√Σw²` of
+    /// the exemplar's; preserving variance keeps it.
+    #[test]
+    fn a_variance_preserving_blend_keeps_the_exemplar_contrast() {
+        let img = noise(11);
+        let rho = Autocorrelation::of_luminance(&img, 8, Wrap::Repeat);
+        let tris = [[Vec2::ZERO, Vec2::X, Vec2::Y]];
+        let size = 64u32;
+        let texel_face = vec![0u32; (size * size) as usize];
+        let target = BakeTarget {
+            corner_uvs: &tris,
+            texel_face: &texel_face,
+            size,
+            padding_px: 0,
+        };
+        /// Three look-ups per texel at unrelated places that move with it.
+        struct Spread;
+        impl ContributionSource for Spread {
+            fn texel(&self, _: u32, b: [f32; 3], out: &mut TexelSamples) {
+                let p = Vec2::new(b[1], b[2]) * 64.0;
+                for (k, o) in [(0.0, 0.0), (17.0, 5.0), (33.0, 41.0)].iter().enumerate() {
+                    out.contribs.push(Contribution {
+                        uv: (p + Vec2::new(o.0, o.1)) / 64.0,
+                        weight: [0.5, 0.3, 0.2][k],
+                        angle: 0.0,
+                        texture: 0,
+                    });
+                }
+            }
+        }
+        let spread_of = |rho: Option<&Autocorrelation>| {
+            let m = img.mean()[0];
+            let src = AgreeingLookups {
+                inner: &Spread,
+                exemplar_size: Vec2::splat(64.0),
+                within: 0.0,
+                wrap: Wrap::Repeat,
+                preserve_variance: rho.map(|r| ([m; 3], r)),
+            };
+            let (baked, _) = bake_channels(&target, &src, &[&img], Wrap::Repeat, &[]);
+            // The texels inside the triangle.
+            let v: Vec<f32> = baked
+                .data
+                .chunks_exact(3)
+                .enumerate()
+                .filter(|(i, _)| i % 64 + i / 64 + 1 < 64)
+                .map(|(_, p)| p[0])
+                .collect();
+            let mean = v.iter().sum::<f32>() / v.len() as f32;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<f32>() / v.len() as f32).sqrt()
+        };
+        let ex_mean = img.mean()[0];
+        let ex = (img.data.iter().map(|x| (x - ex_mean).powi(2)).sum::<f32>()
+            / img.data.len() as f32)
+            .sqrt();
+        let (linear, kept) = (spread_of(None), spread_of(Some(&rho)));
+        let expected_linear = ex * (0.25f32 + 0.09 + 0.04).sqrt();
+        assert!(
+            (linear / expected_linear - 1.0).abs() < 0.1,
+            "{linear} vs {expected_linear}"
+        );
+        assert!((kept / ex - 1.0).abs() < 0.1, "{kept} vs {ex}");
     }
 }

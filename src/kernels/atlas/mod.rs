@@ -36,6 +36,7 @@
 //!    dilation of chart texels into the gutters so bilinear filtering and
 //!    mipmaps do not bleed the background in.
 
+pub mod autocorrelation;
 pub mod bake;
 pub mod lscm;
 pub mod merge;

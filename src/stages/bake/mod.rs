@@ -17,9 +17,10 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
 use crate::image::Image;
+use crate::kernels::atlas::autocorrelation::Autocorrelation;
 use crate::kernels::atlas::bake::{
-    AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap, ContributionSource,
-    CoordinateSource, LappedSource, PatchPlacement, VertexColourSource,
+    AgreeingLookups, AtlasFrames, BakeTarget, BlendUvSource, ChannelKind, ChannelMap,
+    ContributionSource, CoordinateSource, LappedSource, PatchPlacement, VertexColourSource,
     bake_channels_with_progress,
 };
 use crate::kernels::atlas::{
@@ -52,6 +53,27 @@ pub struct BakeSettings {
     pub normal_cone: f64,
     /// How a per-vertex result's colour reaches the texels.
     pub colours: BakeColours,
+    /// Exemplar look-ups of a texel within this many exemplar pixels of
+    /// one another are read as one ([`AgreeingLookups`]); 0 = the colours
+    /// are always blended.
+    pub merge_within: f32,
+    /// How look-ups that still differ are blended.
+    pub blend: BakeBlend,
+}
+
+/// How `bake` blends the exemplar look-ups of a texel that disagree (the
+/// jump-map 3-way blend, the coordinate bake's three vertices).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BakeBlend {
+    /// `mean + Σ wᵢ (cᵢ − mean) / √Σ wᵢ²` about the exemplar's mean colour
+    /// (Heitz & Neyret 2018; Burley 2019): a cross-fade keeps the
+    /// exemplar's contrast.
+    #[default]
+    PreserveVariance,
+    /// `Σ wᵢ cᵢ`, as the papers draw it: a cross-fade of unrelated texture
+    /// washes out towards the mean.
+    Linear,
 }
 
 /// How `bake` reads a per-vertex result (vertex colours on a retiled or
@@ -79,6 +101,8 @@ impl Default for BakeSettings {
             padding: 4,
             normal_cone: 60.0,
             colours: BakeColours::Auto,
+            merge_within: 2.0,
+            blend: BakeBlend::PreserveVariance,
         }
     }
 }
@@ -109,9 +133,30 @@ impl StageSettings for BakeSettings {
             range: ParamRange::OneOf(&["auto", "coordinates", "vertex"]),
             doc: "how a per-vertex result (vertex colours on a retiled or subdivided mesh) reaches the texels: coordinates = each texel looks the exemplar up where the exemplar coordinates of the result triangle's three vertices, continued through their tangent frames at the synthesis scale, put it, blended barycentrically (the exemplar's own resolution whatever the vertex density; needs source texels and frames, which Wei–Levoy, Bangay–Morkel and coherent record); vertex = the vertex colours interpolated across each triangle (detail bounded by the vertex density; the only choice for a result without coordinates); auto = coordinates where recorded, else vertex. Per-corner UVs and lapped pastes are always read at full resolution",
         },
+        ParamDoc {
+            name: "merge_within",
+            unit: "exemplar pixels",
+            range: ParamRange::Float(0.0, 16.0),
+            doc: "the look-ups of one texel (the jump-map 3-way blend, the coordinate bake's three vertices) whose exemplar coordinates lie within this distance of one another are read once, at their weighted mean coordinate, fading back to the colour blend between this distance and twice it: features the look-ups nearly agree on are drawn once, sharp, instead of two or three times a pixel apart; look-ups that disagree (jumps, patch seams) keep the colour blend. 0 = always blend the colours (with `blend = \"linear\"`, the papers' blend: Zelinka & Garland 2004 §6.5, Lefebvre & Hoppe 2005 §7). Per-vertex colours, lapped pastes and triplanar projections are not affected",
+        },
+        ParamDoc {
+            name: "blend",
+            unit: "",
+            range: ParamRange::OneOf(&["preserve_variance", "linear"]),
+            doc: "how the colours of a texel's look-ups that disagree are blended: preserve_variance = about the exemplar's mean colour with the deviation scaled by Σw/√Σw² (Heitz & Neyret 2018, Burley 2019), so a cross-fade of unrelated texture keeps the exemplar's contrast (it assumes the blended look-ups unrelated, which merge_within > 0 ensures: with merge_within = 0 it over-boosts where they agree); linear = the weighted mean, as the papers draw it, which washes blend zones out towards the mean colour. Colour only: normal, roughness and height maps are blended linearly",
+        },
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
+        if !(0.0..=16.0).contains(&self.merge_within) {
+            return Err((
+                "merge_within".into(),
+                format!(
+                    "{} is out of range; allowed: 0.0..=16.0 exemplar pixels",
+                    self.merge_within
+                ),
+            ));
+        }
         if (1..256).contains(&self.size) {
             return Err((
                 "size".into(),
@@ -140,6 +185,39 @@ pub fn auto_atlas_size(texels_per_unit: f64, area: f64) -> u32 {
     (side.clamp(256.0, 8192.0).ceil() as u32)
         .next_power_of_two()
         .min(8192)
+}
+
+/// Lags up to this many exemplar pixels enter the variance-preserving
+/// blend's autocorrelation; look-ups farther apart count as unrelated.
+pub const AUTOCORRELATION_RADIUS: u32 = 64;
+
+/// The exemplar's mean colour and autocorrelation for `blend`, when it
+/// preserves variance.
+fn blend_statistics(blend: BakeBlend, exemplar: &Exemplar) -> Option<([f32; 3], Autocorrelation)> {
+    (blend == BakeBlend::PreserveVariance).then(|| {
+        let m = exemplar.image.to_rgb().mean();
+        let rho =
+            Autocorrelation::of_luminance(&exemplar.image, AUTOCORRELATION_RADIUS, exemplar.wrap);
+        ([m[0], m[1], m[2]], rho)
+    })
+}
+
+/// `source` with its agreeing exemplar look-ups merged (`within > 0`) and
+/// the others blended with `statistics` (variance-preserving); `None` for
+/// the papers' blend.
+fn merge<'a>(
+    source: &'a dyn ContributionSource,
+    within: f32,
+    statistics: Option<&'a ([f32; 3], Autocorrelation)>,
+    exemplar: &Exemplar,
+) -> Option<AgreeingLookups<'a>> {
+    (within > 0.0 || statistics.is_some()).then(|| AgreeingLookups {
+        inner: source,
+        exemplar_size: Vec2::new(exemplar.image.width as f32, exemplar.image.height as f32),
+        within,
+        wrap: exemplar.wrap,
+        preserve_variance: statistics.map(|(m, rho)| (*m, rho)),
+    })
 }
 
 /// What the bake reads of a mesh entity.
@@ -486,9 +564,13 @@ fn bake_world(
         } else {
             BlendUvSource::without_angles(layers)
         };
+        let statistics = blend_statistics(settings.blend, exemplar);
+        let merged = merge(&src, settings.merge_within, statistics.as_ref(), exemplar);
         bake_channels_with_progress(
             &target,
-            &src as &dyn ContributionSource,
+            merged
+                .as_ref()
+                .map_or(&src as &dyn ContributionSource, |m| m),
             &textures,
             exemplar.wrap,
             &maps,
@@ -559,9 +641,16 @@ fn bake_world(
                 })
             }
         };
+        let statistics = blend_statistics(settings.blend, exemplar);
+        let merged = merge(
+            source.as_ref(),
+            settings.merge_within,
+            statistics.as_ref(),
+            exemplar,
+        );
         bake_channels_with_progress(
             &target,
-            source.as_ref(),
+            merged.as_ref().map_or(source.as_ref(), |m| m),
             &textures,
             exemplar.wrap,
             &maps,
