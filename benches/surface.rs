@@ -14,7 +14,8 @@
 //!
 //! Writes into `target/surface/` (under `$CARGO_TARGET_DIR` when set):
 //! `surface.md` and `surface.csv` (mesh × method: completeness, sharpness,
-//! structure, coherence mean and p90, wall and CPU seconds, peak memory of
+//! structure, coherence mean and p90, histogram distance, mean copied-region
+//! fraction of the exemplar (methods that record source texels), wall and CPU seconds, peak memory of
 //! the run's process) and `surface_sheet_<mesh>_<texture>.png` (exemplar |
 //! peer | methods, each the baked GLB's first preview, labelled). Runs keep
 //! their folders in `target/surface/runs/`.
@@ -59,19 +60,21 @@ const SEED: u64 = 1;
 struct Row {
     mesh: String,
     method: String,
-    quality: [Option<f64>; 5],
+    quality: [Option<f64>; QUALITY.len()],
     wall: f64,
     cpu: Option<f64>,
     peak_mib: Option<f64>,
     error: Option<String>,
 }
 
-const QUALITY: [(&str, &str); 5] = [
+const QUALITY: [(&str, &str); 7] = [
     ("completeness", "completeness ↓"),
     ("sharpness", "sharpness →1"),
     ("structure", "structure ↓"),
     ("coherence.mean", "coherence mean ↓"),
     ("coherence.p90", "coherence p90 ↓"),
+    ("histogram", "histogram ↓"),
+    ("verbatim.mean_region_fraction", "verbatim region ↓"),
 ];
 
 fn list_env(name: &str) -> Option<Vec<String>> {
@@ -289,7 +292,7 @@ fn main() {
                     rows.push(Row {
                         mesh: mesh.clone(),
                         method: method.clone(),
-                        quality: [None; 5],
+                        quality: [None; QUALITY.len()],
                         wall: 0.0,
                         cpu: None,
                         peak_mib: None,

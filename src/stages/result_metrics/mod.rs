@@ -14,7 +14,8 @@ use crate::config::params::to_json;
 use crate::image::Image;
 use crate::kernels::frames::frames_from_global_direction;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
-use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality};
+use crate::kernels::lapped::coverage::lattice_samples_into;
+use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality, surface_verbatim};
 use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
 };
@@ -91,6 +92,11 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             return;
         }
         if let (Some(asset), Ok((source, source_frames))) = (baked.as_deref(), source.single()) {
+            // The synthesis's copied regions (a bake blends look-ups at
+            // seams but moves no source).
+            let sources = sources
+                .map(|s| &s.0[..])
+                .filter(|s| s.len() == mesh.vertex_count());
             baked_quality(
                 asset,
                 &source.0,
@@ -100,6 +106,28 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
                 &settings,
                 &mut metrics,
             );
+            let frames = frames
+                .map(|f| &f.0[..])
+                .filter(|f| f.len() == mesh.vertex_count());
+            if let (Some(s), Some(frames)) = (sources, frames) {
+                let topo = Topology::build_edges_and_vertex_faces(mesh);
+                let v = surface_verbatim(
+                    &SurfaceResult {
+                        mesh,
+                        topo: &topo,
+                        frames,
+                        spacing: spacing.0,
+                        signal: &SurfaceSignal::VertexColours {
+                            values: &[],
+                            channels: 0,
+                        },
+                    },
+                    s,
+                    exemplar.image.width,
+                    exemplar.image.height,
+                );
+                metrics.result.insert("verbatim".into(), to_json(&v));
+            }
             progress.inc(4);
             return;
         }
@@ -212,26 +240,15 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             (None, Some(c)) => {
                 // About 20 000 composite samples spread by area.
                 let area: f32 = mesh.face_areas().iter().sum();
-                let per_area = 20_000.0 / area.max(f32::MIN_POSITIVE);
-                Some((c.sample_colours(mesh, per_area), c.channels()))
+                Some((
+                    c.sample_colours(mesh, histogram_density(area)),
+                    c.channels(),
+                ))
             }
             _ => None,
         };
         if let Some((values, channels)) = values {
-            let as_image = Image::from_data(
-                (values.len() / channels.max(1)) as u32,
-                1,
-                channels as u32,
-                values,
-            );
-            if let Some(img) = as_image.filter(|i| i.width > 0) {
-                let w = histogram_wasserstein(&img, &exemplar.image);
-                let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
-                metrics
-                    .result
-                    .insert("histogram_wasserstein".into(), to_json(&w));
-                metrics.result.insert("histogram".into(), to_json(&mean));
-            }
+            record_histogram(&mut metrics, values, channels, &exemplar.image);
         }
         progress.inc(1);
     })
@@ -280,9 +297,58 @@ fn baked_quality(
         None,
     );
     record_surface_measures(metrics, &stats, &q, settings.neighbourhood, spacing);
+    // The histogram of the atlas as the mesh shows it: read at lattice
+    // points of every triangle, about 20 000 spread by area.
+    let per_area = histogram_density(mesh.face_areas().iter().sum());
+    let mut values = Vec::new();
+    let mut px = [0.0f32; 3];
+    let mut lattice = Vec::new();
+    for f in 0..mesh.face_count() {
+        let corners = mesh.face_corners(f);
+        if corners.len() != 3 {
+            continue;
+        }
+        let k = ((mesh.face_area(f) * per_area).max(0.0).sqrt().round() as u16).clamp(1, 8);
+        lattice_samples_into(k, &mut lattice);
+        let uv = &asset.uvs[corners];
+        for b in &lattice {
+            let p = uv[0] * b[0] + uv[1] * b[1] + uv[2] * b[2];
+            asset
+                .colour
+                .sample_uv(p.x, p.y, crate::image::sample::Wrap::Clamp, &mut px);
+            values.extend_from_slice(&px);
+        }
+    }
+    record_histogram(metrics, values, 3, &rgb);
     metrics
         .result
         .insert("measured_on".into(), "baked atlas".into());
+}
+
+/// Writes the histogram distance of `values` (`channels` per sample) to the
+/// exemplar's, per channel (`histogram_wasserstein`) and their mean
+/// (`histogram`).
+fn record_histogram(metrics: &mut Metrics, values: Vec<f32>, channels: usize, exemplar: &Image) {
+    let as_image = Image::from_data(
+        (values.len() / channels.max(1)) as u32,
+        1,
+        channels as u32,
+        values,
+    );
+    if let Some(img) = as_image.filter(|i| i.width > 0) {
+        let w = histogram_wasserstein(&img, exemplar);
+        let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
+        metrics
+            .result
+            .insert("histogram_wasserstein".into(), to_json(&w));
+        metrics.result.insert("histogram".into(), to_json(&mean));
+    }
+}
+
+/// Samples per unit area for a histogram of about 20 000 samples over a
+/// surface of `area`.
+fn histogram_density(area: f32) -> f32 {
+    20_000.0 / area.max(f32::MIN_POSITIVE)
 }
 
 /// Writes the texture energy (as `texture_energy` and `coherence`) and the
