@@ -69,11 +69,11 @@ pub struct TexelSamples {
     /// compact form; neighbouring texels mostly share a face). Kept by
     /// `clear`.
     pub layers: Option<(u32, [[Vec2; 3]; 3])>,
-    /// The result triangle the last texel projected onto, where the next
-    /// search starts ([`VertexColourSource`]; neighbouring texels mostly
-    /// share it). Kept by `clear`; each atlas row starts without one, so
-    /// the bake is the same at any thread count.
-    pub hint: Option<u32>,
+    /// The last texel's original triangle and the result triangle it
+    /// projected onto, where the next texel on the same original triangle
+    /// starts its walk ([`VertexColourSource`]). Kept by `clear`; each atlas
+    /// row starts without one, so the bake is the same at any thread count.
+    pub hint: Option<(u32, u32)>,
 }
 
 impl TexelSamples {
@@ -526,7 +526,7 @@ impl VertexColourSource<'_> {
         &self,
         face: u32,
         b: [f32; 3],
-        hint: &mut Option<u32>,
+        hint: &mut Option<(u32, u32)>,
     ) -> Option<([u32; 3], [f32; 3])> {
         let f = face as usize;
         let t = self.tris[f];
@@ -537,10 +537,14 @@ impl VertexColourSource<'_> {
         let hit = if normal == Vec3::ZERO {
             self.projector.project(p)
         } else {
-            self.projector
-                .project_facing(p, normal, hint.unwrap_or(u32::MAX))
+            match *hint {
+                Some((on, near)) if on == face => {
+                    self.projector.project_facing_local(p, normal, near)
+                }
+                _ => self.projector.project_facing(p, normal, u32::MAX),
+            }
         }?;
-        *hint = Some(hit.face);
+        *hint = Some((face, hit.face));
         let rt = self.result_tris.get(hit.face as usize)?;
         Some((*rt, hit.bary.to_array()))
     }

@@ -256,6 +256,49 @@ impl SurfaceProjector {
         Self::build(tri.positions, triangles, Vec::new())
     }
 
+    /// [`Self::new`] with edge adjacency, so [`Self::project_local`] and
+    /// [`Self::project_facing_local`] walk instead of searching the tree.
+    /// Triangles meet across an edge only where exactly two share it with
+    /// opposite orientations; elsewhere (a boundary, a non-manifold edge, a
+    /// flipped neighbour) a walk stops. O(n log n).
+    pub fn with_adjacency(mesh: &PolyMesh) -> Self {
+        let mut out = Self::new(mesh);
+        // (smaller vertex, larger vertex, triangle, edge) sorted: the
+        // triangles of one edge are consecutive.
+        let mut edges: Vec<(u32, u32, u32, u8)> = out
+            .triangles
+            .iter()
+            .enumerate()
+            .flat_map(|(t, tri)| {
+                (0..3u8).map(move |k| {
+                    let (a, b) = (tri[k as usize], tri[(k as usize + 1) % 3]);
+                    (a.min(b), a.max(b), t as u32, k)
+                })
+            })
+            .collect();
+        edges.sort_unstable();
+        let mut neighbours = vec![[NONE; 3]; out.triangles.len()];
+        let mut i = 0;
+        while i < edges.len() {
+            let mut j = i + 1;
+            while j < edges.len() && edges[j].0 == edges[i].0 && edges[j].1 == edges[i].1 {
+                j += 1;
+            }
+            if j - i == 2 {
+                let ((_, _, t0, k0), (_, _, t1, k1)) = (edges[i], edges[i + 1]);
+                let start = |t: u32, k: u8| out.triangles[t as usize][k as usize];
+                // Consistently oriented neighbours run the edge both ways.
+                if start(t0, k0) != start(t1, k1) {
+                    neighbours[t0 as usize][k0 as usize] = t1;
+                    neighbours[t1 as usize][k1 as usize] = t0;
+                }
+            }
+            i = j;
+        }
+        out.neighbours = neighbours;
+        out
+    }
+
     /// Builds the projector over the live faces of a prepared mesh (face ids
     /// are its face slots divided by three, which are all live right after
     /// preparation), including its boundary loops.
@@ -430,6 +473,45 @@ impl SurfaceProjector {
             }
         }
         self.project_near(p, face)
+    }
+
+    /// [`Self::project_local`] among the triangles facing the same way as
+    /// `normal` ([`Self::project_facing`]): from `hint`, steps to whichever
+    /// facing neighbour is closer to `p`, until none is — "the surface
+    /// here", facing that way. A hint that does not face that way, a walk
+    /// longer than 64 steps, or a projector without adjacency search the
+    /// tree ([`Self::project_facing`]).
+    pub fn project_facing_local(&self, p: Vec3, normal: Vec3, hint: u32) -> Option<SurfacePoint> {
+        const MAX_STEPS: usize = 64;
+        let facing = |t: u32| self.normals[t as usize].dot(normal) > 0.0;
+        if self.neighbours.is_empty() || hint as usize >= self.triangles.len() || !facing(hint) {
+            return self.project_facing(p, normal, hint);
+        }
+        let mut face = hint;
+        let (mut point, mut bary) = self.tri_closest(face, p);
+        let mut d2 = (point - p).length_squared();
+        let mut came_from = NONE;
+        for _ in 0..MAX_STEPS {
+            let mut step = None;
+            for &g in &self.neighbours[face as usize] {
+                if g == NONE || g == came_from || !facing(g) {
+                    continue;
+                }
+                let (q, b) = self.tri_closest(g, p);
+                let e = (q - p).length_squared();
+                if e < d2 {
+                    (d2, step) = (e, Some((g, q, b)));
+                }
+            }
+            match step {
+                Some((g, q, b)) => {
+                    came_from = face;
+                    (face, point, bary) = (g, q, b);
+                }
+                None => return Some(SurfacePoint { point, face, bary }),
+            }
+        }
+        self.project_facing(p, normal, face)
     }
 
     /// Whether `pred` holds for the normal of any input triangle through the
@@ -775,5 +857,44 @@ mod tests {
             assert!(((got.point - p).length() - best).abs() < 1e-5);
             assert!((proj.point_at(got.face, got.bary) - got.point).length() < 1e-5);
         }
+    }
+
+    /// Walking from a neighbouring point's triangle finds the same closest
+    /// point as the tree, for points near a smooth surface.
+    #[test]
+    fn facing_walk_matches_the_tree_near_the_surface() {
+        let mesh = builtin_mesh("torus", &BuiltinOptions::default()).unwrap();
+        let tree = SurfaceProjector::new(&mesh);
+        let walk = SurfaceProjector::with_adjacency(&mesh);
+        assert!(
+            walk.neighbours.iter().flatten().all(|&g| g != NONE),
+            "a closed torus"
+        );
+        let mut state = 777u32;
+        let mut rnd = || {
+            state = state.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (state >> 8) as f32 / (1u32 << 24) as f32 - 0.5
+        };
+        let mut walked = 0;
+        for t in 0..walk.triangle_count() as u32 {
+            let centre = walk.point_at(t, Vec3::splat(1.0 / 3.0));
+            let n = walk.normals[t as usize];
+            // A point a little off the surface, a few triangles away.
+            let p = centre + Vec3::new(rnd(), rnd(), rnd()) * 0.08 + n * 0.005;
+            let want = tree.project_facing(p, n, NONE).unwrap();
+            let got = walk.project_facing_local(p, n, t).unwrap();
+            assert!(
+                (got.point - want.point).length() < 1e-5,
+                "from triangle {t}: walk {:?} tree {:?}",
+                got.point,
+                want.point
+            );
+            walked += usize::from(got.face != t);
+        }
+        println!(
+            "walks that left their start: {walked} of {}",
+            walk.triangle_count()
+        );
+        assert!(walked > 50, "the walks left their start {walked} times");
     }
 }

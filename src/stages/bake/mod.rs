@@ -581,7 +581,8 @@ fn bake_world(
         if c.channels == 0 || c.values.len() != c.channels * result.0.vertex_count() {
             return Err("the result's vertex colours do not match its vertices".into());
         }
-        let projector = SurfaceProjector::new(&result.0);
+        // Neighbouring texels project near one another: walk from the last.
+        let projector = SurfaceProjector::with_adjacency(&result.0);
         let result_tris: Vec<[u32; 3]> = result
             .0
             .triangulated()
