@@ -1292,3 +1292,42 @@ fn surface_methods_meet_the_triplanar_peer_on_the_bunny() {
     println!("{report}");
     assert!(failures.is_empty(), "{failures:?}\n{report}");
 }
+
+/// A baked per-vertex result is measured in the frames it was synthesised
+/// in, carried onto the loaded mesh, when the loaded mesh has none of its
+/// own: the same structure as with an `orientation` on the loaded mesh
+/// (the same up), where measuring in another direction (texture-up along x
+/// against a synthesis along y) read the texture as turned: structure 0.59
+/// instead of 0.11 for coherent on the bunny.
+#[test]
+fn a_baked_result_is_measured_in_its_synthesis_frames() {
+    let text = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/surface/coherent.toml"),
+    )
+    .expect("the surface config")
+    .replace("../../data/", "data/");
+    // The same run without the `orientation` on the loaded mesh.
+    let start = text
+        .find("[[stage]]\nkind = \"orientation\"               # on the loaded mesh")
+        .expect("configs/surface/coherent.toml orients the loaded mesh first");
+    let end = start + 1 + text[start + 1..].find("[[stage]]").expect("a next stage");
+    let without = format!("{}{}", &text[..start], &text[end..]);
+    let structure = |text: &str| {
+        let world = run(text).expect("coherent runs");
+        let q = &world.resource::<Metrics>().result;
+        (
+            q["structure"].as_f64().expect("structure"),
+            q["measured_on"].clone(),
+        )
+    };
+    let (with_frames, on) = structure(&text);
+    let (carried, _) = structure(&without);
+    assert_eq!(on, "baked atlas");
+    println!(
+        "structure: loaded-mesh frames {with_frames:.3}, carried synthesis frames {carried:.3}"
+    );
+    assert!(
+        (with_frames - carried).abs() < 0.03,
+        "{with_frames} vs {carried}"
+    );
+}

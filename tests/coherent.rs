@@ -330,8 +330,8 @@ fn works_on_several_components_and_on_sqrt2_levels() {
 
 /// The shipped surface config on `retile` levels of the bunny (a mesh with
 /// its own pyramid, 4 levels, smaller here) through the CLI: exit 0, every
-/// level synthesised with falling energy, the result coloured and mapped
-/// back, and the same bytes at 1 and 2 threads.
+/// level synthesised with falling energy, the result coloured and baked,
+/// and the same bytes at 1 and 2 threads.
 #[test]
 fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
     let tmp = tempfile::tempdir().expect("a temporary folder");
@@ -358,7 +358,7 @@ fn the_surface_config_runs_on_retile_levels_and_is_deterministic() {
         assert!(e.last().unwrap() < &e[0], "level {}: {e:?}", l["level"]);
     }
     assert!(stage["texels_per_world_unit"].as_f64().unwrap() > 0.0);
-    for f in ["result.ply", "result_original.ply"] {
+    for f in ["result.ply", "result.glb"] {
         assert_eq!(
             std::fs::read(a.join(f)).expect("written"),
             std::fs::read(b.join(f)).expect("written"),

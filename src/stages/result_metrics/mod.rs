@@ -20,6 +20,7 @@ use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
 };
 use crate::kernels::metrics::{SourceMap, image_quality};
+use crate::kernels::retile::{ResultAttributes, map_back};
 use crate::kernels::surface_sample::CornerFn;
 use crate::mesh::Topology;
 use crate::progress::Progress;
@@ -97,10 +98,19 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             let sources = sources
                 .map(|s| &s.0[..])
                 .filter(|s| s.len() == mesh.vertex_count());
+            // Measured in the source's frames, else in the synthesis frames
+            // carried onto it, else texture-up along +y (`orientation`'s
+            // default).
+            let carried = match (source_frames, frames) {
+                (None, Some(f)) if f.0.len() == mesh.vertex_count() => {
+                    frames_carried_onto(mesh, &f.0, &source.0)
+                }
+                _ => None,
+            };
             baked_quality(
                 asset,
                 &source.0,
-                source_frames,
+                source_frames.map(|f| &f.0[..]).or(carried.as_deref()),
                 &exemplar.image,
                 spacing.0,
                 &settings,
@@ -261,7 +271,7 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
 fn baked_quality(
     asset: &BakedAsset,
     source: &crate::mesh::PolyMesh,
-    source_frames: Option<&Frames>,
+    source_frames: Option<&[crate::kernels::frames::TangentFrame]>,
     exemplar: &Image,
     spacing: f32,
     settings: &EnergySettings,
@@ -276,9 +286,9 @@ fn baked_quality(
     };
     let owned;
     let frames = match source_frames {
-        Some(f) if f.0.len() == mesh.vertex_count() => &f.0,
+        Some(f) if f.len() == mesh.vertex_count() => f,
         _ => {
-            owned = frames_from_global_direction(&mesh.vertex_normals(), glam::Vec3::X);
+            owned = frames_from_global_direction(&mesh.vertex_normals(), glam::Vec3::Y);
             &owned
         }
     };
@@ -323,6 +333,30 @@ fn baked_quality(
     metrics
         .result
         .insert("measured_on".into(), "baked atlas".into());
+}
+
+/// The synthesis frames of `result` carried onto the vertices of `source`
+/// (each takes the frame of its closest result triangle's heaviest corner,
+/// turned into its tangent plane: [`map_back`]); `None` when that fails.
+fn frames_carried_onto(
+    result: &crate::mesh::PolyMesh,
+    frames: &[crate::kernels::frames::TangentFrame],
+    source: &crate::mesh::PolyMesh,
+) -> Option<Vec<crate::kernels::frames::TangentFrame>> {
+    let attributes = ResultAttributes {
+        colours: &[],
+        channels: 0,
+        texels: None,
+        frames: Some(frames),
+    };
+    map_back(
+        result,
+        &attributes,
+        &source.positions,
+        &source.vertex_normals(),
+    )
+    .ok()
+    .and_then(|m| m.frames)
 }
 
 /// Writes the histogram distance of `values` (`channels` per sample) to the
