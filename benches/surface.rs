@@ -257,6 +257,9 @@ fn main() {
                 )
             };
             let run_dir = runs.join(format!("{mesh}_{texture}_{method}"));
+            // The bench's own folder: a run from an older surfsynth (without
+            // a run marker) would be refused as someone else's.
+            let _ = std::fs::remove_dir_all(&run_dir);
             eprintln!("surface: {mesh} × {method} …");
             let result = run(
                 &config,
