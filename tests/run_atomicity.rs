@@ -517,3 +517,54 @@ fn out_as_a_symlink_or_a_mount_point_is_written_through_or_refused_up_front() {
         "the result is in the target"
     );
 }
+
+/// Issue 43: a run that died between the two renames of its commit left
+/// the earlier result set aside (`.out.old-PID.N`) and no `out`; a next run
+/// refused for its options or its config left it hidden. Every run into
+/// `out` now puts it back first, refused or not.
+#[test]
+fn a_refused_run_puts_back_an_earlier_result_a_dead_run_set_aside() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = quick_config(dir.path());
+    let out = dir.path().join("out");
+    let before = complete_run(&cfg, &out);
+    // The PID of a process that is gone.
+    let mut gone = std::process::Command::new("true").spawn().unwrap();
+    let pid = gone.id();
+    gone.wait().unwrap();
+    let aside = dir.path().join(format!(".out.old-{pid}.0"));
+    let bad_cfg = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad_cfg,
+        QUICK.replace("preview_size = 64", "preview_size = 0"),
+    )
+    .unwrap();
+    // Without `--out`: the config's own `[output] dir`.
+    let bad_own_dir = dir.path().join("bad_own_dir.toml");
+    std::fs::write(
+        &bad_own_dir,
+        format!(
+            "{}\n[output]\ndir = \"{}\"\n",
+            QUICK.replace("preview_size = 64", "preview_size = 0"),
+            s(&out)
+        ),
+    )
+    .unwrap();
+    let cases: [Vec<&str>; 3] = [
+        vec!["run", s(&cfg), "--out", s(&out), "--threads", "0"],
+        vec!["run", s(&bad_cfg), "--out", s(&out)],
+        vec!["run", s(&bad_own_dir)],
+    ];
+    for args in cases {
+        std::fs::rename(&out, &aside).unwrap();
+        let (code, _, stderr) = run_cli(&args);
+        assert_eq!(code, 2, "{args:?} is refused: {stderr}");
+        assert!(
+            snapshot(&out) == before,
+            "{args:?}: the earlier result is back in place; found {:?} and {:?}",
+            files_under(&out),
+            siblings(&out)
+        );
+        assert!(siblings(&out).is_empty(), "{args:?}: {:?}", siblings(&out));
+    }
+}
