@@ -64,8 +64,9 @@ pub struct RunFolder {
 impl RunFolder {
     /// Cleans stale siblings of `dir`, creates its missing parents and the
     /// temporary folder. Fails when `dir` is a file, has no folder name, or
-    /// holds something other than an earlier run, or when the process was
-    /// interrupted.
+    /// holds something other than an earlier run, when the temporary folder
+    /// is on another file system than an existing `dir` (the final move
+    /// could not be a rename), or when the process was interrupted.
     pub fn begin(dir: &Path) -> Result<Self, OutputError> {
         let (parent, name) = split(dir)?;
         check_replaceable(dir).map_err(|m| io_error(dir, m))?;
@@ -97,12 +98,16 @@ impl RunFolder {
         registered.extend(created.iter().cloned());
         active.push(registered);
         drop(active);
-        Ok(Self {
+        let folder = Self {
             final_dir: dir.to_path_buf(),
             tmp_dir,
             created,
             committed: false,
-        })
+        };
+        // `preflight` refuses mount points; this catches a library caller
+        // (or a mount made meanwhile) before the work, not at the commit.
+        same_file_system(&folder.tmp_dir, dir).map_err(|m| io_error(dir, m))?;
+        Ok(folder)
     }
 
     /// Where the run writes its files.
@@ -297,6 +302,27 @@ fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn exchange(_a: &Path, _b: &Path) -> std::io::Result<()> {
     Err(std::io::ErrorKind::Unsupported.into())
+}
+
+/// `Err` naming both when the existing `dir` and the new `tmp` beside it
+/// are on different file systems (a bind mount at `dir` has its own device
+/// number too), so the final rename would fail.
+#[cfg(unix)]
+fn same_file_system(tmp: &Path, dir: &Path) -> Result<(), String> {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(tmp), std::fs::metadata(dir)) {
+        (Ok(t), Ok(d)) if t.dev() != d.dev() => Err(format!(
+            "{} is on another file system than its parent folder {}, where the run writes before it moves the result into place; allowed: a folder on the same file system as its parent",
+            dir.display(),
+            tmp.parent().unwrap_or(Path::new("")).display()
+        )),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file_system(_tmp: &Path, _dir: &Path) -> Result<(), String> {
+    Ok(())
 }
 
 /// The file a run writes last into its output folder: the format's name and
