@@ -191,6 +191,12 @@ fn run(
     trace: Option<PathBuf>,
     quiet: bool,
 ) -> Result<(), PipelineError> {
+    // An earlier result that a run killed in the middle of its commit left
+    // set aside goes back first, whatever this run's options and config:
+    // a refused run must not leave it hidden (`output::staging::recover`).
+    if let Some(o) = &out {
+        surfsynth::output::staging::recover(o);
+    }
     // Options and paths are checked before any work; `--out` is checked by
     // `pipeline::run` before it loads the inputs.
     let option_err = |key: &str, message: String| {
@@ -211,6 +217,15 @@ fn run(
     // output folder would be replaced with it when the run commits.
     let mut source = ConfigSource::from_file(&config)?;
     source.apply_overrides(&set)?;
+    if out.is_none()
+        && let Some(dir) = source
+            .text
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|t| t.get("output")?.get("dir")?.as_str().map(PathBuf::from))
+    {
+        surfsynth::output::staging::recover(&dir);
+    }
     let pipeline = Pipeline::from_source(source)?;
     if let Some(t) = &trace {
         let out_dir = out

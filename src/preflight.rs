@@ -78,8 +78,11 @@ pub fn check_file_outside(path: &Path, dir: &Path) -> Result<(), String> {
 /// The output folder a run really writes: `dir` itself, or, when `dir` is a
 /// symlink to a folder, that folder (the run writes through the link,
 /// which stays). A symlink to nothing, or to something other than a
-/// folder, is refused; so is a mount point, which a run cannot replace by
-/// renaming (its result would be lost at the very end).
+/// folder, is refused; so is a mount point (another file system, or a bind
+/// mount of a folder of the same one, as container volumes are), which a
+/// run cannot replace by renaming (its result would be lost at the very
+/// end). The run stages its files beside the folder, in the same parent,
+/// so with these refused the final rename stays on one file system.
 pub fn resolve_output_folder(dir: &Path) -> Result<PathBuf, String> {
     let allowed = "allowed: a folder (existing or new) whose nearest existing parent is writable, or a symlink to one";
     let Ok(meta) = std::fs::symlink_metadata(dir) else {
@@ -109,14 +112,16 @@ pub fn resolve_output_folder(dir: &Path) -> Result<PathBuf, String> {
     };
     if is_mount_point(&target) {
         return Err(format!(
-            "{} is a mount point (a file system of its own), which a run cannot replace as a whole; allowed: a folder inside it",
+            "{} is a mount point (a file system or a bind mount of its own), which a run cannot replace as a whole; allowed: a folder inside it",
             target.display()
         ));
     }
     Ok(target)
 }
 
-/// Whether `dir` is an existing folder on another device than its parent.
+/// Whether `dir` is an existing folder on another device than its parent,
+/// or listed as a mount point in `/proc/self/mountinfo` (a bind mount keeps
+/// the device number of its source, yet a rename cannot cross it).
 #[cfg(unix)]
 fn is_mount_point(dir: &Path) -> bool {
     use std::os::unix::fs::MetadataExt;
@@ -124,7 +129,9 @@ fn is_mount_point(dir: &Path) -> bool {
     let (Ok(own), Some(parent)) = (std::fs::metadata(&full), full.parent()) else {
         return false;
     };
-    own.is_dir() && std::fs::metadata(parent).is_ok_and(|p| p.dev() != own.dev())
+    own.is_dir()
+        && (std::fs::metadata(parent).is_ok_and(|p| p.dev() != own.dev())
+            || mount_points().contains(&full))
 }
 
 #[cfg(not(unix))]
@@ -132,11 +139,62 @@ fn is_mount_point(_dir: &Path) -> bool {
     false
 }
 
+/// The mount points of this process's mount namespace (field 5 of
+/// `/proc/self/mountinfo`, with its octal escapes such as `\040` for a
+/// space undone); empty where there is no such file.
+fn mount_points() -> Vec<PathBuf> {
+    let Ok(text) = std::fs::read_to_string("/proc/self/mountinfo") else {
+        return Vec::new();
+    };
+    text.lines()
+        .filter_map(|line| line.split(' ').nth(4))
+        .map(|field| PathBuf::from(unescape_mountinfo(field)))
+        .collect()
+}
+
+/// Undoes the `\ooo` octal escapes of a mountinfo field.
+fn unescape_mountinfo(field: &str) -> std::ffi::OsString {
+    let bytes = field.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        let octal = bytes.get(i + 1..i + 4).and_then(|d| {
+            d.iter()
+                .all(|b| (b'0'..=b'7').contains(b))
+                .then(|| d.iter().fold(0u32, |v, b| v * 8 + u32::from(b - b'0')))
+        });
+        match (bytes[i], octal) {
+            (b'\\', Some(v)) if v <= 0xFF => {
+                out.push(v as u8);
+                i += 4;
+            }
+            (b, _) => {
+                out.push(b);
+                i += 1;
+            }
+        }
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::ffi::OsStringExt;
+        std::ffi::OsString::from_vec(out)
+    }
+    #[cfg(not(unix))]
+    {
+        String::from_utf8_lossy(&out).into_owned().into()
+    }
+}
+
 /// A folder to be created or filled (`--out DIR`, `[output] dir`, the sweep
-/// folder): not an existing file, and its nearest existing ancestor lets us
-/// create files (probed by creating and removing a temporary file).
+/// folder): not an existing file; a new one's nearest existing ancestor
+/// lets us create files; an existing one lets us, and so does its parent
+/// (a run writes beside it, then deletes the earlier result's files in
+/// it). Probed by creating and removing a temporary file: permission bits
+/// do not tell about read-only mounts, ACLs or root. The message names
+/// `dir`, the folder that refused and why (read-only file system,
+/// permission).
 pub fn check_folder_target(dir: &Path) -> Result<(), String> {
-    let allowed = "allowed: a folder (existing or new) whose nearest existing parent is writable";
+    let allowed = "allowed: a new folder whose nearest existing parent is writable, or a writable folder in a writable parent";
     if dir.exists() && !dir.is_dir() {
         return Err(format!("{} is a file; {allowed}", dir.display()));
     }
@@ -154,19 +212,44 @@ pub fn check_folder_target(dir: &Path) -> Result<(), String> {
             dir.display()
         ));
     }
+    if ancestor != absolute(dir) {
+        return probe_writable(&ancestor).map_err(|e| {
+            format!(
+                "{} cannot be created: cannot create files in {}, which {}; {allowed}",
+                dir.display(),
+                ancestor.display(),
+                why_unwritable(&e)
+            )
+        });
+    }
     // A run writes into a sibling of the folder (see `output::staging`), so
-    // the parent must be writable even when the folder exists.
-    let probe_in = if ancestor == absolute(dir) {
-        parent_or_current(&ancestor)
-    } else {
-        ancestor
-    };
-    probe_writable(&probe_in).map_err(|e| {
+    // the parent must be writable even when the folder exists; and it
+    // deletes the earlier result's files in the folder itself.
+    let parent = parent_or_current(&ancestor);
+    probe_writable(&parent).map_err(|e| {
         format!(
-            "cannot create files in {} ({e}); {allowed}",
-            probe_in.display()
+            "{} cannot be replaced: cannot create files in its parent folder {}, which {}, and a run writes its result there before it moves it into place; {allowed}",
+            dir.display(),
+            parent.display(),
+            why_unwritable(&e)
+        )
+    })?;
+    probe_writable(dir).map_err(|e| {
+        format!(
+            "{} cannot be replaced: cannot create files in it, as it {}, and a run deletes the earlier result's files in it; {allowed}",
+            dir.display(),
+            why_unwritable(&e)
         )
     })
+}
+
+/// What an error of [`probe_writable`] says about the folder.
+fn why_unwritable(e: &std::io::Error) -> String {
+    match e.kind() {
+        std::io::ErrorKind::ReadOnlyFilesystem => "is on a read-only file system".into(),
+        std::io::ErrorKind::PermissionDenied => "is not writable (permission denied)".into(),
+        _ => format!("is not writable ({e})"),
+    }
 }
 
 /// The parent of `path`, `.` for a bare name.
@@ -220,5 +303,12 @@ mod tests {
         assert!(check_file_target(&dir).unwrap_err().contains("is a folder"));
         assert!(check_file_target(&dir.join("none/t.json")).is_err());
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn mountinfo_escapes_are_undone() {
+        assert_eq!(unescape_mountinfo("/mnt/a\\040b"), "/mnt/a b");
+        assert_eq!(unescape_mountinfo("/x\\134y\\011"), "/x\\y\t");
+        assert_eq!(unescape_mountinfo("/plain\\9"), "/plain\\9");
     }
 }

@@ -550,3 +550,173 @@ fn builtins_have_the_expected_topology() {
     let centre: Vec3 = level8.positions.iter().sum::<Vec3>() / level8.vertex_count() as f32;
     assert!(centre.length() < 1e-5);
 }
+
+/// A star of `spikes` points, outer radius 1 and inner radius 0.3, in the
+/// plane z = 0 (counter-clockwise seen from +z), and its exact area.
+fn star(spikes: usize) -> (Vec<Vec3>, f64) {
+    let n = 2 * spikes;
+    let points = (0..n)
+        .map(|i| {
+            let a = i as f64 / n as f64 * std::f64::consts::TAU;
+            let r = if i % 2 == 0 { 1.0 } else { 0.3 };
+            Vec3::new((r * a.cos()) as f32, (r * a.sin()) as f32, 0.0)
+        })
+        .collect();
+    let area = spikes as f64 * 0.3 * (std::f64::consts::PI / spikes as f64).sin();
+    (points, area)
+}
+
+/// One polygon as OBJ text: optional leading lines, then `v` lines, then the face.
+fn polygon_obj(points: &[Vec3]) -> String {
+    let mut text = String::from("# a polygon\n");
+    for p in points {
+        text.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
+    }
+    text.push('f');
+    for i in 1..=points.len() {
+        text.push_str(&format!(" {i}"));
+    }
+    text.push('\n');
+    text
+}
+
+/// Sum of the areas of the triangles every kernel cuts the mesh into (the
+/// fan of `PolyMesh::triangulated`), and the number of them facing against
+/// `normal`.
+fn fan_area_and_folds(mesh: &PolyMesh, normal: Vec3) -> (f64, usize) {
+    let tris = mesh.triangulated();
+    let area = tris
+        .faces()
+        .map(|f| surfsynth::mesh::repair::polygon_area(&tris.positions, f))
+        .sum();
+    let folded = (0..tris.face_count())
+        .filter(|&f| tris.face_normal_scaled(f).dot(normal) < 0.0)
+        .count();
+    (area, folded)
+}
+
+/// Issue 43: a non-convex polygon of 400 corners (a star) was cut by the
+/// zigzag strip, whose triangles fold over each other: area 57.9 instead
+/// of 0.94, exit 0, no warning. A smaller one (kept as a polygon) was cut
+/// by every kernel's fan, folding the same way. Both are now cut by ear
+/// clipping in the polygon's plane: the triangles cover the polygon once.
+#[test]
+fn non_convex_polygons_are_triangulated_with_their_true_area() {
+    for spikes in [200, 20] {
+        let (points, area) = star(spikes);
+        let text = polygon_obj(&points);
+        let (mesh, report) = load_mesh_from_bytes(
+            text.as_bytes(),
+            MeshFormat::Obj,
+            Path::new("star.obj"),
+            &LoadOptions::default(),
+        )
+        .unwrap();
+        let (got, folded) = fan_area_and_folds(&mesh, Vec3::Z);
+        assert!(
+            (got - area).abs() < 1e-4 * area,
+            "{} corners: the triangles cover {got}, the star {area}",
+            2 * spikes
+        );
+        assert_eq!(folded, 0, "{} corners: triangles facing down", 2 * spikes);
+        assert_eq!(mesh.triangulated().face_count(), 2 * spikes - 2);
+        assert!(!report.is_clean(), "the report tells: {report}");
+    }
+}
+
+/// Issue 43: an L-shaped hexagon, tilted out of every coordinate plane and
+/// far from the origin, whose first corner does not see the whole polygon:
+/// its fan folded (area 4 instead of 3). Cut in its best-fit plane.
+#[test]
+fn a_tilted_l_shape_is_triangulated_in_its_plane() {
+    let flat = [
+        (2.0, 1.0),
+        (1.0, 1.0),
+        (1.0, 2.0),
+        (0.0, 2.0),
+        (0.0, 0.0),
+        (2.0, 0.0),
+    ];
+    let rotation = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.5, -0.3, 0.2);
+    let offset = Vec3::new(5.0, -3.0, 100.0);
+    let points: Vec<Vec3> = flat
+        .iter()
+        .map(|&(x, y)| rotation * Vec3::new(x, y, 0.0) + offset)
+        .collect();
+    for (name, text, format) in [
+        ("l.obj", polygon_obj(&points), MeshFormat::Obj),
+        ("l.off", polygon_off(&points), MeshFormat::Off),
+    ] {
+        let (mesh, _) = load_mesh_from_bytes(
+            text.as_bytes(),
+            format,
+            Path::new(name),
+            &LoadOptions::default(),
+        )
+        .unwrap();
+        let (area, folded) = fan_area_and_folds(&mesh, rotation * Vec3::Z);
+        assert!((area - 3.0).abs() < 1e-3, "{name}: area {area}");
+        assert_eq!(folded, 0, "{name}");
+    }
+    // A convex polygon keeps its corners as one face.
+    let square = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 1.0, 0.0), Vec3::Y];
+    let (mesh, report) = load_mesh_from_bytes(
+        polygon_obj(&square).as_bytes(),
+        MeshFormat::Obj,
+        Path::new("q.obj"),
+        &LoadOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(mesh.face(0), &[0, 1, 2, 3]);
+    assert!(report.is_clean(), "{report}");
+}
+
+/// One polygon as OFF text.
+fn polygon_off(points: &[Vec3]) -> String {
+    let mut text = format!("OFF\n{} 1 0\n", points.len());
+    for p in points {
+        text.push_str(&format!("{} {} {}\n", p.x, p.y, p.z));
+    }
+    text.push_str(&points.len().to_string());
+    for i in 0..points.len() {
+        text.push_str(&format!(" {i}"));
+    }
+    text.push('\n');
+    text
+}
+
+/// Issue 43: a face that cannot be cut into triangles (it crosses itself,
+/// so no corner can be cut off) is an error naming its line, in every text
+/// format, and the command exits 2; it was kept and folded.
+#[test]
+fn a_face_that_cannot_be_triangulated_is_named_by_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // A bow tie with lobes of different size (so its area is not zero),
+    // after a good triangle.
+    let obj = "v 0 0 0\nv 2 2 0\nv 2 0 0\nv 0 1 0\nv 5 5 5\n\nf 1 3 5\nf 1 2 3 4\n";
+    let off = "OFF\n5 2 0\n0 0 0\n2 2 0\n2 0 0\n0 1 0\n5 5 5\n3 0 2 4\n4 0 1 2 3\n";
+    let ply = "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\n\
+               property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n\
+               0 0 0\n2 2 0\n2 0 0\n0 1 0\n5 5 5\n3 0 2 4\n4 0 1 2 3\n";
+    for (name, text, line) in [
+        ("bow.obj", obj, 8),
+        ("bow.off", off, 9),
+        ("bow.ply", ply, 16),
+    ] {
+        let e = load_err(d, name, text).to_string();
+        assert!(e.contains(&format!("line {line}")), "{name}: {e}");
+        assert!(e.contains("cannot be cut into triangles"), "{name}: {e}");
+        assert!(e.contains("allowed:"), "{name}: {e}");
+    }
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_surfsynth"))
+        .args(["mesh-info", d.join("bow.obj").to_str().unwrap()])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("line 8") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+}

@@ -580,3 +580,149 @@ fn thin_parts_above_the_target_are_kept_not_refused() {
         );
     }
 }
+
+/// Issue 43: `retile` refused a non-manifold scan ("non-manifold edge
+/// between vertices 267 and 322 (4 faces meet there)") that every other
+/// method runs on. Two cubes sharing an edge, in every face order: the cut
+/// paired the four triangles on the edge by their order, across the cubes
+/// in half of the orders, so the edge stayed non-manifold and was refused.
+/// Each cube is now retiled as a closed piece of its own.
+#[test]
+fn two_cubes_sharing_an_edge_are_retiled_in_any_face_order() {
+    for seed in 0..16 {
+        let (positions, triangles) = common::two_cubes_sharing_an_edge(seed);
+        let input = PolyMesh::from_triangles(positions, &triangles);
+        let settings = RetileSettings {
+            target: RetileTarget::Vertices(1200),
+            levels: 2,
+            ..RetileSettings::default()
+        };
+        let pyramid =
+            retile(&input, &settings).unwrap_or_else(|e| panic!("face order {seed}: {e}"));
+        assert_eq!(
+            pyramid.input.cut_edges, 1,
+            "order {seed}: {:?}",
+            pyramid.input
+        );
+        assert_eq!(
+            pyramid.input.components, 2,
+            "order {seed}: {:?}",
+            pyramid.input
+        );
+        let proj = SurfaceProjector::new(&input);
+        for (l, level) in pyramid.levels.iter().enumerate() {
+            let info = MeshInfo::compute(&level.mesh);
+            let target = 1200.0 / 4f64.powi(l as i32);
+            assert!(
+                (info.vertices as f64 - target).abs() <= 0.05 * target,
+                "order {seed} level {l}: {} vertices",
+                info.vertices
+            );
+            assert_eq!(info.non_manifold_edges, 0, "order {seed} level {l}");
+            assert_eq!(info.non_manifold_vertices, 0, "order {seed} level {l}");
+            assert_eq!(
+                info.boundary_loops, 0,
+                "order {seed} level {l}: each cube closed"
+            );
+            assert_eq!(info.components, 2, "order {seed} level {l}");
+            assert!(info.consistently_oriented, "order {seed} level {l}");
+            assert_eq!(
+                flipped_faces(&level.mesh, &proj),
+                0,
+                "order {seed} level {l}"
+            );
+            let area = level.mesh.area();
+            // The cubes' sharp edges and corners are cut by chords.
+            assert!(
+                (9.6..=12.1).contains(&area),
+                "order {seed} level {l}: area {area} of 12"
+            );
+        }
+    }
+}
+
+/// `k` closed wedges (triangular prisms of 60°) around the z axis from
+/// z = 0 to 1, all sharing that edge (2k triangles on it), triangles facing
+/// out, in an order shuffled by `seed`.
+fn wedges_around_an_edge(k: usize, seed: u64) -> PolyMesh {
+    let mut positions = vec![Vec3::ZERO, Vec3::Z];
+    let mut triangles: Vec<[u32; 3]> = Vec::new();
+    for w in 0..k {
+        let angle = |d: f32| {
+            let a = (w as f32 * 360.0 / k as f32 + d).to_radians();
+            Vec3::new(a.cos(), a.sin(), 0.0)
+        };
+        let base = positions.len() as u32;
+        for p in [angle(0.0), angle(60.0)] {
+            positions.push(p);
+            positions.push(p + Vec3::Z);
+        }
+        // O0 O1 A0 A1 B0 B1
+        let [o0, o1, a0, a1, b0, b1] = [0, 1, base, base + 1, base + 2, base + 3];
+        let centre = (positions[a0 as usize] + positions[b0 as usize]) / 3.0 + Vec3::Z * 0.5;
+        for mut t in [
+            [o0, a0, b0],
+            [o1, b1, a1],
+            [o0, o1, a1],
+            [o0, a1, a0],
+            [a0, a1, b1],
+            [a0, b1, b0],
+            [b0, b1, o1],
+            [b0, o1, o0],
+        ] {
+            let [p, q, r] = t.map(|v| positions[v as usize]);
+            if (q - p).cross(r - p).dot((p + q + r) / 3.0 - centre) < 0.0 {
+                t.swap(1, 2);
+            }
+            triangles.push(t);
+        }
+    }
+    let mut state = seed;
+    for i in (1..triangles.len()).rev() {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        triangles.swap(i, (state >> 33) as usize % (i + 1));
+    }
+    PolyMesh::from_triangles(positions, &triangles)
+}
+
+/// Issue 43: three closed wedges around one edge (six triangles on it), in
+/// many face orders: each is retiled as a closed piece of its own, never
+/// refused for the edge.
+#[test]
+fn three_wedges_around_one_edge_are_retiled_in_any_face_order() {
+    for seed in 0..16 {
+        let input = wedges_around_an_edge(3, seed);
+        let settings = RetileSettings {
+            target: RetileTarget::Vertices(900),
+            levels: 1,
+            ..RetileSettings::default()
+        };
+        let pyramid =
+            retile(&input, &settings).unwrap_or_else(|e| panic!("face order {seed}: {e}"));
+        assert_eq!(
+            pyramid.input.components, 3,
+            "order {seed}: {:?}",
+            pyramid.input
+        );
+        let info = MeshInfo::compute(&pyramid.levels[0].mesh);
+        assert_eq!(
+            (
+                info.non_manifold_edges,
+                info.non_manifold_vertices,
+                info.boundary_loops
+            ),
+            (0, 0, 0),
+            "order {seed}"
+        );
+        assert_eq!(info.components, 3, "order {seed}");
+        assert!(info.consistently_oriented, "order {seed}");
+        let proj = SurfaceProjector::new(&input);
+        assert_eq!(
+            flipped_faces(&pyramid.levels[0].mesh, &proj),
+            0,
+            "order {seed}"
+        );
+    }
+}

@@ -517,3 +517,245 @@ fn out_as_a_symlink_or_a_mount_point_is_written_through_or_refused_up_front() {
         "the result is in the target"
     );
 }
+
+/// Issue 43: a run that died between the two renames of its commit left
+/// the earlier result set aside (`.out.old-PID.N`) and no `out`; a next run
+/// refused for its options or its config left it hidden. Every run into
+/// `out` now puts it back first, refused or not.
+#[test]
+fn a_refused_run_puts_back_an_earlier_result_a_dead_run_set_aside() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = quick_config(dir.path());
+    let out = dir.path().join("out");
+    let before = complete_run(&cfg, &out);
+    // The PID of a process that is gone.
+    let mut gone = std::process::Command::new("true").spawn().unwrap();
+    let pid = gone.id();
+    gone.wait().unwrap();
+    let aside = dir.path().join(format!(".out.old-{pid}.0"));
+    let bad_cfg = dir.path().join("bad.toml");
+    std::fs::write(
+        &bad_cfg,
+        QUICK.replace("preview_size = 64", "preview_size = 0"),
+    )
+    .unwrap();
+    // Without `--out`: the config's own `[output] dir`.
+    let bad_own_dir = dir.path().join("bad_own_dir.toml");
+    std::fs::write(
+        &bad_own_dir,
+        format!(
+            "{}\n[output]\ndir = \"{}\"\n",
+            QUICK.replace("preview_size = 64", "preview_size = 0"),
+            s(&out)
+        ),
+    )
+    .unwrap();
+    let cases: [Vec<&str>; 3] = [
+        vec!["run", s(&cfg), "--out", s(&out), "--threads", "0"],
+        vec!["run", s(&bad_cfg), "--out", s(&out)],
+        vec!["run", s(&bad_own_dir)],
+    ];
+    for args in cases {
+        std::fs::rename(&out, &aside).unwrap();
+        let (code, _, stderr) = run_cli(&args);
+        assert_eq!(code, 2, "{args:?} is refused: {stderr}");
+        assert!(
+            snapshot(&out) == before,
+            "{args:?}: the earlier result is back in place; found {:?} and {:?}",
+            files_under(&out),
+            siblings(&out)
+        );
+        assert!(siblings(&out).is_empty(), "{args:?}: {:?}", siblings(&out));
+    }
+}
+
+/// Runs the CLI as the unprivileged user `nobody` when this test runs as
+/// root (whom permission bits do not stop), else as ourselves; `None` when
+/// `nobody` cannot run the binary here (its folders are not open to all).
+#[cfg(unix)]
+fn run_cli_unprivileged(args: &[&str]) -> Option<(i32, String, String)> {
+    use std::os::unix::process::CommandExt;
+    let as_nobody = |cmd: &mut std::process::Command| {
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } == 0 {
+            cmd.uid(65534).gid(65534);
+        }
+    };
+    let mut probe = bin();
+    probe.arg("--version");
+    as_nobody(&mut probe);
+    if !probe.output().is_ok_and(|o| o.status.success()) {
+        return None;
+    }
+    let mut cmd = bin();
+    cmd.args(args).env("RUST_LOG", "warn");
+    as_nobody(&mut cmd);
+    let out = cmd.output().expect("the surfsynth binary runs");
+    Some((
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    ))
+}
+
+/// Issue 43: an `--out` the run cannot write is refused before any work,
+/// naming the folder. A new folder in a read-only parent was refused
+/// naming only the parent; an existing earlier result that is itself
+/// read-only was replaced, but its files could not be deleted, so the run
+/// exited 0 leaving them in a hidden folder.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+#[test]
+fn out_in_a_read_only_folder_or_read_only_itself_is_refused_naming_it() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = tempfile::tempdir().unwrap();
+    let mode = |p: &Path, m: u32| std::fs::set_permissions(p, std::fs::Permissions::from_mode(m));
+    mode(dir.path(), 0o755).unwrap();
+    let cfg = quick_config(dir.path());
+    mode(&cfg, 0o644).unwrap();
+    // A read-only parent: a new folder in it cannot be created.
+    let locked = dir.path().join("locked");
+    std::fs::create_dir(&locked).unwrap();
+    mode(&locked, 0o555).unwrap();
+    let new = locked.join("new");
+    let Some((code, _, stderr)) = run_cli_unprivileged(&["run", s(&cfg), "--out", s(&new)]) else {
+        eprintln!("skipped: the unprivileged user cannot run the binary from here");
+        return;
+    };
+    assert_refused(
+        code,
+        &stderr,
+        &["--out", s(&new), "not writable", "allowed:"],
+    );
+    assert!(!new.exists());
+    // An earlier result, read-only itself, in a writable parent.
+    let open = dir.path().join("open");
+    std::fs::create_dir(&open).unwrap();
+    mode(&open, 0o777).unwrap();
+    let earlier = open.join("out");
+    let before = complete_run(&cfg, &earlier);
+    mode(&earlier, 0o555).unwrap();
+    let (code, _, stderr) = run_cli_unprivileged(&["run", s(&cfg), "--out", s(&earlier)]).unwrap();
+    assert_refused(
+        code,
+        &stderr,
+        &["--out", s(&earlier), "not writable", "allowed:"],
+    );
+    assert!(
+        snapshot(&earlier) == before,
+        "the earlier result is untouched"
+    );
+    assert!(siblings(&earlier).is_empty(), "{:?}", siblings(&earlier));
+}
+
+/// Runs `surfsynth ARGS` in a mount namespace of its own after
+/// `mount --bind -o ro SOURCE TARGET`; `None` where that cannot be done
+/// (not root, or no `unshare`).
+#[cfg(target_os = "linux")]
+fn run_cli_over_read_only_bind(
+    source: &Path,
+    target: &Path,
+    args: &[&str],
+) -> Option<(i32, String, String)> {
+    let shell = r#"mount --bind -o ro "$1" "$2" || exit 99; shift 2; exec "$@""#;
+    let mut cmd = std::process::Command::new("unshare");
+    cmd.args(["-m", "sh", "-c", shell, "sh", s(source), s(target)])
+        .arg(env!("CARGO_BIN_EXE_surfsynth"))
+        .args(args)
+        .env("RUST_LOG", "warn");
+    let out = cmd.output().ok()?;
+    let code = out.status.code().unwrap_or(-1);
+    if code == 99 || (code == 1 && out.stdout.is_empty() && out.stderr.starts_with(b"unshare")) {
+        return None;
+    }
+    Some((
+        code,
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    ))
+}
+
+/// Issue 43: `--out` as a read-only mount (a container volume: a bind mount
+/// of a folder of the same file system, so the same device number) ran the
+/// whole computation and failed at the final rename with exit 1; a folder
+/// inside it was refused naming only the mount. Both are refused before
+/// any work, naming the `--out` folder. Needs root for the bind mount (in a
+/// mount namespace of its own); skipped where that is not possible.
+#[cfg(target_os = "linux")]
+#[test]
+fn out_as_or_inside_a_read_only_bind_mount_is_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = quick_config(dir.path());
+    let source = dir.path().join("source");
+    let volume = dir.path().join("volume");
+    std::fs::create_dir(&source).unwrap();
+    std::fs::create_dir(&volume).unwrap();
+    let Some((code, _, stderr)) =
+        run_cli_over_read_only_bind(&source, &volume, &["run", s(&cfg), "--out", s(&volume)])
+    else {
+        eprintln!(
+            "skipped: no bind mount in a mount namespace of our own (needs root and unshare)"
+        );
+        return;
+    };
+    assert_refused(
+        code,
+        &stderr,
+        &["--out", s(&volume), "mount point", "allowed:"],
+    );
+    let inside = volume.join("run");
+    let (code, _, stderr) =
+        run_cli_over_read_only_bind(&source, &volume, &["run", s(&cfg), "--out", s(&inside)])
+            .unwrap();
+    assert_refused(
+        code,
+        &stderr,
+        &["--out", s(&inside), "read-only file system", "allowed:"],
+    );
+    assert!(files_under(&source).is_empty() && files_under(&volume).is_empty());
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        3,
+        "nothing beside the config, the source and the mount point"
+    );
+}
+
+/// Issue 43: `--out` as a symlink to a folder on another file system is
+/// written through; the run writes beside the folder it points to (on its
+/// file system), so the final rename works and nothing is left beside
+/// either. Skipped where /dev/shm is not another file system.
+#[cfg(target_os = "linux")]
+#[test]
+fn out_as_a_symlink_to_another_file_system_is_written_there() {
+    use std::os::unix::fs::MetadataExt;
+    let dir = tempfile::tempdir().unwrap();
+    let Ok(other) = tempfile::tempdir_in("/dev/shm") else {
+        eprintln!("skipped: no /dev/shm");
+        return;
+    };
+    let dev = |p: &Path| std::fs::metadata(p).unwrap().dev();
+    if dev(dir.path()) == dev(other.path()) {
+        eprintln!("skipped: /dev/shm is on the same file system");
+        return;
+    }
+    let cfg = quick_config(dir.path());
+    let target = other.path().join("result");
+    std::fs::create_dir(&target).unwrap();
+    let link = dir.path().join("link");
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    for round in ["first", "rerun"] {
+        let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&link)]);
+        assert_eq!(code, 0, "{round}: {stderr}");
+        assert!(target.join("surfsynth_run.json").is_file(), "{round}");
+        assert!(
+            siblings(&target).is_empty(),
+            "{round}: {:?}",
+            siblings(&target)
+        );
+        assert_eq!(
+            std::fs::read_dir(other.path()).unwrap().count(),
+            1,
+            "{round}"
+        );
+        assert!(siblings(&link).is_empty(), "{round}: {:?}", siblings(&link));
+    }
+}

@@ -54,6 +54,17 @@ pub enum MeshError {
         /// What exists and what is allowed.
         detail: String,
     },
+    /// A face that cannot be cut into triangles: it crosses itself, or it
+    /// is non-convex with more corners than the loader cuts (see
+    /// [`crate::mesh::repair::triangulate_faces`]).
+    #[error("mesh file {path}, {location}: {message}")]
+    BadFace {
+        path: PathBuf,
+        /// Where in the file: `line 12` (text formats) or `face 7`.
+        location: String,
+        /// What is wrong and what is allowed.
+        message: String,
+    },
     /// Nothing to texture.
     #[error("mesh {path}: no faces{detail}; a mesh needs at least one triangle or polygon")]
     NoFaces { path: PathBuf, detail: String },

@@ -240,6 +240,9 @@ impl PolyMesh {
 
     /// Fan-triangulates every face. Returns, per triangle, its three corner
     /// indices (so per-corner attributes carry over) and the face it came from.
+    /// The fan covers a face once when it is convex, as every face the
+    /// loaders return is (they cut non-convex ones,
+    /// [`repair::triangulate_faces`]).
     pub fn triangulate_corners(&self) -> (Vec<[u32; 3]>, Vec<u32>) {
         // A face of k corners gives k − 2 triangles.
         let count = self.corner_count().saturating_sub(2 * self.face_count());

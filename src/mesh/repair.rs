@@ -9,8 +9,12 @@
 //!    whole, not collapsed, since its intended shape is unknown;
 //! 3. drop zero-area faces: area `<= 1e-12 × bbox_diagonal²`
 //!    ([`drop_zero_area_faces`]);
-//! 4. split faces of more than [`MAX_FACE_CORNERS`] corners into triangles
-//!    ([`triangulate_large_faces`]);
+//! 4. cut into triangles every non-convex face (in its best-fit plane, by
+//!    ear clipping) and every face of more than [`MAX_FACE_CORNERS`] corners
+//!    ([`triangulate_faces`]), so that every face left is convex and the
+//!    fan each kernel cuts it into ([`PolyMesh::triangulate_corners`])
+//!    covers it once; a face that cannot be cut (it crosses itself) is a
+//!    [`BadFace`];
 //! 5. drop vertices no face uses, remapping face indices
 //!    ([`drop_unused_vertices`]).
 //!
@@ -20,7 +24,7 @@
 
 use super::PolyMesh;
 use super::io::LoadOptions;
-use glam::{DVec3, Vec3};
+use glam::{DVec2, DVec3, Vec3};
 use std::collections::HashMap;
 
 /// Faces with area at most this times the squared bounding-box diagonal count
@@ -35,6 +39,53 @@ pub const ZERO_AREA_FACTOR: f64 = 1e-12;
 /// face's corners in loops that are quadratic in the degree here and there,
 /// so a 10⁶-corner polygon would stall them; triangles never do.
 pub const MAX_FACE_CORNERS: usize = 255;
+
+/// Largest corner count of a non-convex face the loader cuts into
+/// triangles. Ear clipping costs about corners × reflex corners point
+/// tests: 10⁸ here, well under a second; a 10⁶-corner non-convex face
+/// would take hours. Convex faces of any size are cut in linear time.
+pub const MAX_NON_CONVEX_CORNERS: usize = 16_384;
+
+/// A face the loader cannot keep, with its index among the input's faces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BadFace {
+    /// 0-based, among the faces as read (before any repair).
+    pub face: usize,
+    /// Its corner count.
+    pub corners: usize,
+    /// What is wrong with it.
+    pub problem: FaceProblem,
+}
+
+/// Why a face cannot be cut into triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FaceProblem {
+    /// Ear clipping finds no corner to cut off: the polygon crosses or
+    /// folds onto itself in its plane.
+    CrossesItself,
+    /// A non-convex face of more than [`MAX_NON_CONVEX_CORNERS`] corners.
+    TooManyCorners,
+}
+
+impl BadFace {
+    /// What is wrong and what is allowed, for an error naming the face's
+    /// place in the file.
+    pub fn message(&self) -> String {
+        let n = self.corners;
+        match self.problem {
+            FaceProblem::CrossesItself => format!(
+                "a face of {n} corners cannot be cut into triangles: in its plane it crosses or folds onto itself \
+                 (no corner can be cut off without overlapping the rest); allowed: simple polygons, whose sides \
+                 meet only at their shared corners (split the face in two, or triangulate it in the modeller)"
+            ),
+            FaceProblem::TooManyCorners => format!(
+                "a non-convex face of {n} corners cannot be cut into triangles here; allowed: non-convex faces \
+                 of at most {MAX_NON_CONVEX_CORNERS} corners (convex ones of any size): split it, or triangulate \
+                 it in the modeller"
+            ),
+        }
+    }
+}
 
 /// What the loader changed in a mesh. All counts are zero for a clean mesh.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -51,8 +102,11 @@ pub struct LoadReport {
     pub dropped_zero_area_faces: usize,
     /// Vertices dropped because no face used them.
     pub dropped_unused_vertices: usize,
-    /// Faces of more than [`MAX_FACE_CORNERS`] corners split into triangles.
+    /// Convex faces of more than [`MAX_FACE_CORNERS`] corners split into
+    /// triangles.
     pub triangulated_faces: usize,
+    /// Non-convex faces cut into triangles (ear clipping in their plane).
+    pub triangulated_non_convex_faces: usize,
 }
 
 impl LoadReport {
@@ -63,6 +117,7 @@ impl LoadReport {
             && self.dropped_zero_area_faces == 0
             && self.dropped_unused_vertices == 0
             && self.triangulated_faces == 0
+            && self.triangulated_non_convex_faces == 0
     }
 
     /// One line for the log, e.g. `read 1839 vertices, 3674 faces; no repairs
@@ -122,6 +177,16 @@ impl LoadReport {
                 plural(self.triangulated_faces, "face", "faces")
             ));
         }
+        if self.triangulated_non_convex_faces > 0 {
+            parts.push(format!(
+                "triangulated {}",
+                plural(
+                    self.triangulated_non_convex_faces,
+                    "non-convex face",
+                    "non-convex faces"
+                )
+            ));
+        }
         s.push_str(&parts.join("; "));
         s
     }
@@ -137,7 +202,11 @@ impl std::fmt::Display for LoadReport {
 ///
 /// Precondition: every index of `mesh` is `< positions.len()` and every
 /// position is finite (the loaders check both).
-pub fn repair_mesh(mesh: &mut PolyMesh, options: &LoadOptions) -> LoadReport {
+///
+/// # Errors
+/// A [`BadFace`] (with its index among the faces of `mesh` as given) for a
+/// face that cannot be cut into triangles.
+pub fn repair_mesh(mesh: &mut PolyMesh, options: &LoadOptions) -> Result<LoadReport, BadFace> {
     let mut report = LoadReport {
         input_vertices: mesh.vertex_count(),
         input_faces: mesh.face_count(),
@@ -148,11 +217,41 @@ pub fn repair_mesh(mesh: &mut PolyMesh, options: &LoadOptions) -> LoadReport {
         let tol = (options.merge_tolerance as f64 * diag) as f32;
         report.merged_vertices = merge_vertices(mesh, tol);
     }
-    report.dropped_degenerate_faces = drop_degenerate_faces(mesh);
-    report.dropped_zero_area_faces = drop_zero_area_faces(mesh, ZERO_AREA_FACTOR * diag * diag);
-    report.triangulated_faces = triangulate_large_faces(mesh, MAX_FACE_CORNERS);
+    // The input index of each face kept, to name a bad face's place: steps
+    // 2 and 3 (`drop_degenerate_faces`, `drop_zero_area_faces`), noting it.
+    let mut origin: Vec<u32> = (0..mesh.face_count() as u32).collect();
+    let mut kept = Vec::with_capacity(origin.len());
+    let mut scratch = Vec::new();
+    report.dropped_degenerate_faces = retain_faces(mesh, |f, face| {
+        let keep = !is_degenerate(face, &mut scratch);
+        if keep {
+            kept.push(origin[f]);
+        }
+        keep
+    });
+    std::mem::swap(&mut origin, &mut kept);
+    kept.clear();
+    let threshold = ZERO_AREA_FACTOR * diag * diag;
+    let positions = std::mem::take(&mut mesh.positions);
+    report.dropped_zero_area_faces = retain_faces(mesh, |f, face| {
+        let keep = polygon_area(&positions, face) > threshold;
+        if keep {
+            kept.push(origin[f]);
+        }
+        keep
+    });
+    mesh.positions = positions;
+    origin = kept;
+    let counts =
+        triangulate_faces(mesh, MAX_FACE_CORNERS).map_err(|(f, corners, problem)| BadFace {
+            face: origin.get(f).map_or(f, |&o| o as usize),
+            corners,
+            problem,
+        })?;
+    report.triangulated_faces = counts.large;
+    report.triangulated_non_convex_faces = counts.non_convex;
     report.dropped_unused_vertices = drop_unused_vertices(mesh);
-    report
+    Ok(report)
 }
 
 /// Length of the bounding-box diagonal of `positions` (0 when empty).
@@ -291,23 +390,25 @@ pub fn retain_faces(mesh: &mut PolyMesh, mut keep: impl FnMut(usize, &[u32]) -> 
 /// Returns the number dropped.
 pub fn drop_degenerate_faces(mesh: &mut PolyMesh) -> usize {
     let mut scratch: Vec<u32> = Vec::new();
-    retain_faces(mesh, |_, face| {
-        if face.len() < 3 {
-            return false;
-        }
-        if face.len() <= 16 {
-            // Quadratic scan beats sorting for the usual small faces.
-            !face
-                .iter()
-                .enumerate()
-                .any(|(i, v)| face[i + 1..].contains(v))
-        } else {
-            scratch.clear();
-            scratch.extend_from_slice(face);
-            scratch.sort_unstable();
-            scratch.windows(2).all(|w| w[0] != w[1])
-        }
-    })
+    retain_faces(mesh, |_, face| !is_degenerate(face, &mut scratch))
+}
+
+/// Whether `face` has fewer than three corners or a repeated vertex.
+fn is_degenerate(face: &[u32], scratch: &mut Vec<u32>) -> bool {
+    if face.len() < 3 {
+        return true;
+    }
+    if face.len() <= 16 {
+        // Quadratic scan beats sorting for the usual small faces.
+        face.iter()
+            .enumerate()
+            .any(|(i, v)| face[i + 1..].contains(v))
+    } else {
+        scratch.clear();
+        scratch.extend_from_slice(face);
+        scratch.sort_unstable();
+        scratch.windows(2).any(|w| w[0] == w[1])
+    }
 }
 
 /// Area of a polygon by its fan around the first corner, in `f64` and
@@ -335,21 +436,76 @@ pub fn drop_zero_area_faces(mesh: &mut PolyMesh, threshold: f64) -> usize {
     dropped
 }
 
-/// Splits every face of more than `max_corners` corners into triangles, in
-/// place of the face (face order otherwise kept); returns the number split.
+/// What [`triangulate_faces`] cut.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Triangulated {
+    /// Convex faces of more than the corner limit (zigzag strips).
+    pub large: usize,
+    /// Non-convex faces (ear clipping).
+    pub non_convex: usize,
+}
+
+/// Cuts into triangles, in place of the face (face order otherwise kept),
+/// every face that is not convex in its best-fit plane and every convex
+/// face of more than `max_corners` corners. Convex faces up to
+/// `max_corners` are kept as they are, so a mesh of convex faces is
+/// unchanged, and every face left is convex: the fan each kernel cuts a
+/// face into ([`PolyMesh::triangulate_corners`]) covers it exactly once.
 ///
-/// The split is a zigzag strip: triangles `(l, l+1, r)` and `(l, r-1, r)`
-/// alternately, walking the two ends of the corner list towards each other.
-/// It is O(n) (ear clipping is O(n²): 10¹⁰ steps for a 10⁵-corner face),
-/// adds no vertex, keeps the polygon's winding, and is exact for convex
-/// polygons, which large polygons in practice are (caps, discs, hole fills);
-/// unlike a fan it gives no vertex a valence of n, and it makes no zero-area
-/// triangle on a side with collinear corners unless the opposite corner lies
-/// on the same line. A strongly non-convex polygon may get overlapping
-/// triangles.
-pub fn triangulate_large_faces(mesh: &mut PolyMesh, max_corners: usize) -> usize {
-    if mesh.faces().all(|f| f.len() <= max_corners) {
-        return 0;
+/// A face is convex when, projected onto the plane of its Newell normal,
+/// every corner turns the same way (within `1e-10 ×` its squared extent, so
+/// float noise on nearly straight corners does not count) and the turns
+/// add up to one revolution (a pentagram turns one way twice).
+///
+/// A large convex face becomes a zigzag strip: triangles `(l, l+1, r)` and
+/// `(l, r-1, r)` alternately, walking the two ends of the corner list
+/// towards each other. It is O(n), adds no vertex, keeps the polygon's
+/// winding, and unlike a fan it gives no vertex a valence of n; it makes no
+/// zero-area triangle on a side with collinear corners unless the opposite
+/// corner lies on the same line.
+///
+/// A non-convex face is cut by ear clipping in that plane (O(n · reflex
+/// corners)): a corner is cut off when it turns the polygon's way and no
+/// other corner that does not lies in or on its triangle; the triangles
+/// keep the face's winding and cover it once.
+///
+/// # Errors
+/// `(face, corners, problem)` for the first face that cannot be cut: ear
+/// clipping finds no corner to cut off (the face crosses itself), or a
+/// non-convex face has more than [`MAX_NON_CONVEX_CORNERS`] corners.
+pub fn triangulate_faces(
+    mesh: &mut PolyMesh,
+    max_corners: usize,
+) -> Result<Triangulated, (usize, usize, FaceProblem)> {
+    let mut counts = Triangulated::default();
+    // The faces to replace, with their triangles (vertex ids).
+    let mut replaced: Vec<(usize, Vec<[u32; 3]>)> = Vec::new();
+    for (f, face) in mesh.faces().enumerate() {
+        if face.len() == 3 {
+            continue;
+        }
+        let plane = FacePlane::new(&mesh.positions, face);
+        if plane.as_ref().is_none_or(FacePlane::is_convex) {
+            // Convex (or without a plane: zero area, which the loader
+            // drops before; kept as it was).
+            if face.len() > max_corners {
+                counts.large += 1;
+                replaced.push((f, zigzag(face)));
+            }
+            continue;
+        }
+        if face.len() > MAX_NON_CONVEX_CORNERS {
+            return Err((f, face.len(), FaceProblem::TooManyCorners));
+        }
+        let corners = plane.and_then(|p| p.ear_clip());
+        let Some(corners) = corners else {
+            return Err((f, face.len(), FaceProblem::CrossesItself));
+        };
+        counts.non_convex += 1;
+        replaced.push((f, corners.iter().map(|t| t.map(|c| face[c])).collect()));
+    }
+    if replaced.is_empty() {
+        return Ok(counts);
     }
     let mut out = PolyMesh {
         positions: std::mem::take(&mut mesh.positions),
@@ -357,28 +513,203 @@ pub fn triangulate_large_faces(mesh: &mut PolyMesh, max_corners: usize) -> usize
         corner_vertex: Vec::with_capacity(mesh.corner_vertex.len() * 3),
     };
     out.face_start.push(0);
-    let mut split = 0;
-    for face in mesh.faces() {
-        if face.len() <= max_corners {
-            out.push_face(face);
-            continue;
-        }
-        split += 1;
-        let (mut l, mut r) = (0, face.len() - 1);
-        let mut advance_left = true;
-        while r - l >= 2 {
-            if advance_left {
-                out.push_face(&[face[l], face[l + 1], face[r]]);
-                l += 1;
-            } else {
-                out.push_face(&[face[l], face[r - 1], face[r]]);
-                r -= 1;
+    let mut next = replaced.iter().peekable();
+    for (f, face) in mesh.faces().enumerate() {
+        match next.peek() {
+            Some((g, tris)) if *g == f => {
+                for t in tris {
+                    out.push_face(t);
+                }
+                next.next();
             }
-            advance_left = !advance_left;
+            _ => out.push_face(face),
         }
     }
     *mesh = out;
-    split
+    Ok(counts)
+}
+
+/// The zigzag strip of [`triangulate_faces`] over `face`'s vertex ids.
+fn zigzag(face: &[u32]) -> Vec<[u32; 3]> {
+    let mut tris = Vec::with_capacity(face.len().saturating_sub(2));
+    if face.len() < 3 {
+        return tris;
+    }
+    let (mut l, mut r) = (0, face.len() - 1);
+    let mut advance_left = true;
+    while r - l >= 2 {
+        if advance_left {
+            tris.push([face[l], face[l + 1], face[r]]);
+            l += 1;
+        } else {
+            tris.push([face[l], face[r - 1], face[r]]);
+            r -= 1;
+        }
+        advance_left = !advance_left;
+    }
+    tris
+}
+
+/// A face's corners in 2D coordinates of its best-fit plane, relative to
+/// its first corner, in `f64`, counter-clockwise about its Newell normal.
+struct FacePlane {
+    q: Vec<DVec2>,
+    /// Twice a triangle's area below which a corner counts as straight.
+    tol: f64,
+}
+
+impl FacePlane {
+    /// `None` when the face has no plane (a zero Newell normal).
+    fn new(positions: &[Vec3], face: &[u32]) -> Option<Self> {
+        let p0 = positions[*face.first()? as usize].as_dvec3();
+        let rel: Vec<DVec3> = face
+            .iter()
+            .map(|&v| positions[v as usize].as_dvec3() - p0)
+            .collect();
+        let mut normal = DVec3::ZERO;
+        for w in rel.windows(2) {
+            normal += w[0].cross(w[1]);
+        }
+        let n = normal.try_normalize()?;
+        // (u, v, n) right-handed: counter-clockwise about n stays so in (u, v).
+        let u = n.any_orthonormal_vector();
+        let v = n.cross(u);
+        let q: Vec<DVec2> = rel.iter().map(|r| DVec2::new(r.dot(u), r.dot(v))).collect();
+        let (lo, hi) = q
+            .iter()
+            .fold((q[0], q[0]), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+        let extent = (hi - lo).max_element();
+        Some(Self {
+            q,
+            tol: 1e-10 * extent * extent,
+        })
+    }
+
+    /// Twice the signed area of the triangle of corners `a`, `b`, `c`.
+    fn area2(&self, a: usize, b: usize, c: usize) -> f64 {
+        (self.q[b] - self.q[a]).perp_dot(self.q[c] - self.q[a])
+    }
+
+    /// See [`triangulate_faces`].
+    fn is_convex(&self) -> bool {
+        let n = self.q.len();
+        let mut turning = 0.0;
+        for i in 0..n {
+            let (a, b, c) = (self.q[(i + n - 1) % n], self.q[i], self.q[(i + 1) % n]);
+            let (d0, d1) = (b - a, c - b);
+            let cross = d0.perp_dot(d1);
+            if cross < -self.tol {
+                return false;
+            }
+            turning += cross.atan2(d0.dot(d1));
+        }
+        turning < 3.0 * std::f64::consts::PI
+    }
+
+    /// Ear clipping; triangles as corner indices, or `None` when no corner
+    /// can be cut off.
+    fn ear_clip(&self) -> Option<Vec<[usize; 3]>> {
+        let n = self.q.len();
+        let mut ring = Ring {
+            prev: (0..n).map(|i| (i + n - 1) % n).collect(),
+            next: (0..n).map(|i| (i + 1) % n).collect(),
+            alive: vec![true; n],
+            blocking: vec![false; n],
+            blockers: Vec::new(),
+        };
+        for i in 0..n {
+            ring.update_blocking(self, i);
+        }
+        let mut ear: Vec<bool> = (0..n).map(|i| ring.is_ear(self, i)).collect();
+        let mut tris = Vec::with_capacity(n - 2);
+        let (mut remaining, mut cur, mut stall) = (n, 0, 0);
+        let mut recomputed = false;
+        while remaining > 3 {
+            if !ear[cur] {
+                cur = ring.next[cur];
+                stall += 1;
+                if stall <= remaining {
+                    continue;
+                }
+                // No ear in a whole round. Once, recompute every flag; then
+                // cut off a straight corner (a zero-area triangle) if any.
+                stall = 0;
+                if !recomputed {
+                    recomputed = true;
+                    for i in (0..n).filter(|&i| ring.alive[i]) {
+                        ear[i] = ring.is_ear(self, i);
+                    }
+                    continue;
+                }
+                cur = (0..n).find(|&i| {
+                    ring.alive[i] && self.area2(ring.prev[i], i, ring.next[i]).abs() <= self.tol
+                })?;
+            }
+            let (a, c) = (ring.prev[cur], ring.next[cur]);
+            tris.push([a, cur, c]);
+            ring.next[a] = c;
+            ring.prev[c] = a;
+            ring.alive[cur] = false;
+            remaining -= 1;
+            ring.update_blocking(self, a);
+            ring.update_blocking(self, c);
+            ear[a] = ring.is_ear(self, a);
+            ear[c] = ring.is_ear(self, c);
+            cur = c;
+            stall = 0;
+        }
+        let (a, b) = (cur, ring.next[cur]);
+        let c = ring.next[b];
+        if self.area2(a, b, c) < -self.tol {
+            return None;
+        }
+        tris.push([a, b, c]);
+        Some(tris)
+    }
+}
+
+/// The corners left during ear clipping: a doubly linked ring.
+struct Ring {
+    prev: Vec<usize>,
+    next: Vec<usize>,
+    alive: Vec<bool>,
+    /// Corners that do not turn the polygon's way: the only ones that can
+    /// lie in an ear's triangle.
+    blocking: Vec<bool>,
+    /// Every corner that was ever blocking (the flag tells which still are).
+    blockers: Vec<usize>,
+}
+
+impl Ring {
+    fn update_blocking(&mut self, plane: &FacePlane, i: usize) {
+        let blocking = plane.area2(self.prev[i], i, self.next[i]) <= plane.tol;
+        if blocking && !self.blocking[i] {
+            self.blockers.push(i);
+        }
+        self.blocking[i] = blocking;
+    }
+
+    /// Whether corner `i` turns the polygon's way and no blocking corner
+    /// lies in or on its triangle (a corner at the same position as one of
+    /// the triangle's, as where a polygon meets itself, does not block).
+    fn is_ear(&self, plane: &FacePlane, i: usize) -> bool {
+        let (a, c) = (self.prev[i], self.next[i]);
+        if plane.area2(a, i, c) <= plane.tol {
+            return false;
+        }
+        let corners = [plane.q[a], plane.q[i], plane.q[c]];
+        !self.blockers.iter().any(|&j| {
+            self.alive[j]
+                && self.blocking[j]
+                && j != a
+                && j != i
+                && j != c
+                && !corners.contains(&plane.q[j])
+                && plane.area2(a, i, j) >= 0.0
+                && plane.area2(i, c, j) >= 0.0
+                && plane.area2(c, a, j) >= 0.0
+        })
+    }
 }
 
 /// Drops vertices that no face uses, keeping the others in order, and remaps
@@ -420,7 +751,8 @@ mod tests {
         let ring: Vec<u32> = (0..n).collect();
         let mut m = PolyMesh::from_polygons(positions, [&ring[..], &[0, 1, 2][..]]);
         let area = polygon_area(&m.positions, &ring);
-        assert_eq!(triangulate_large_faces(&mut m, MAX_FACE_CORNERS), 1);
+        let counts = triangulate_faces(&mut m, MAX_FACE_CORNERS).unwrap();
+        assert_eq!((counts.large, counts.non_convex), (1, 0));
         assert_eq!(m.face_count(), n as usize - 2 + 1);
         assert!(m.faces().all(|f| f.len() == 3));
         // Same area, same winding (every triangle's normal is +z).
@@ -446,6 +778,137 @@ mod tests {
         );
     }
 
+    /// A star-shaped simple polygon of `n` corners at random angles and radii
+    /// (seeded), tilted and moved off the origin, reversed when `reverse`.
+    fn random_polygon(seed: u64, n: usize, reverse: bool) -> Vec<Vec3> {
+        let mut state = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut angles: Vec<f64> = (0..n).map(|_| next() * std::f64::consts::TAU).collect();
+        angles.sort_by(f64::total_cmp);
+        let rotation = glam::DQuat::from_euler(glam::EulerRot::XYZ, next(), next(), next());
+        let mut points: Vec<Vec3> = angles
+            .iter()
+            .map(|&a| {
+                let r = 0.2 + 0.8 * next();
+                let p = rotation * DVec3::new(r * a.cos(), r * a.sin(), 0.0);
+                (p + DVec3::new(3.0, -2.0, 7.0)).as_vec3()
+            })
+            .collect();
+        if reverse {
+            points.reverse();
+        }
+        points
+    }
+
+    #[test]
+    fn ear_clipping_covers_random_simple_polygons_once() {
+        let mut cut = 0;
+        for seed in 0..300u64 {
+            let n = 4 + (seed as usize * 7) % 60;
+            let points = random_polygon(seed, n, seed % 3 == 0);
+            let ring: Vec<u32> = (0..n as u32).collect();
+            let normal = area_vector_f64(&points, &ring);
+            let area = 0.5 * normal.length();
+            let mut m = PolyMesh::from_polygons(points, [&ring[..]]);
+            let counts = triangulate_faces(&mut m, MAX_FACE_CORNERS).expect("a simple polygon");
+            cut += counts.non_convex;
+            let tris = m.triangulated();
+            assert_eq!(tris.face_count(), n - 2, "seed {seed}");
+            let mut sum = 0.0;
+            for f in tris.faces() {
+                let t = area_vector_f64(&tris.positions, f);
+                assert!(
+                    t.dot(normal) >= -1e-9 * area * normal.length(),
+                    "seed {seed}: a triangle faces against the polygon"
+                );
+                sum += 0.5 * t.length();
+            }
+            assert!(
+                (sum - area).abs() <= 1e-5 * area,
+                "seed {seed}: {sum} vs {area}"
+            );
+        }
+        assert!(cut > 250, "most random polygons are non-convex: {cut}");
+    }
+
+    fn area_vector_f64(positions: &[Vec3], face: &[u32]) -> DVec3 {
+        let p0 = positions[face[0] as usize].as_dvec3();
+        face.windows(2).fold(DVec3::ZERO, |n, w| {
+            n + (positions[w[0] as usize].as_dvec3() - p0)
+                .cross(positions[w[1] as usize].as_dvec3() - p0)
+        })
+    }
+
+    #[test]
+    fn a_face_crossing_itself_or_too_large_is_reported() {
+        // A bow tie with lobes of different size.
+        let p = vec![
+            Vec3::ZERO,
+            Vec3::new(2.0, 2.0, 0.0),
+            Vec3::new(2.0, 0.0, 0.0),
+            Vec3::new(0.0, 1.0, 0.0),
+        ];
+        let mut m = PolyMesh::from_polygons(p.clone(), [&[0u32, 1, 2][..], &[0, 1, 2, 3][..]]);
+        assert_eq!(
+            triangulate_faces(&mut m, MAX_FACE_CORNERS),
+            Err((1, 4, FaceProblem::CrossesItself))
+        );
+        // Named by its index among the faces as read, before the repairs
+        // dropped the degenerate one in front of it.
+        let mut m =
+            PolyMesh::from_polygons(p, [&[0u32, 0, 1][..], &[0, 1, 2][..], &[0, 1, 2, 3][..]]);
+        assert_eq!(
+            repair_mesh(&mut m, &LoadOptions::default()),
+            Err(BadFace {
+                face: 2,
+                corners: 4,
+                problem: FaceProblem::CrossesItself
+            })
+        );
+        // A non-convex star of more corners than ear clipping takes.
+        let n = MAX_NON_CONVEX_CORNERS + 2;
+        let star: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let a = i as f32 / n as f32 * std::f32::consts::TAU;
+                let r = if i % 2 == 0 { 1.0 } else { 0.5 };
+                Vec3::new(r * a.cos(), r * a.sin(), 0.0)
+            })
+            .collect();
+        let ring: Vec<u32> = (0..n as u32).collect();
+        let mut m = PolyMesh::from_polygons(star, [&ring[..]]);
+        assert_eq!(
+            triangulate_faces(&mut m, MAX_FACE_CORNERS),
+            Err((0, n, FaceProblem::TooManyCorners))
+        );
+    }
+
+    #[test]
+    fn the_largest_non_convex_face_is_cut_in_time() {
+        let n = MAX_NON_CONVEX_CORNERS;
+        let star: Vec<Vec3> = (0..n)
+            .map(|i| {
+                let a = i as f64 / n as f64 * std::f64::consts::TAU;
+                let r = if i % 2 == 0 { 1.0 } else { 0.9 };
+                Vec3::new((r * a.cos()) as f32, (r * a.sin()) as f32, 0.0)
+            })
+            .collect();
+        let ring: Vec<u32> = (0..n as u32).collect();
+        let mut m = PolyMesh::from_polygons(star, [&ring[..]]);
+        let started = std::time::Instant::now();
+        let counts = triangulate_faces(&mut m, MAX_FACE_CORNERS).unwrap();
+        assert_eq!((counts.non_convex, m.face_count()), (1, n - 2));
+        assert!(
+            started.elapsed() < std::time::Duration::from_secs(20),
+            "{:?}",
+            started.elapsed()
+        );
+    }
+
     fn quad_pair() -> PolyMesh {
         // Two unit squares side by side whose shared edge is duplicated.
         let p = vec![
@@ -464,7 +927,7 @@ mod tests {
     #[test]
     fn clean_mesh_reports_nothing() {
         let mut m = PolyMesh::from_triangles(vec![Vec3::ZERO, Vec3::X, Vec3::Y], &[[0, 1, 2]]);
-        let r = repair_mesh(&mut m, &LoadOptions::default());
+        let r = repair_mesh(&mut m, &LoadOptions::default()).unwrap();
         assert!(r.is_clean());
         assert_eq!(r.summary(), "read 3 vertices, 1 face; no repairs needed");
     }
@@ -472,7 +935,7 @@ mod tests {
     #[test]
     fn merge_is_opt_in_and_respects_tolerance() {
         let mut m = quad_pair();
-        let r = repair_mesh(&mut m, &LoadOptions::default());
+        let r = repair_mesh(&mut m, &LoadOptions::default()).unwrap();
         assert_eq!((r.merged_vertices, m.vertex_count()), (0, 8));
 
         let mut m = quad_pair();
@@ -480,7 +943,7 @@ mod tests {
             merge_duplicates: true,
             merge_tolerance: 0.0,
         };
-        let r = repair_mesh(&mut m, &exact);
+        let r = repair_mesh(&mut m, &exact).unwrap();
         assert_eq!(r.merged_vertices, 1);
         assert_eq!(m.face(1), &[1, 4, 5, 6]);
 
@@ -489,7 +952,7 @@ mod tests {
             merge_duplicates: true,
             merge_tolerance: 1e-4,
         };
-        let r = repair_mesh(&mut m, &loose);
+        let r = repair_mesh(&mut m, &loose).unwrap();
         assert_eq!(r.merged_vertices, 2);
         assert_eq!(m.vertex_count(), 6);
         assert_eq!(m.face(1), &[1, 4, 5, 2]);
@@ -504,7 +967,7 @@ mod tests {
             merge_duplicates: true,
             merge_tolerance: 1e-3,
         };
-        let r = repair_mesh(&mut m, &opts);
+        let r = repair_mesh(&mut m, &opts).unwrap();
         assert_eq!(r.merged_vertices, 1);
         assert_eq!(r.dropped_degenerate_faces, 1);
         assert_eq!(m.face_count(), 1);
@@ -523,7 +986,7 @@ mod tests {
         ];
         let faces: [&[u32]; 5] = [&[0, 1, 2], &[0, 1, 3], &[0, 1, 1, 2], &[0, 1], &[1, 5, 2]];
         let mut m = PolyMesh::from_polygons(p, faces);
-        let r = repair_mesh(&mut m, &LoadOptions::default());
+        let r = repair_mesh(&mut m, &LoadOptions::default()).unwrap();
         assert_eq!(r.dropped_degenerate_faces, 2);
         assert_eq!(r.dropped_zero_area_faces, 1);
         assert_eq!(r.dropped_unused_vertices, 2);

@@ -35,19 +35,24 @@ pub fn write_atomic(
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => std::path::PathBuf::from("."),
     };
-    std::fs::create_dir_all(&dir).map_err(io_err)?;
     let file_name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "output".to_string());
     let tmp = dir.join(format!(".{file_name}.{}.tmp", std::process::id()));
+    // Creating and renaming go through the staging lock, so an interrupt
+    // never deletes a run's folder while a file appears in it, nor lets a
+    // write recreate it afterwards (`staging` module docs).
     let result = (|| {
-        let file = std::fs::File::create(&tmp)?;
+        let file = staging::guarded(|| {
+            std::fs::create_dir_all(&dir)?;
+            std::fs::File::create(&tmp)
+        })?;
         let mut buf = std::io::BufWriter::new(file);
         write(&mut buf)?;
         let file = buf.into_inner().map_err(|e| e.into_error())?;
         file.sync_all()?;
-        std::fs::rename(&tmp, path)
+        staging::guarded(|| std::fs::rename(&tmp, path))
     })();
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);

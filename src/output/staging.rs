@@ -1,27 +1,48 @@
 //! Whole-run atomicity: a run writes every file into a hidden sibling folder
-//! `.DIR.tmp-PID` and renames it to `DIR` at the end, so a reader sees either
+//! `.DIR.tmp-PID.N` and moves it to `DIR` at the end, so a reader sees either
 //! the previous complete result or the new one, never a mix, and a run that
 //! fails or is killed leaves no folder with final names.
 //!
-//! When `DIR` already holds an earlier run, it is renamed aside to
-//! `.DIR.old-PID` just before the new folder takes its name, then deleted.
-//! A run refuses to replace a folder that does not look like a run's output
-//! (see [`check_replaceable`]), so `--out ~/Documents` cannot delete files.
+//! When `DIR` already holds an earlier run, the two folders trade places in
+//! one step (Linux `renameat2(RENAME_EXCHANGE)`; elsewhere, or on a file
+//! system without it, the earlier one is first renamed aside to
+//! `.DIR.old-PID.N`), and the earlier result, now under the temporary name,
+//! is deleted. A run refuses to replace a folder that does not look like a
+//! run's output (see [`check_replaceable`]), so `--out ~/Documents` cannot
+//! delete files.
+//!
+//! One lock orders everything that changes these folders: creating the
+//! temporary folder, creating or renaming a file in it
+//! ([`guarded`], which [`crate::output::write_atomic`] goes through), the
+//! commit with the deletion of the earlier result, and the interrupt
+//! handler's clean-up. The handler ([`exit_cleanly_on_signals`]) takes the
+//! lock, marks the process interrupted, deletes the temporary folders and
+//! exits *holding* it, so no file is created in a folder being deleted, no
+//! folder is recreated after it, and no commit moves a half-deleted folder
+//! into place: after a signal at any moment there is either the complete
+//! new folder or nothing new, beside an untouched earlier result.
 //!
 //! Stale siblings (the owning process is gone, or started after the folder
 //! was last written, so it is a reused PID) are removed when the next run
-//! into the same `DIR` begins; a stale `.DIR.old-PID` whose `DIR` is missing
-//! (the process died between the two renames) is renamed back first.
+//! into the same `DIR` begins; a stale `.DIR.old-PID.N` whose `DIR` is
+//! missing (the process died between the two renames of the fallback) is
+//! renamed back first ([`recover`], which a run calls before it checks
+//! anything else, so even a run refused for its config puts it back).
 
 use super::OutputError;
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Folders to remove when the process is interrupted (see [`abandon_active`]):
-/// each active run's temporary folder, then the parents it created.
+/// each active run's temporary folder, then the parents it created. Its lock
+/// is the one lock of the module docs.
 static ACTIVE: Mutex<Vec<Vec<PathBuf>>> = Mutex::new(Vec::new());
+
+/// Set (under the lock) once the process is interrupted: from then on no
+/// file is created or renamed through [`guarded`], and nothing is committed.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
 
 /// Distinguishes two runs of one process into the same folder.
 static SEQUENCE: AtomicU64 = AtomicU64::new(0);
@@ -43,14 +64,12 @@ pub struct RunFolder {
 impl RunFolder {
     /// Cleans stale siblings of `dir`, creates its missing parents and the
     /// temporary folder. Fails when `dir` is a file, has no folder name, or
-    /// holds something other than an earlier run.
+    /// holds something other than an earlier run, when the temporary folder
+    /// is on another file system than an existing `dir` (the final move
+    /// could not be a rename), or when the process was interrupted.
     pub fn begin(dir: &Path) -> Result<Self, OutputError> {
         let (parent, name) = split(dir)?;
         check_replaceable(dir).map_err(|m| io_error(dir, m))?;
-        let created = create_parents(&parent).map_err(|e| OutputError::Io {
-            path: parent.clone(),
-            source: e,
-        })?;
         clean_stale(&parent, &name, dir);
         let pid = std::process::id();
         let seq = SEQUENCE.fetch_add(1, Ordering::Relaxed);
@@ -58,19 +77,36 @@ impl RunFolder {
         tmp_name.push(&name);
         tmp_name.push(format!("{TMP_TAG}{pid}.{seq}"));
         let tmp_dir = parent.join(tmp_name);
+        // Under the lock: an interrupt either comes first (nothing is
+        // created) or finds the folder registered (and removes it).
+        let mut active = lock_active();
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            return Err(interrupted_error(dir));
+        }
+        let created = create_parents(&parent).map_err(|e| OutputError::Io {
+            path: parent.clone(),
+            source: e,
+        })?;
+        if let Err(source) = std::fs::create_dir(&tmp_dir) {
+            remove_created(&created);
+            return Err(OutputError::Io {
+                path: tmp_dir,
+                source,
+            });
+        }
+        let mut registered = vec![tmp_dir.clone()];
+        registered.extend(created.iter().cloned());
+        active.push(registered);
+        drop(active);
         let folder = Self {
             final_dir: dir.to_path_buf(),
             tmp_dir,
             created,
             committed: false,
         };
-        let mut registered = vec![folder.tmp_dir.clone()];
-        registered.extend(folder.created.iter().cloned());
-        lock_active().push(registered);
-        std::fs::create_dir(&folder.tmp_dir).map_err(|e| OutputError::Io {
-            path: folder.tmp_dir.clone(),
-            source: e,
-        })?;
+        // `preflight` refuses mount points; this catches a library caller
+        // (or a mount made meanwhile) before the work, not at the commit.
+        same_file_system(&folder.tmp_dir, dir).map_err(|m| io_error(dir, m))?;
         Ok(folder)
     }
 
@@ -84,49 +120,62 @@ impl RunFolder {
         &self.final_dir
     }
 
-    /// Moves the finished folder into place: the earlier run (if any) aside,
-    /// the new one to the final name, then the earlier one deleted.
+    /// Moves the finished folder into place: it trades places with the
+    /// earlier run (if any), which is then deleted. All under the lock, so
+    /// an interrupt waits for the whole of it (and the process then exits
+    /// with the new folder complete and nothing left beside it).
     pub fn commit(mut self) -> Result<PathBuf, OutputError> {
-        // Held across the renames so an interrupt handler does not delete
-        // the temporary folder half-way through.
         let mut active = lock_active();
+        if INTERRUPTED.load(Ordering::SeqCst) {
+            return Err(interrupted_error(&self.final_dir));
+        }
         let io = |path: &Path| {
             let path = path.to_path_buf();
             move |source| OutputError::Io { path, source }
         };
-        let old = if self.final_dir.exists() {
-            let mut old_name = OsString::from(".");
-            let (parent, name) = split(&self.final_dir)?;
-            old_name.push(&name);
-            old_name.push(format!(
-                "{OLD_TAG}{}.{}",
-                std::process::id(),
-                SEQUENCE.fetch_add(1, Ordering::Relaxed)
-            ));
-            let old = parent.join(old_name);
-            std::fs::rename(&self.final_dir, &old).map_err(io(&self.final_dir))?;
-            Some(old)
+        let earlier = if self.final_dir.exists() {
+            match exchange(&self.tmp_dir, &self.final_dir) {
+                // The earlier result is now under the temporary name.
+                Ok(()) => Some(self.tmp_dir.clone()),
+                Err(_) => Some(self.set_aside_and_rename().map_err(io(&self.final_dir))?),
+            }
         } else {
+            std::fs::rename(&self.tmp_dir, &self.final_dir).map_err(io(&self.final_dir))?;
             None
         };
-        if let Err(e) = std::fs::rename(&self.tmp_dir, &self.final_dir) {
-            if let Some(old) = &old {
-                let _ = std::fs::rename(old, &self.final_dir);
-            }
-            return Err(io(&self.final_dir)(e));
-        }
         self.committed = true;
-        active.retain(|paths| paths.first() != Some(&self.tmp_dir));
-        drop(active);
-        if let Some(old) = old
-            && let Err(e) = std::fs::remove_dir_all(&old)
+        if let Some(earlier) = earlier
+            && let Err(e) = std::fs::remove_dir_all(&earlier)
         {
             tracing::warn!(
                 "the earlier result moved to {} could not be deleted: {e}",
-                old.display()
+                earlier.display()
             );
         }
+        active.retain(|paths| paths.first() != Some(&self.tmp_dir));
+        drop(active);
         Ok(self.final_dir.clone())
+    }
+
+    /// The two-rename fallback of [`commit`](Self::commit): the earlier
+    /// folder to `.DIR.old-PID.N`, the new one to `DIR` (on failure the
+    /// earlier one back). Returns where the earlier one is.
+    fn set_aside_and_rename(&self) -> std::io::Result<PathBuf> {
+        let (parent, name) = split(&self.final_dir).map_err(std::io::Error::other)?;
+        let mut old_name = OsString::from(".");
+        old_name.push(&name);
+        old_name.push(format!(
+            "{OLD_TAG}{}.{}",
+            std::process::id(),
+            SEQUENCE.fetch_add(1, Ordering::Relaxed)
+        ));
+        let old = parent.join(old_name);
+        std::fs::rename(&self.final_dir, &old)?;
+        if let Err(e) = std::fs::rename(&self.tmp_dir, &self.final_dir) {
+            let _ = std::fs::rename(&old, &self.final_dir);
+            return Err(e);
+        }
+        Ok(old)
     }
 }
 
@@ -141,12 +190,32 @@ impl Drop for RunFolder {
     }
 }
 
-/// Removes the temporary folder of every run in progress (and the parents
-/// they created). For an interrupt handler that then exits the process;
-/// a file written concurrently may recreate a folder, which the next run
-/// into the same place removes as stale.
+/// Runs `op` (creating or renaming a file) under the lock of the module
+/// docs, unless the process was interrupted: then it fails with
+/// [`std::io::ErrorKind::Interrupted`] without running. Keep `op` short:
+/// an interrupt waits for it.
+pub fn guarded<T>(op: impl FnOnce() -> std::io::Result<T>) -> std::io::Result<T> {
+    let _active = lock_active();
+    if INTERRUPTED.load(Ordering::SeqCst) {
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::Interrupted,
+            "the run was interrupted",
+        ));
+    }
+    op()
+}
+
+/// Marks the process interrupted and removes the temporary folder of every
+/// run in progress (and the parents they created); afterwards no file is
+/// created through [`guarded`] and no run commits. For an interrupt handler
+/// that then exits the process.
 pub fn abandon_active() {
     let mut active = lock_active();
+    abandon(&mut active);
+}
+
+fn abandon(active: &mut Vec<Vec<PathBuf>>) {
+    INTERRUPTED.store(true, Ordering::SeqCst);
     for paths in active.drain(..) {
         if let Some((tmp, created)) = paths.split_first() {
             remove_all(tmp, created);
@@ -155,8 +224,10 @@ pub fn abandon_active() {
 }
 
 /// On SIGINT, SIGTERM and SIGHUP: removes the temporary folders of the runs
-/// in progress and exits with 128 + the signal number (130, 143, 129). For
-/// the `run` command; a library user installs its own handler and calls
+/// in progress and exits with 128 + the signal number (130, 143, 129),
+/// holding the lock of the module docs until the process is gone (a commit
+/// under way finishes first; the new folder is then complete). For the
+/// `run` command; a library user installs its own handler and calls
 /// [`abandon_active`].
 #[cfg(unix)]
 pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
@@ -166,7 +237,10 @@ pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
         .name("signals".into())
         .spawn(move || {
             if let Some(signal) = signals.forever().next() {
-                abandon_active();
+                let mut active = lock_active();
+                abandon(&mut active);
+                // `exit` does not return: the lock stays held, so no other
+                // thread creates, renames or commits before the process ends.
                 std::process::exit(128 + signal);
             }
         })?;
@@ -176,6 +250,78 @@ pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
 /// Without Unix signals there is nothing to install; the next run cleans up.
 #[cfg(not(unix))]
 pub fn exit_cleanly_on_signals() -> std::io::Result<()> {
+    Ok(())
+}
+
+/// Puts back an earlier result of `dir` that a run which died between the
+/// two renames of a commit left set aside, and removes the temporary
+/// folders of runs that are gone. A run calls it first, before checking its
+/// config and options, so even a run refused for those restores it. A
+/// symlink `dir` is followed (also when its folder is the one set aside).
+pub fn recover(dir: &Path) {
+    let dir = match std::fs::read_link(dir) {
+        Ok(to) if to.is_absolute() => to,
+        Ok(to) => dir.parent().unwrap_or(Path::new("")).join(to),
+        Err(_) => dir.to_path_buf(),
+    };
+    clean_stale_siblings(&dir);
+}
+
+fn interrupted_error(dir: &Path) -> OutputError {
+    OutputError::Io {
+        path: dir.to_path_buf(),
+        source: std::io::Error::new(std::io::ErrorKind::Interrupted, "the run was interrupted"),
+    }
+}
+
+/// Swaps two existing folders in one step (Linux: `renameat2` with
+/// `RENAME_EXCHANGE`). Fails where the system or the file system cannot.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn exchange(a: &Path, b: &Path) -> std::io::Result<()> {
+    use std::os::unix::ffi::OsStrExt;
+    let a = std::ffi::CString::new(a.as_os_str().as_bytes())?;
+    let b = std::ffi::CString::new(b.as_os_str().as_bytes())?;
+    // SAFETY: both are valid NUL-terminated paths that outlive the call;
+    // AT_FDCWD makes relative paths relative to the working folder.
+    let r = unsafe {
+        libc::renameat2(
+            libc::AT_FDCWD,
+            a.as_ptr(),
+            libc::AT_FDCWD,
+            b.as_ptr(),
+            libc::RENAME_EXCHANGE,
+        )
+    };
+    if r == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn exchange(_a: &Path, _b: &Path) -> std::io::Result<()> {
+    Err(std::io::ErrorKind::Unsupported.into())
+}
+
+/// `Err` naming both when the existing `dir` and the new `tmp` beside it
+/// are on different file systems (a bind mount at `dir` has its own device
+/// number too), so the final rename would fail.
+#[cfg(unix)]
+fn same_file_system(tmp: &Path, dir: &Path) -> Result<(), String> {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(tmp), std::fs::metadata(dir)) {
+        (Ok(t), Ok(d)) if t.dev() != d.dev() => Err(format!(
+            "{} is on another file system than its parent folder {}, where the run writes before it moves the result into place; allowed: a folder on the same file system as its parent",
+            dir.display(),
+            tmp.parent().unwrap_or(Path::new("")).display()
+        )),
+        _ => Ok(()),
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file_system(_tmp: &Path, _dir: &Path) -> Result<(), String> {
     Ok(())
 }
 
@@ -339,8 +485,13 @@ fn create_parents(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
 
 fn remove_all(tmp: &Path, created: &[PathBuf]) {
     let _ = std::fs::remove_dir_all(tmp);
+    remove_created(created);
+}
+
+/// Removes the parents a run created, deepest first, each only when empty:
+/// another process may have put files there meanwhile.
+fn remove_created(created: &[PathBuf]) {
     for dir in created {
-        // Only when empty: another process may have put files there meanwhile.
         let _ = std::fs::remove_dir(dir);
     }
 }

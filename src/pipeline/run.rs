@@ -218,6 +218,9 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         .out_dir
         .clone()
         .unwrap_or_else(|| PathBuf::from(&pipeline.output.dir));
+    // A set-aside earlier result goes back before anything can refuse the
+    // run (`output::staging::recover`).
+    crate::output::staging::recover(&requested);
     let (file, key) = match options.out_dir {
         Some(_) => ("command line".to_string(), "--out"),
         None => (pipeline.source.file.clone(), "output.dir"),

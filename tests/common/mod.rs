@@ -110,3 +110,62 @@ pub fn world_with(
 pub fn world_for(text: &str) -> Result<bevy_ecs::world::World, surfsynth::pipeline::PipelineError> {
     world_with(text, |_| {})
 }
+
+/// Two unit cubes, [0,1]³ and [1,2]×[1,2]×[0,1], sharing one edge (x = y = 1;
+/// four triangles meet on it, two vertices are shared), as 14 vertices and
+/// 24 outward-facing triangles in an order shuffled by `seed` (0: as built).
+pub fn two_cubes_sharing_an_edge(seed: u64) -> (Vec<glam::Vec3>, Vec<[u32; 3]>) {
+    let mut positions: Vec<glam::Vec3> = Vec::new();
+    let mut triangles = Vec::new();
+    // Corner k of a cube is at offset (k >> 2 & 1, k >> 1 & 1, k & 1).
+    let quads = [
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+    ];
+    for origin in [glam::Vec3::ZERO, glam::Vec3::new(1.0, 1.0, 0.0)] {
+        let mut id = |k: u32| {
+            let p =
+                origin + glam::Vec3::new((k >> 2 & 1) as f32, (k >> 1 & 1) as f32, (k & 1) as f32);
+            match positions.iter().position(|&q| q == p) {
+                Some(i) => i as u32,
+                None => {
+                    positions.push(p);
+                    positions.len() as u32 - 1
+                }
+            }
+        };
+        for q in quads {
+            let [a, b, c, d] = q.map(&mut id);
+            triangles.push([a, b, c]);
+            triangles.push([a, c, d]);
+        }
+    }
+    // Fisher–Yates with a small LCG.
+    let mut state = seed;
+    for i in (1..triangles.len()).rev() {
+        state = state
+            .wrapping_mul(6_364_136_223_846_793_005)
+            .wrapping_add(1_442_695_040_888_963_407);
+        let j = (state >> 33) as usize % (i + 1);
+        if seed != 0 {
+            triangles.swap(i, j);
+        }
+    }
+    (positions, triangles)
+}
+
+/// `positions` and `triangles` as OBJ text.
+pub fn triangles_obj(positions: &[glam::Vec3], triangles: &[[u32; 3]]) -> String {
+    let mut text = String::new();
+    for p in positions {
+        text.push_str(&format!("v {} {} {}\n", p.x, p.y, p.z));
+    }
+    for t in triangles {
+        text.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+    }
+    text
+}

@@ -41,9 +41,9 @@
 //!
 //! Any [`PolyMesh`]: polygons are fan-triangulated, several components are
 //! remeshed together (each keeps its share of vertices by area),
-//! inconsistently oriented faces are turned over, non-manifold vertices are
-//! split (see [`InputReport`]), vertices in no face are left out.
-//! Non-manifold edges, non-orientable components, non-finite positions,
+//! inconsistently oriented faces are turned over, non-manifold edges are
+//! cut and non-manifold vertices split (see [`InputReport`]), vertices in
+//! no face are left out. Non-orientable components, non-finite positions,
 //! meshes without faces (or area) and settings out of range are
 //! [`RetileError`]s naming what and where, as is a target below three
 //! vertices per connected piece (checked before any remeshing).

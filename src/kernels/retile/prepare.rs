@@ -132,45 +132,52 @@ pub(crate) fn prepare(input: &PolyMesh) -> Result<Prepared, RetileError> {
 /// A triangle's side along an edge: (edge key, triangle, corner).
 type Side = (u64, u32, u8);
 
-/// Cuts every edge that three or more triangles share, as a scan's fins
-/// and flaps need: the triangles on the edge are paired greedily, each with
-/// the next one running along it in the opposite direction (a consistently
-/// oriented pair; else the next one), and only pairs stay joined there (a
-/// side past the eighth stays alone). Then every
+/// Cuts every edge that three or more triangles share, as a scan's fins,
+/// flaps and touching parts need: the triangles on the edge are paired
+/// greedily, each with the next one running along it in the opposite
+/// direction (a consistently oriented pair; else the next one), and only
+/// pairs stay joined there (a side past the eighth stays alone). Then every
 /// vertex gets one copy per fan of its triangles still joined through
 /// edges (corners joined by union-find across the kept edges), so each
-/// detached triangle's corners on the cut become their own vertices and
-/// the mesh is edge-manifold. Linear in the triangles (one sort). Returns
-/// (edges cut, vertices added); nothing changes on an edge-manifold mesh.
+/// detached triangle's corners on the cut become their own vertices.
+///
+/// The pairing can disagree with the fans: two cubes sharing an edge, with
+/// a triangle of each cube paired, join both cubes' fans at the edge's ends
+/// into one, so all four triangles stay on one edge. Such an edge keeps no
+/// pair in a second pass: around a vertex, the corners joined through
+/// edges form paths and cycles (a corner has two edges, and each edge
+/// joins it to at most one other), and an edge with no pair joined ends
+/// paths, two per path, so at most two triangles stay on each copy of it.
+/// Dropping joins never puts more triangles on another edge's copies, so
+/// the mesh is then edge-manifold. Linear in the triangles (one sort, at
+/// most two passes). Returns (edges cut, vertices added); nothing changes
+/// on an edge-manifold mesh.
 fn cut_nonmanifold_edges(tris: &mut [[u32; 3]], positions: &mut Vec<Vec3>) -> (usize, usize) {
     // Sides keyed by their undirected edge: (key, triangle, corner of a).
-    let mut sides: Vec<(u64, u32, u8)> = Vec::with_capacity(tris.len() * 3);
+    let mut sides: Vec<Side> = Vec::with_capacity(tris.len() * 3);
     for (t, tri) in tris.iter().enumerate() {
         for i in 0..3 {
             sides.push((edge_key(tri[i], tri[(i + 1) % 3]), t as u32, i as u8));
         }
     }
     sides.sort_unstable();
-    let mut cut = 0;
-    let mut parent: Vec<u32> = (0..tris.len() as u32 * 3).collect();
-    let mut i = 0;
-    while i < sides.len() {
-        let mut j = i + 1;
-        while j < sides.len() && sides[j].0 == sides[i].0 {
-            j += 1;
-        }
-        let group = &sides[i..j];
-        if group.len() > 2 {
-            cut += 1;
+    // Sides that stay joined, with the non-manifold edge (its index in
+    // `cut`) they were paired on, if any.
+    let mut pairs: Vec<(Side, Side, Option<usize>)> = Vec::new();
+    // The sides of each non-manifold edge.
+    let mut cut: Vec<&[Side]> = Vec::new();
+    let forward = |s: &Side| {
+        let tri = tris[s.1 as usize];
+        tri[s.2 as usize] < tri[(s.2 as usize + 1) % 3]
+    };
+    for group in sides.chunk_by(|a, b| a.0 == b.0) {
+        let edge = (group.len() > 2).then_some(cut.len());
+        if edge.is_some() {
+            cut.push(group);
         }
         // Pair the sides greedily: each unpaired side with the next one
         // running the other way along the edge (else the next one).
-        let forward = |s: &(u64, u32, u8)| {
-            let tri = tris[s.1 as usize];
-            tri[s.2 as usize] < tri[(s.2 as usize + 1) % 3]
-        };
         let mut paired = [false; 8];
-        let mut pairs: Vec<(Side, Side)> = Vec::new();
         let n = group.len().min(paired.len());
         for a in 0..n {
             if paired[a] {
@@ -184,51 +191,100 @@ fn cut_nonmanifold_edges(tris: &mut [[u32; 3]], positions: &mut Vec<Vec3>) -> (u
             if let Some(b) = partner {
                 paired[a] = true;
                 paired[b] = true;
-                pairs.push((group[a], group[b]));
+                pairs.push((group[a], group[b], edge));
             }
         }
-        for (s, t) in pairs {
-            // Join the corners of s and t at each end of the edge.
-            let (ts, cs) = (s.1 as usize, s.2 as usize);
-            let (tt, _) = (t.1 as usize, t.2 as usize);
-            for v in [tris[ts][cs], tris[ts][(cs + 1) % 3]] {
-                let corner_s = 3 * ts + (0..3).find(|&k| tris[ts][k] == v).unwrap_or(0);
-                let corner_t = 3 * tt + (0..3).find(|&k| tris[tt][k] == v).unwrap_or(0);
-                let (a, b) = (
-                    root(&mut parent, corner_s as u32),
-                    root(&mut parent, corner_t as u32),
-                );
-                if a != b {
-                    parent[a.max(b) as usize] = a.min(b);
-                }
-            }
-        }
-        i = j;
     }
-    if cut == 0 {
+    if cut.is_empty() {
         return (0, 0);
     }
-    // One vertex per fan: the first fan met keeps the vertex, each further
-    // one gets a copy.
-    let mut fan_vertex: Vec<u32> = vec![u32::MAX; parent.len()];
-    let mut vertex_taken = vec![false; positions.len()];
+    let mut unpaired = vec![false; cut.len()];
+    let (split, added) = loop {
+        let (split, added) = split_fans(tris, positions.len(), &pairs, &unpaired);
+        // A cut edge whose sides still share a copy of the edge three or
+        // more times loses its pairs; the second pass always succeeds.
+        let mut again = false;
+        for (e, group) in cut.iter().enumerate() {
+            let mut keys: Vec<u64> = group
+                .iter()
+                .map(|&(_, t, c)| {
+                    let tri = split[t as usize];
+                    edge_key(tri[c as usize].0, tri[(c as usize + 1) % 3].0)
+                })
+                .collect();
+            keys.sort_unstable();
+            if !unpaired[e] && keys.chunk_by(|a, b| a == b).any(|k| k.len() > 2) {
+                unpaired[e] = true;
+                again = true;
+            }
+        }
+        if !again {
+            break (split, added);
+        }
+    };
+    positions.resize(positions.len() + added, Vec3::ZERO);
+    for (tri, new) in tris.iter_mut().zip(&split) {
+        for (corner, &(v, copy_of)) in tri.iter_mut().zip(new) {
+            if let Some(from) = copy_of {
+                positions[v as usize] = positions[from as usize];
+            }
+            *corner = v;
+        }
+    }
+    (cut.len(), added)
+}
+
+/// One vertex per fan of corners joined across `pairs` (except those on
+/// the edges marked in `unpaired`): the first fan met keeps the vertex,
+/// each further one gets a new vertex numbered from `vertex_count`. Returns
+/// each triangle's corners as (vertex, the vertex it copies if new) and
+/// the number of new vertices.
+#[allow(clippy::type_complexity)]
+fn split_fans(
+    tris: &[[u32; 3]],
+    vertex_count: usize,
+    pairs: &[(Side, Side, Option<usize>)],
+    unpaired: &[bool],
+) -> (Vec<[(u32, Option<u32>); 3]>, usize) {
+    let mut parent: Vec<u32> = (0..tris.len() as u32 * 3).collect();
+    for &(s, t, edge) in pairs {
+        if edge.is_some_and(|e| unpaired[e]) {
+            continue;
+        }
+        // Join the corners of s and t at each end of the edge.
+        let (ts, cs) = (s.1 as usize, s.2 as usize);
+        let tt = t.1 as usize;
+        for v in [tris[ts][cs], tris[ts][(cs + 1) % 3]] {
+            let corner_s = 3 * ts + (0..3).find(|&k| tris[ts][k] == v).unwrap_or(0);
+            let corner_t = 3 * tt + (0..3).find(|&k| tris[tt][k] == v).unwrap_or(0);
+            let (a, b) = (
+                root(&mut parent, corner_s as u32),
+                root(&mut parent, corner_t as u32),
+            );
+            if a != b {
+                parent[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut fan_vertex: Vec<(u32, Option<u32>)> = vec![(u32::MAX, None); parent.len()];
+    let mut vertex_taken = vec![false; vertex_count];
     let mut added = 0;
+    let mut split = vec![[(0, None); 3]; tris.len()];
     for c in 0..parent.len() {
         let r = root(&mut parent, c as u32) as usize;
         let v = tris[c / 3][c % 3];
-        if fan_vertex[r] == u32::MAX {
+        if fan_vertex[r].0 == u32::MAX {
             fan_vertex[r] = if vertex_taken[v as usize] {
-                positions.push(positions[v as usize]);
                 added += 1;
-                (positions.len() - 1) as u32
+                ((vertex_count + added - 1) as u32, Some(v))
             } else {
                 vertex_taken[v as usize] = true;
-                v
+                (v, None)
             };
         }
-        tris[c / 3][c % 3] = fan_vertex[r];
+        split[c / 3][c % 3] = fan_vertex[r];
     }
-    (cut, added)
+    (split, added)
 }
 
 /// Checks edge manifoldness and orients each component consistently.

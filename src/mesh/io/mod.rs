@@ -118,9 +118,10 @@ pub const BUILTIN_PREFIX: &str = "builtin:";
 /// A path of the form `builtin:NAME` builds the procedural mesh `NAME` with
 /// default options instead (see [`crate::mesh::builtin`]); its report is empty.
 ///
-/// Faces keep their degree up to
+/// Convex faces keep their degree up to
 /// [`MAX_FACE_CORNERS`](crate::mesh::repair::MAX_FACE_CORNERS) corners; larger
-/// polygons are split into triangles (the report counts them). All OBJ
+/// ones, and every non-convex face, are cut into triangles (the report
+/// counts them; see [`crate::mesh::repair::triangulate_faces`]). All OBJ
 /// objects and groups merge into one mesh. A UTF-8 byte-order mark at the
 /// start of a text file (OBJ, OFF, PLY header, ASCII STL) is skipped. Non-manifold edges, boundaries and several components are
 /// legal and kept.
@@ -134,6 +135,8 @@ pub const BUILTIN_PREFIX: &str = "builtin:";
 /// - [`MeshError::IndexOutOfRange`] for a face index outside the vertex list
 ///   ([`MeshError::ReferenceOutOfRange`] for OBJ, with the line and the
 ///   reference as written);
+/// - [`MeshError::BadFace`] for a face that cannot be cut into triangles
+///   (it crosses itself), with its line;
 /// - [`MeshError::NoFaces`] when no usable face is left;
 /// - [`MeshError::InvalidOption`] for out-of-range `options`.
 pub fn load_mesh(path: &Path, options: &LoadOptions) -> Result<(PolyMesh, LoadReport), MeshError> {
@@ -191,7 +194,7 @@ fn load_mesh_from_bytes_with_progress(
 ) -> Result<(PolyMesh, LoadReport), MeshError> {
     options.validate()?;
     progress.set_part("parsing");
-    let mut mesh = parse_mesh(bytes, format, path)?;
+    let (mut mesh, face_lines) = parse_mesh_located(bytes, format, path)?;
     progress.inc(1);
     progress.set_part("repairs");
     let file_faces = mesh.face_count();
@@ -201,7 +204,15 @@ fn load_mesh_from_bytes_with_progress(
             detail: format!(" ({} vertices, no face elements)", mesh.vertex_count()),
         });
     }
-    let report = repair_mesh(&mut mesh, options);
+    let report = repair_mesh(&mut mesh, options).map_err(|bad| MeshError::BadFace {
+        path: path.to_path_buf(),
+        location: match face_lines.get(bad.face) {
+            Some(&line) if line > 0 => format!("line {line}"),
+            _ => format!("face {}", bad.face),
+        },
+        message: bad.message(),
+    })?;
+    drop(face_lines);
     progress.inc(1);
     if mesh.face_count() == 0 {
         return Err(MeshError::NoFaces {
@@ -218,6 +229,16 @@ fn load_mesh_from_bytes_with_progress(
 /// coordinates finite, but faces may have fewer than three corners, repeated
 /// vertices or zero area, and vertices may be unused.
 pub fn parse_mesh(bytes: &[u8], format: MeshFormat, path: &Path) -> Result<PolyMesh, MeshError> {
+    parse_mesh_located(bytes, format, path).map(|(mesh, _)| mesh)
+}
+
+/// [`parse_mesh`], with the 1-based line of each face in a text file (0
+/// where there is none: binary PLY, STL).
+fn parse_mesh_located(
+    bytes: &[u8],
+    format: MeshFormat,
+    path: &Path,
+) -> Result<(PolyMesh, Vec<u32>), MeshError> {
     // STL decides between binary and ASCII itself: the 80-byte header of a
     // binary file may begin with the BOM's bytes.
     let bytes = if format == MeshFormat::Stl {
@@ -252,6 +273,8 @@ struct RawMesh {
     positions: Vec<Vec3>,
     face_start: Vec<u32>,
     corners: Vec<i64>,
+    /// The 1-based line of each face in a text file, 0 where there is none.
+    face_line: Vec<u32>,
     /// Set when the corner count overflowed `u32`.
     too_many_corners: bool,
 }
@@ -267,6 +290,7 @@ impl RawMesh {
             positions: Vec::with_capacity(vertices.min(cap)),
             face_start,
             corners: Vec::with_capacity((faces.saturating_mul(3)).min(cap)),
+            face_line: Vec::with_capacity(faces.min(cap)),
             too_many_corners: false,
         }
     }
@@ -284,8 +308,17 @@ impl RawMesh {
     /// Closes the face made of the corners pushed since the previous call.
     #[inline]
     fn end_face(&mut self) {
+        self.end_face_at(0);
+    }
+
+    /// [`end_face`](Self::end_face) for a face on text line `line` (1-based).
+    #[inline]
+    fn end_face_at(&mut self, line: usize) {
         match u32::try_from(self.corners.len()) {
-            Ok(n) => self.face_start.push(n),
+            Ok(n) => {
+                self.face_start.push(n);
+                self.face_line.push(u32::try_from(line).unwrap_or(0));
+            }
             Err(_) => self.too_many_corners = true,
         }
     }
@@ -294,8 +327,9 @@ impl RawMesh {
         self.face_start.len() - 1
     }
 
-    /// Validates coordinates and indices and converts to a [`PolyMesh`].
-    fn finish(self, path: &Path) -> Result<PolyMesh, MeshError> {
+    /// Validates coordinates and indices and converts to a [`PolyMesh`],
+    /// with the line of each face.
+    fn finish(self, path: &Path) -> Result<(PolyMesh, Vec<u32>), MeshError> {
         if self.too_many_corners {
             return Err(MeshError::Parse {
                 path: path.to_path_buf(),
@@ -332,11 +366,14 @@ impl RawMesh {
                 }
             }
         }
-        Ok(PolyMesh {
-            positions: self.positions,
-            face_start: self.face_start,
-            corner_vertex,
-        })
+        Ok((
+            PolyMesh {
+                positions: self.positions,
+                face_start: self.face_start,
+                corner_vertex,
+            },
+            self.face_line,
+        ))
     }
 }
 

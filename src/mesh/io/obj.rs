@@ -49,7 +49,7 @@ pub(super) fn parse_obj(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
                         ),
                     ));
                 }
-                raw.end_face();
+                raw.end_face_at(line_no);
             }
             _ => {}
         }

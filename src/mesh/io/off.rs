@@ -146,7 +146,7 @@ pub(super) fn parse_off(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
             })?;
             raw.push_corner(i);
         }
-        raw.end_face();
+        raw.end_face_at(n);
     }
     Ok(raw)
 }
@@ -156,7 +156,9 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<crate::mesh::PolyMesh, MeshError> {
-        parse_off(text.as_bytes(), Path::new("t.off"))?.finish(Path::new("t.off"))
+        parse_off(text.as_bytes(), Path::new("t.off"))?
+            .finish(Path::new("t.off"))
+            .map(|(m, _)| m)
     }
 
     #[test]

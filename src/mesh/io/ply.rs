@@ -313,7 +313,11 @@ pub(super) fn parse_ply(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
                 Role::Vertex => raw.push_vertex(element.xyz.map(|v| v as f32)),
                 Role::Face => {
                     element.indices.for_each(|i| raw.push_corner(i));
-                    raw.end_face();
+                    if header.encoding == Encoding::Ascii {
+                        raw.end_face_at(line_no);
+                    } else {
+                        raw.end_face();
+                    }
                 }
                 Role::Skip => {}
             }
@@ -330,7 +334,9 @@ mod tests {
     use super::*;
 
     fn parse(bytes: &[u8]) -> Result<crate::mesh::PolyMesh, MeshError> {
-        parse_ply(bytes, Path::new("t.ply"))?.finish(Path::new("t.ply"))
+        parse_ply(bytes, Path::new("t.ply"))?
+            .finish(Path::new("t.ply"))
+            .map(|(m, _)| m)
     }
 
     const ASCII: &str = "ply\nformat ascii 1.0\ncomment hi\nelement vertex 4\nproperty double x\nproperty double y\n\

@@ -209,7 +209,9 @@ mod tests {
     use super::*;
 
     fn parse(bytes: &[u8]) -> Result<crate::mesh::PolyMesh, MeshError> {
-        parse_stl(bytes, Path::new("t.stl"))?.finish(Path::new("t.stl"))
+        parse_stl(bytes, Path::new("t.stl"))?
+            .finish(Path::new("t.stl"))
+            .map(|(m, _)| m)
     }
 
     const ASCII: &str = "solid t\n facet normal 0 0 1\n  outer loop\n   vertex 0 0 0\n   vertex 1 0 0\n   vertex 0 1 0\n  endloop\n endfacet\n\
