@@ -15,7 +15,7 @@ use common::gates::to_rgb;
 use common::peer::peer_synthesis;
 use surfsynth::image::Image;
 use surfsynth::image::io::load_image;
-use surfsynth::kernels::metrics::quality::{luminance, structure_features, structure_scales};
+use surfsynth::kernels::metrics::quality::{luma, structure_features, structure_scales};
 use surfsynth::kernels::metrics::{EnergySettings, ImageQuality, SourceMap, image_quality};
 
 /// The shared textures, found by listing the folder (new ones join in).
@@ -114,12 +114,7 @@ fn tiling(img: &Image, bx: u32, by: u32, w: u32, h: u32) -> (Image, SourceMap) {
 /// two beside it (3 of 8 bins: 0.375 for an isotropic texture).
 fn anisotropy(img: &Image) -> f64 {
     let scales = structure_scales((img.width, img.height), (img.width, img.height));
-    let f = structure_features(
-        &luminance(img),
-        img.width as usize,
-        img.height as usize,
-        scales,
-    );
+    let f = structure_features(&luma(img), img.width as usize, img.height as usize, scales);
     let bins = f.len() / scales;
     let per: Vec<f64> = (0..bins)
         .map(|b| (0..scales).map(|s| f[s * bins + b]).sum())

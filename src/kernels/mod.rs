@@ -122,3 +122,26 @@ mod tests {
         }
     }
 }
+
+/// Squared Euclidean distance of two equal-length vectors, with eight
+/// independent accumulators so it vectorises (a plain `.sum()` of squared
+/// differences does not). The summation order is part of the result: the
+/// jump-map and Wei–Levoy searches depend on it.
+#[inline]
+pub fn dist2(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let mut ca = a.chunks_exact(8);
+    let mut cb = b.chunks_exact(8);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for i in 0..8 {
+            let d = x[i] - y[i];
+            acc[i] += d * d;
+        }
+    }
+    let mut s: f32 = acc.iter().sum();
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        let d = x - y;
+        s += d * d;
+    }
+    s
+}

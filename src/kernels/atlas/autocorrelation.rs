@@ -30,18 +30,7 @@ impl Autocorrelation {
         let (w, h) = (img.width as usize, img.height as usize);
         let radius = (radius as usize).min(w / 2).min(h / 2) as i32;
         let side = (2 * radius + 1) as usize;
-        let ch = img.channels as usize;
-        let mut l: Vec<f32> = img
-            .data
-            .chunks_exact(ch.max(1))
-            .map(|p| {
-                if ch >= 3 {
-                    0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2]
-                } else {
-                    p[0]
-                }
-            })
-            .collect();
+        let mut l = crate::kernels::metrics::quality::luma(img);
         let mean = l.iter().map(|&v| f64::from(v)).sum::<f64>() / l.len().max(1) as f64;
         l.iter_mut().for_each(|v| *v -= mean as f32);
         let lags = side * side;

@@ -36,6 +36,7 @@ use faer::{Accum, MatMut, MatRef, Par};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 
+use crate::kernels::dist2;
 use crate::progress::Progress;
 
 /// Number of leading PCA coordinates indexed by the kd-tree.
@@ -357,25 +358,4 @@ fn insert(list: &mut Vec<Neighbour>, m: usize, n: Neighbour) {
         list.pop();
     }
     list.insert(pos, n);
-}
-
-/// Squared Euclidean distance, with eight independent accumulators so it
-/// vectorises.
-#[inline]
-fn dist2(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
-    for (x, y) in (&mut ca).zip(&mut cb) {
-        for i in 0..8 {
-            let d = x[i] - y[i];
-            acc[i] += d * d;
-        }
-    }
-    let mut s: f32 = acc.iter().sum();
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
-        let d = x - y;
-        s += d * d;
-    }
-    s
 }

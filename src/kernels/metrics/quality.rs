@@ -172,9 +172,11 @@ pub fn completeness(output: &Image, exemplar: &Image, n: u32) -> f32 {
     (sum / values.len().max(1) as f64 / norm) as f32
 }
 
-/// Luminance of every pixel: Rec. 601 weights of RGB for 3 or 4 channels,
-/// the first channel otherwise.
-pub fn luminance(img: &Image) -> Vec<f32> {
+/// Luma of every pixel: Rec. 601 weights of RGB for 3 or 4 channels, the
+/// first channel otherwise (the quality measures' grey; the material
+/// channels' [`crate::kernels::channels::luminance`] is Rec. 709's of one
+/// pixel).
+pub fn luma(img: &Image) -> Vec<f32> {
     let ch = img.channels as usize;
     img.data
         .chunks_exact(ch)
@@ -205,7 +207,7 @@ pub fn mean_gradient(img: &Image) -> f32 {
     if w < 3 || h < 3 {
         return 0.0;
     }
-    let l = luminance(img);
+    let l = luma(img);
     let sum: f64 = (1..h - 1)
         .map(|y| {
             (1..w - 1)
@@ -322,13 +324,13 @@ pub fn structure_distance(output: &Image, exemplar: &Image) -> f32 {
         (exemplar.width, exemplar.height),
     );
     let fo = structure_features(
-        &luminance(output),
+        &luma(output),
         output.width as usize,
         output.height as usize,
         scales,
     );
     let fe = structure_features(
-        &luminance(exemplar),
+        &luma(exemplar),
         exemplar.width as usize,
         exemplar.height as usize,
         scales,

@@ -14,8 +14,8 @@ use rayon::prelude::*;
 
 use super::energy::sample_indices;
 use super::quality::{
-    VerbatimStats, completeness_windows, luminance, mean_gradient, normalised_l1,
-    structure_features, structure_scales,
+    VerbatimStats, completeness_windows, luma, mean_gradient, normalised_l1, structure_features,
+    structure_scales,
 };
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
@@ -121,7 +121,7 @@ pub fn continuous_mean_gradient(img: &Image, k: u32) -> f32 {
     if w < 2 || h < 2 || k == 0 {
         return 0.0;
     }
-    let l = luminance(img);
+    let l = luma(img);
     // Sample j of a row sits (j + ½) / k pixels in: half a step off the
     // pixel centres, where a template at a random shift sits on average
     // (a Sobel step straddles a pixel boundary — a kink of the
@@ -241,7 +241,7 @@ pub fn surface_quality(
         let sum_features = |windows: &mut dyn Iterator<Item = Image>| {
             let mut acc = vec![0.0f64; 0];
             for w in windows {
-                let f = structure_features(&luminance(&w), side as usize, side as usize, scales);
+                let f = structure_features(&luma(&w), side as usize, side as usize, scales);
                 if acc.is_empty() {
                     acc = f;
                 } else {

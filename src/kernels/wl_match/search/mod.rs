@@ -22,6 +22,7 @@ pub use pca_kdtree::PcaKdTree;
 pub use tsvq::Tsvq;
 
 use super::features::FeatureMatrix;
+use crate::kernels::dist2;
 
 /// The best exemplar neighbourhood for a query.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -93,27 +94,6 @@ pub fn build_search(
             Box::new(Tsvq::new(features, leaf_size, leaves, seed))
         }
     }
-}
-
-/// Squared Euclidean distance with eight independent accumulators, so it
-/// vectorises.
-#[inline]
-pub(crate) fn dist2(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
-    for (x, y) in (&mut ca).zip(&mut cb) {
-        for i in 0..8 {
-            let d = x[i] - y[i];
-            acc[i] += d * d;
-        }
-    }
-    let mut s: f32 = acc.iter().sum();
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
-        let d = x - y;
-        s += d * d;
-    }
-    s
 }
 
 /// The better of two matches: smaller distance, then lower index.

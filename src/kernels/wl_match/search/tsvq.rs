@@ -9,7 +9,8 @@
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
-use super::{Match, NeighbourhoodSearch, better, dist2};
+use super::{Match, NeighbourhoodSearch, better};
+use crate::kernels::dist2;
 use crate::kernels::wl_match::features::FeatureMatrix;
 
 /// Lloyd iterations per split.
