@@ -82,6 +82,29 @@ pub(crate) fn floor_i64(x: f32) -> i64 {
     if (t as f32) > x { t - 1 } else { t }
 }
 
+/// Squared Euclidean distance of two equal-length vectors, with eight
+/// independent accumulators so it vectorises (a plain `.sum()` of squared
+/// differences does not). The summation order is part of the result: the
+/// jump-map and Wei–Levoy searches depend on it.
+#[inline]
+pub fn dist2(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = [0.0f32; 8];
+    let mut ca = a.chunks_exact(8);
+    let mut cb = b.chunks_exact(8);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for i in 0..8 {
+            let d = x[i] - y[i];
+            acc[i] += d * d;
+        }
+    }
+    let mut s: f32 = acc.iter().sum();
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        let d = x - y;
+        s += d * d;
+    }
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::floor_f32;
@@ -121,27 +144,4 @@ mod tests {
             bits = next;
         }
     }
-}
-
-/// Squared Euclidean distance of two equal-length vectors, with eight
-/// independent accumulators so it vectorises (a plain `.sum()` of squared
-/// differences does not). The summation order is part of the result: the
-/// jump-map and Wei–Levoy searches depend on it.
-#[inline]
-pub fn dist2(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let mut ca = a.chunks_exact(8);
-    let mut cb = b.chunks_exact(8);
-    for (x, y) in (&mut ca).zip(&mut cb) {
-        for i in 0..8 {
-            let d = x[i] - y[i];
-            acc[i] += d * d;
-        }
-    }
-    let mut s: f32 = acc.iter().sum();
-    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
-        let d = x - y;
-        s += d * d;
-    }
-    s
 }
