@@ -23,3 +23,6 @@ pub mod progress;
 pub mod stages;
 pub mod sweep;
 pub mod telemetry;
+
+#[cfg(test)]
+mod layer_check;

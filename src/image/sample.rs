@@ -13,6 +13,21 @@ pub enum Wrap {
     Clamp,
 }
 
+/// `x.floor()` without the library call, exactly: the same value for
+/// every `f32` (signed zeros, NaN and infinities included). Below 2²³ in
+/// magnitude a truncating cast and a correction; beyond, `x` is already
+/// an integer (or not finite). The sign of the result is always `x`'s.
+#[inline]
+pub fn floor_f32(x: f32) -> f32 {
+    if x.abs() < 8_388_608.0 {
+        let t = (x as i32) as f32;
+        let f = if t > x { t - 1.0 } else { t };
+        f.copysign(x)
+    } else {
+        x
+    }
+}
+
 #[inline]
 fn index(i: i64, n: u32, wrap: Wrap) -> u32 {
     match wrap {
@@ -34,8 +49,8 @@ impl Image {
     pub fn sample_bilinear(&self, x: f32, y: f32, wrap: Wrap, out: &mut [f32]) {
         let fx = x - 0.5;
         let fy = y - 0.5;
-        let x0 = crate::kernels::floor_f32(fx);
-        let y0 = crate::kernels::floor_f32(fy);
+        let x0 = floor_f32(fx);
+        let y0 = floor_f32(fy);
         let ax = fx - x0;
         let ay = fy - y0;
         let (x0, y0) = (x0 as i64, y0 as i64);

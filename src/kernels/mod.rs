@@ -51,20 +51,9 @@ pub(crate) fn floor_i(x: f32) -> i32 {
     if (t as f32) > x { t - 1 } else { t }
 }
 
-/// `x.floor()` without the library call, exactly: the same value for
-/// every `f32` (signed zeros, NaN and infinities included). Below 2²³ in
-/// magnitude a truncating cast and a correction; beyond, `x` is already
-/// an integer (or not finite). The sign of the result is always `x`'s.
-#[inline]
-pub fn floor_f32(x: f32) -> f32 {
-    if x.abs() < 8_388_608.0 {
-        let t = (x as i32) as f32;
-        let f = if t > x { t - 1.0 } else { t };
-        f.copysign(x)
-    } else {
-        x
-    }
-}
+/// `x.floor()` without the library call: lives with the image sampler,
+/// which is below the kernels.
+pub use crate::image::sample::floor_f32;
 
 /// `⌈x⌉`, like [`floor_i`].
 #[inline]

@@ -17,7 +17,7 @@
 
 use super::OutputError;
 use super::render::{Background, DEFAULT_VIEWS, RenderOptions};
-use crate::sweep::html::escape;
+use crate::output::html_escape as escape;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 

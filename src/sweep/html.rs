@@ -18,21 +18,7 @@ use super::summary::{FIXED_COLUMNS, RunRow, Table, cell_text};
 use serde_json::Value;
 use std::fmt::Write;
 
-/// Escapes text for HTML element content and quoted attribute values.
-pub fn escape(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&#39;"),
-            _ => out.push(c),
-        }
-    }
-    out
-}
+pub use crate::output::html_escape as escape;
 
 /// Percent-encodes a relative path for an `href`/`src` (folders kept).
 pub fn url_path(path: &str) -> String {
