@@ -110,8 +110,12 @@ fn huge_png_is_refused_from_its_header() {
     common::expect_refused(BASE, &["--set", &height_map], &["huge.png", "20000x20000"]);
 }
 
+/// The memory limit of the refusals below: the former fixed budget, set
+/// so that they do not depend on the machine (issue 43 detects it).
+const EIGHT_GIB: &[(&str, &str)] = &[("SURFSYNTH_MEMORY_LIMIT", "8G")];
+
 #[test]
-fn legal_maxima_over_the_memory_budget_are_refused_at_validation() {
+fn legal_maxima_over_the_memory_limit_are_refused_at_validation() {
     let jump_image = r#"
 seed = 1
 [input]
@@ -125,12 +129,19 @@ kind = "jump_image"
 width = 32768
 height = 32768
 "#;
-    common::expect_refused(
+    common::expect_refused_env(
         jump_image,
         &[],
-        &["jump_image", "32768x32768", "GiB", "budget of 8.0 GiB"],
+        EIGHT_GIB,
+        &[
+            "jump_image",
+            "32768x32768",
+            "GiB",
+            "memory limit of 8.00 GiB",
+            "largest that fits",
+        ],
     );
-    common::expect_refused(
+    common::expect_refused_env(
         BASE,
         &[
             "--set",
@@ -138,40 +149,42 @@ height = 32768
             "--set",
             "input.mesh_options={resolution = [4096, 4096]}",
         ],
-        &["input.mesh_options.resolution", "GiB", "budget"],
+        EIGHT_GIB,
+        &["input.mesh_options.resolution", "GiB", "memory limit"],
     );
 }
 
-/// The other sizes a stage takes with legal maxima far over the budget:
+/// The other sizes a stage takes with legal maxima far over the limit:
 /// refused at validation naming the stage and the key, not aborted mid-run.
 #[test]
-fn other_stage_sizes_over_the_memory_budget_are_refused_at_validation() {
+fn other_stage_sizes_over_the_memory_limit_are_refused_at_validation() {
     let pyramid = BASE.replace(
         "[[stage]]\nkind = \"orientation\"",
         "[[stage]]\nkind = \"builtin_pyramid\"\nmesh = \"plane\"\nresolution = [4096, 4096]\n\n[[stage]]\nkind = \"orientation\"",
     );
-    common::expect_refused(
+    common::expect_refused_env(
         &pyramid,
         &[],
+        EIGHT_GIB,
         &[
             "stage 1 (builtin_pyramid) resolution",
             "4096x4096",
-            "budget",
+            "memory limit",
         ],
     );
     for (kind, line, needles) in [
         (
             "retile",
             "vertices = 50000000",
-            ["stage 1 (retile) vertices", "50000000 vertices", "budget"],
+            ["stage 1 (retile) vertices", "= 50000000", "memory limit"],
         ),
         (
             "subdivide_sqrt2",
             "target_vertices = 67108864",
             [
                 "stage 1 (subdivide_sqrt2) target_vertices",
-                "67108864 vertices",
-                "budget",
+                "= 67108864",
+                "memory limit",
             ],
         ),
     ] {
@@ -179,16 +192,28 @@ fn other_stage_sizes_over_the_memory_budget_are_refused_at_validation() {
             "[[stage]]\nkind = \"orientation\"",
             &format!("[[stage]]\nkind = \"{kind}\"\n{line}\n\n[[stage]]\nkind = \"orientation\""),
         );
-        common::expect_refused(&config, &[], &needles);
+        common::expect_refused_env(&config, &[], EIGHT_GIB, &needles);
     }
-    // A retile by edge length depends on the mesh and is not estimated.
+    // A retile by edge length depends on the mesh's area: validated, then
+    // refused once the mesh is loaded, before any work.
     let by_edge = BASE.replace(
         "[[stage]]\nkind = \"orientation\"",
-        "[[stage]]\nkind = \"retile\"\nvertices = 50000000\nedge_length = 0.5\nlevels = 1\n\n[[stage]]\nkind = \"orientation\"",
+        "[[stage]]\nkind = \"retile\"\nvertices = 50000000\nedge_length = 0.0001\nlevels = 1\n\n[[stage]]\nkind = \"orientation\"",
     );
     let source = surfsynth::config::ConfigSource::from_text("by_edge.toml", &by_edge);
     surfsynth::pipeline::Pipeline::from_source(source).expect("validates");
-    common::expect_refused(
+    common::expect_refused_env(
+        &by_edge,
+        &[],
+        EIGHT_GIB,
+        &[
+            "stage 1 (retile)",
+            "`edge_length` = 0.0001",
+            "the largest that fits: edge_length = ",
+            "or more",
+        ],
+    );
+    common::expect_refused_env(
         BASE,
         &[
             "--set",
@@ -200,7 +225,8 @@ fn other_stage_sizes_over_the_memory_budget_are_refused_at_validation() {
             "--set",
             "stage.3.plane_size=[16384, 16384]",
         ],
-        &["stage 3 (export) plane_size", "16384x16384", "budget"],
+        &[("SURFSYNTH_MEMORY_LIMIT", "4G")],
+        &["stage 3 (export) plane_size", "16384x16384", "memory limit"],
     );
 }
 

@@ -1316,3 +1316,162 @@ fn alignment_and_seam_passes_add_no_large_verbatim_repeats() {
         }
     }
 }
+
+/// The analysis as it was before issue 43, from the kernel's public parts:
+/// every neighbourhood vector in one buffer, the PCA sample drawn from it,
+/// all of them projected, every pixel's neighbours in one buffer, then
+/// filtered. The streamed analysis must give the same map, bit for bit.
+fn whole_buffer_analysis(exemplar: &Image, settings: &JumpMapSettings) -> JumpMap {
+    use surfsynth::image::pyramid::gaussian_pyramid;
+    use surfsynth::kernels::jump_map::map::JumpMapParts;
+    use surfsynth::kernels::jump_map::neighbourhoods::{
+        neighbourhood_vectors, source_region, vector_len, wrap_for,
+    };
+    use surfsynth::kernels::jump_map::normalise::normalise_weights;
+    use surfsynth::kernels::jump_map::pca;
+    use surfsynth::kernels::jump_map::poisson::PoissonDisc;
+    let (w, h) = (exemplar.width, exemplar.height);
+    let widths = &settings.neighbourhood_widths;
+    let boundary = settings.boundary;
+    let region = source_region(w, h, widths, boundary).unwrap();
+    let destinations = match boundary {
+        Boundary::Toroidal => region,
+        Boundary::Inset => region.eroded(1),
+    };
+    let dim = vector_len(widths, exemplar.channels);
+    let pyramid = gaussian_pyramid(exemplar, widths.len(), wrap_for(boundary));
+    let vectors = neighbourhood_vectors(&pyramid, widths, region, wrap_for(boundary));
+    let fit = pca::fit(
+        &vectors,
+        dim,
+        settings.pca_sample_fraction,
+        settings.pca_variance,
+        settings.max_components as usize,
+        settings.seed,
+    )
+    .unwrap();
+    let projected = fit.project(&vectors);
+    let k = settings.jumps_per_pixel as usize;
+    let n_src = (region.width() * region.height()) as usize;
+    let m = (k * settings.candidate_factor as usize + 1).min(n_src);
+    let nbrs = all_knn(
+        &projected,
+        fit.components,
+        m,
+        settings.ann_epsilon,
+        settings.ann_search,
+    );
+    let disc = PoissonDisc {
+        k,
+        diameter: settings.effective_disc_diameter(),
+        min_diameter: settings.min_disc_diameter,
+        width: w,
+        height: h,
+        boundary,
+    };
+    let rw = region.width();
+    let coord = |i: usize| TexelCoord::new(region.x0 + i as u32 % rw, region.y0 + i as u32 / rw);
+    let n = (w * h) as usize;
+    let (mut counts, mut discs) = (vec![0u8; n], vec![0.0f32; n]);
+    let (mut diffs, mut dests) = (vec![0.0f32; n * k], vec![TexelCoord::default(); n * k]);
+    let (mut cands, mut acc) = (Vec::new(), Vec::new());
+    for (i, row) in nbrs.chunks(m).enumerate() {
+        cands.clear();
+        cands.extend(
+            row.iter()
+                .map(|nb| (coord(nb.index as usize), nb.dist2.max(0.0).sqrt()))
+                .filter(|(c, _)| destinations.contains(c.x, c.y)),
+        );
+        let c = coord(i);
+        let p = (c.y * w + c.x) as usize;
+        discs[p] = disc.filter(c, &cands, &mut acc);
+        counts[p] = acc.len() as u8;
+        for (j, &a) in acc.iter().enumerate() {
+            dests[p * k + j] = cands[a].0;
+            diffs[p * k + j] = cands[a].1;
+        }
+    }
+    let weights = normalise_weights(&diffs, &counts, k, settings.alpha);
+    let slots = dests
+        .iter()
+        .zip(&weights)
+        .map(|(&to, &weight)| Jump { to, weight })
+        .collect();
+    JumpMap::from_parts(JumpMapParts {
+        width: w,
+        height: h,
+        boundary,
+        k: k as u32,
+        sources: region,
+        destinations,
+        counts,
+        discs,
+        slots,
+        key: settings.cache_key(exemplar),
+    })
+    .unwrap()
+}
+
+/// Issue 43: the analysis no longer holds every neighbourhood vector or
+/// every pixel's neighbours (23 GB at a 4096² exemplar); the map it gives is
+/// the same, bit for bit, for both boundaries and both searches.
+#[test]
+fn the_streamed_analysis_gives_the_whole_buffer_map_bit_for_bit() {
+    use surfsynth::image::builtin::{ExemplarOptions, builtin_exemplar};
+    for (name, size, boundary, search, widths, components) in [
+        (
+            "noise",
+            64,
+            Boundary::Toroidal,
+            AnnSearch::Auto,
+            vec![9, 5, 3],
+            64,
+        ),
+        (
+            "bricks",
+            96,
+            Boundary::Inset,
+            AnnSearch::Exhaustive,
+            vec![9, 5, 3],
+            64,
+        ),
+        (
+            "noise",
+            120,
+            Boundary::Inset,
+            AnnSearch::KdTree,
+            vec![7, 3],
+            8,
+        ),
+        (
+            "checker",
+            64,
+            Boundary::Inset,
+            AnnSearch::Exhaustive,
+            vec![5, 5, 3],
+            16,
+        ),
+    ] {
+        let ex = builtin_exemplar(
+            name,
+            &ExemplarOptions {
+                size,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let settings = JumpMapSettings {
+            neighbourhood_widths: widths,
+            boundary,
+            ann_search: search,
+            max_components: components,
+            ..Default::default()
+        };
+        let streamed = analyse(&ex, &settings).unwrap();
+        let whole = whole_buffer_analysis(&ex, &settings);
+        assert!(
+            streamed.to_bytes() == whole.to_bytes(),
+            "{name} {size} {boundary:?} {search:?}"
+        );
+    }
+}

@@ -9,6 +9,7 @@
 mod error;
 mod input;
 pub mod memory_budget;
+pub mod memory_limit;
 pub mod plane_check;
 pub mod registry;
 mod report;
@@ -38,6 +39,9 @@ pub struct Pipeline {
     pub output: RawOutput,
     /// The stages, in order.
     pub stages: Vec<Box<dyn StagePlan>>,
+    /// The memory the run may use, detected (or read from
+    /// `$SURFSYNTH_MEMORY_LIMIT`) at validation.
+    pub memory_limit: memory_limit::MemoryLimit,
 }
 
 impl std::fmt::Debug for Pipeline {
@@ -234,13 +238,27 @@ impl Pipeline {
             available.extend(plan.produces());
             stages.push(plan);
         }
-        memory_budget::check_memory(&raw.input, &stages, &file)?;
+        let memory_limit =
+            memory_limit::MemoryLimit::detect().map_err(|message| ConfigError::Value {
+                file: "environment".into(),
+                key: memory_limit::LIMIT_VAR.into(),
+                message,
+            })?;
+        memory_budget::check_input(&raw.input, &memory_limit, &file)?;
+        // Before loading: what the settings alone decide.
+        memory_budget::check_stages(&stages, &Default::default(), &memory_limit).map_err(|r| {
+            value_err(
+                &format!("stage {} ({}) {}", r.index, r.kind, r.param),
+                r.message,
+            )
+        })?;
         Ok(Self {
             seed: raw.seed,
             input: raw.input,
             output: raw.output,
             stages,
             source,
+            memory_limit,
         })
     }
 

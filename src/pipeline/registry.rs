@@ -2,6 +2,7 @@
 //! needs and makes, and how it adds its systems to the schedule.
 
 use crate::config::params::{ParamDoc, StageSettings, check_range, defaults_table};
+use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 
@@ -123,6 +124,13 @@ pub trait Stage: 'static {
     fn plane_role(_settings: &Self::Settings) -> PlaneRole {
         PlaneRole::Keeps
     }
+    /// Its large allocations, estimated from its settings and the input's
+    /// sizes before any work (default: none). Each estimate names the
+    /// parameter it grows with; the run is refused when one is over the
+    /// memory limit ([`crate::pipeline::memory_budget`]).
+    fn memory_estimate(_settings: &Self::Settings, _sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        Vec::new()
+    }
 }
 
 /// A configured stage, type-erased.
@@ -139,6 +147,8 @@ pub trait StagePlan: Send + Sync {
     fn systems(&self, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem>;
     /// What it means for the planar image output.
     fn plane_role(&self) -> PlaneRole;
+    /// Its memory estimates for an input of `sizes`.
+    fn memory_estimate(&self, sizes: &InputSizes) -> Vec<MemoryEstimate>;
 }
 
 struct Plan<S: Stage>(S::Settings);
@@ -161,6 +171,9 @@ impl<S: Stage> StagePlan for Plan<S> {
     }
     fn plane_role(&self) -> PlaneRole {
         S::plane_role(&self.0)
+    }
+    fn memory_estimate(&self, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        S::memory_estimate(&self.0, sizes)
     }
 }
 

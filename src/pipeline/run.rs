@@ -182,7 +182,27 @@ fn run_schedule(
     keep: Keep,
 ) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
+    // Every stage's memory estimate for the loaded input, before any work.
+    let sizes = super::memory_budget::InputSizes::of(&input, &pipeline.input);
+    let estimates =
+        super::memory_budget::check_stages(&pipeline.stages, &sizes, &pipeline.memory_limit)
+            .map_err(|r| PipelineError::Stage {
+                index: r.index,
+                kind: r.kind.into(),
+                message: r.message,
+            })?;
     setup_world(pipeline, world, input);
+    let mut metrics = world.resource_mut::<Metrics>();
+    for e in estimates {
+        let mut all = metrics
+            .stages
+            .get(e.index - 1)
+            .and_then(|m| m.get("memory_estimate_bytes"))
+            .and_then(|v| v.as_object().cloned())
+            .unwrap_or_default();
+        all.insert(e.param.into(), e.bytes.into());
+        metrics.record(e.index - 1, "memory_estimate_bytes", all);
+    }
     let mut schedule = build_schedule(pipeline);
     if keep == Keep::Read {
         let n = pipeline.stages.len();
@@ -251,6 +271,11 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         input.exemplar.height,
         input.exemplar.channels
     );
+    let memory = serde_json::json!({
+        "limit_bytes": pipeline.memory_limit.bytes,
+        "limit_source": pipeline.memory_limit.source.to_string(),
+        "input_bytes": super::memory_budget::InputSizes::of(&input, &pipeline.input).resident_bytes(),
+    });
     let input_counts = serde_json::json!({
         "vertices": input.mesh.vertex_count(),
         "faces": input.mesh.face_count(),
@@ -332,6 +357,7 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
         "stages": stages,
         "total_seconds": started.elapsed().as_secs_f64(),
         "peak_rss_bytes": peak_rss_bytes(),
+        "memory": memory,
     });
     let metrics_path = staged.join("metrics.json");
     let text = serde_json::to_string_pretty(&metrics)

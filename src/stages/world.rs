@@ -189,18 +189,17 @@ impl TextureScale {
     }
 
     /// [`Self::vertices_for_area`], checked before any remeshing: at least
-    /// `MIN_DERIVED_VERTICES` and within the memory budget, else a message
-    /// naming the scale, the count it asks for, and the two ways out
-    /// (`[input] texture_scale` or the stage's own `key`).
-    pub fn derived_vertices(&self, area: f64, key: &str) -> Result<usize, String> {
+    /// `MIN_DERIVED_VERTICES` and at most `max` (the stage's own range; its
+    /// memory estimate refused a count over the memory limit before the
+    /// run), else a message naming the scale, the count it asks for, and the
+    /// two ways out (`[input] texture_scale` or the stage's own `key`).
+    pub fn derived_vertices(&self, area: f64, key: &str, max: usize) -> Result<usize, String> {
         let n = self.vertices_for_area(area);
-        let max = crate::pipeline::memory_budget::MEMORY_BUDGET
-            / crate::pipeline::memory_budget::BYTES_PER_MESH_VERTEX;
         if n.is_finite() && (MIN_DERIVED_VERTICES as f64..=max as f64).contains(&n) {
             return Ok(n.round() as usize);
         }
         Err(format!(
-            "[input] texture_scale = {} ({:?}) is {} exemplar pixels per world unit, which asks for {n:.0} vertices on this surface of area {area:.4e} (one per exemplar pixel²); allowed {MIN_DERIVED_VERTICES}..={max} (the memory budget): {} texture_scale, or set `{key}`",
+            "[input] texture_scale = {} ({:?}) is {} exemplar pixels per world unit, which asks for {n:.0} vertices on this surface of area {area:.4e} (one per exemplar pixel²); allowed {MIN_DERIVED_VERTICES}..={max}: {} texture_scale, or set `{key}`",
             self.value,
             self.unit,
             self.texels_per_unit,

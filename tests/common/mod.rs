@@ -22,8 +22,14 @@ pub fn data_file(rel: &str) -> PathBuf {
 
 /// Runs the CLI, returning (exit code, stdout, stderr).
 pub fn run_cli(args: &[&str]) -> (i32, String, String) {
+    run_cli_env(args, &[])
+}
+
+/// [`run_cli`] with extra environment variables.
+pub fn run_cli_env(args: &[&str], env: &[(&str, &str)]) -> (i32, String, String) {
     let out = bin()
         .args(args)
+        .envs(env.iter().copied())
         .env("RUST_LOG", "warn")
         .env(
             "SURFSYNTH_CACHE",
@@ -60,13 +66,23 @@ pub fn files_under(dir: &Path) -> Vec<PathBuf> {
 /// and checks exit 2, that stderr contains every `needles` and no panic, and
 /// that no output folder was created.
 pub fn expect_refused(config: &str, extra: &[&str], needles: &[&str]) {
+    expect_refused_env(config, extra, &[], needles);
+}
+
+/// [`expect_refused`] with extra environment variables; returns stderr.
+pub fn expect_refused_env(
+    config: &str,
+    extra: &[&str],
+    env: &[(&str, &str)],
+    needles: &[&str],
+) -> String {
     let dir = tempfile::tempdir().expect("a temporary folder");
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, config).expect("the config is written");
     let out = dir.path().join("out");
     let mut args = vec!["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()];
     args.extend_from_slice(extra);
-    let (code, _stdout, stderr) = run_cli(&args);
+    let (code, _stdout, stderr) = run_cli_env(&args, env);
     assert_eq!(code, 2, "exit code for {needles:?}; stderr: {stderr}");
     for n in needles {
         assert!(stderr.contains(n), "stderr should contain {n:?}: {stderr}");
@@ -77,6 +93,14 @@ pub fn expect_refused(config: &str, extra: &[&str], needles: &[&str]) {
         "no output folder may be created: {:?}",
         files_under(&out)
     );
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .expect("the temporary folder")
+        .flatten()
+        .map(|e| e.file_name())
+        .filter(|n| n != "bad.toml")
+        .collect();
+    assert!(left.is_empty(), "nothing else is left behind: {left:?}");
+    stderr
 }
 pub mod messy;
 

@@ -4,9 +4,9 @@
 
 use rayon::prelude::*;
 
-use super::ann::all_knn_with_progress;
+use super::ann::{AnnSearch, KD_MIN_POINTS, KnnSearch, Neighbour};
 use super::map::JumpMapParts;
-use super::neighbourhoods::{neighbourhood_vectors, source_region, vector_len, wrap_for};
+use super::neighbourhoods::{Neighbourhoods, source_region, vector_len, wrap_for};
 use super::normalise::normalise_weights;
 use super::pca;
 use super::poisson::PoissonDisc;
@@ -65,6 +65,86 @@ pub fn check_exemplar(exemplar: &Image) -> Result<(), JumpMapError> {
     Ok(())
 }
 
+/// Pixels whose neighbourhood vectors are computed and projected at once:
+/// a multiple of the projection's chunk (so blocks give the result of one
+/// whole buffer) of about [`PROJECTION_BLOCK_BYTES`].
+pub fn projection_block(dim: usize) -> usize {
+    let chunk = pca::PROJECT_CHUNK;
+    ((PROJECTION_BLOCK_BYTES / (4 * dim.max(1))) / chunk).max(1) * chunk
+}
+
+/// Bytes of neighbourhood vectors computed at once (see
+/// [`projection_block`]).
+pub const PROJECTION_BLOCK_BYTES: usize = 32 << 20;
+
+/// Estimated peak bytes of [`analyse_with_stats`] for a `width × height`
+/// exemplar of `channels` (issue 43), the largest of its phases:
+///
+/// - PCA: the Gaussian pyramid, the sample's neighbourhood vectors (`f32`)
+///   and [`pca::fit_bytes`] (the sample in `f64`, faer's SVD workspace);
+/// - projection: the pyramid, the projected vectors of every source pixel
+///   (`4 · components` bytes, components bounded by `max_components`) and
+///   one block of vectors ([`projection_block`]);
+/// - nearest neighbours: the projected vectors, the per-source-pixel jump
+///   lists (`5 + 12k` bytes), the kd-tree (72 bytes a point, when the search
+///   may use it) and the blocks' neighbour lists;
+/// - the map: per-pixel lists at the exemplar's size and the source
+///   region's, then the weights and slots (`5 + 24k` bytes a pixel), then
+///   the map and its cache bytes.
+///
+/// 0 for settings or an exemplar the analysis refuses.
+pub fn analysis_bytes(width: u32, height: u32, channels: u32, settings: &JumpMapSettings) -> u64 {
+    let widths = &settings.neighbourhood_widths;
+    if settings.validate().is_err() || width == 0 || height == 0 || channels == 0 {
+        return 0;
+    }
+    let Ok(region) = source_region(width, height, widths, settings.boundary) else {
+        return 0;
+    };
+    let big_n = u64::from(width) * u64::from(height);
+    let n = u64::from(region.width()) * u64::from(region.height());
+    let c = u64::from(channels);
+    let dim = vector_len(widths, channels) as u64;
+    let (mut pyramid, mut lw, mut lh) = (0u64, u64::from(width), u64::from(height));
+    for _ in 0..widths.len() {
+        pyramid += lw * lh * c * 4;
+        (lw, lh) = (lw.div_ceil(2).max(1), lh.div_ceil(2).max(1));
+    }
+    // Building a level blurs the one above: one more image of the finest size.
+    pyramid += big_n * c * 4;
+    let ms = pca::sample_size(n as usize, settings.pca_sample_fraction) as u64;
+    let components = u64::from(settings.max_components).clamp(1, ms.min(dim).max(1));
+    let pca = (n * 4)
+        .max(ms * 4 + ms * dim * 4)
+        .saturating_add(pca::fit_bytes(ms as usize, dim as usize));
+    let block = (projection_block(dim as usize) as u64).min(n);
+    let chunk = pca::PROJECT_CHUNK as u64;
+    let projection =
+        n * components * 4 + block * (dim + components) * 4 + ESTIMATE_THREADS * chunk * dim * 4;
+    let k = u64::from(settings.jumps_per_pixel);
+    let m = (k * u64::from(settings.candidate_factor) + 1).min(n);
+    let per_source = 5 + 12 * k;
+    let may_use_tree = match settings.ann_search {
+        AnnSearch::Auto => n >= KD_MIN_POINTS as u64,
+        AnnSearch::KdTree => true,
+        AnnSearch::Exhaustive => false,
+    };
+    let tree = if may_use_tree { 72 * n } else { 0 };
+    let q = KnnSearch::BLOCK as u64;
+    let per_thread = q * m * 8 * 5 + (q + 512) * (components + 1) * 4 + q * 512 * 4;
+    let neighbours = n * components * 4 + n * per_source + tree + ESTIMATE_THREADS * per_thread;
+    let map = (big_n * per_source + n * per_source)
+        .max(big_n * (5 + 24 * k))
+        .max(2 * big_n * per_source);
+    (pyramid.saturating_add(pca.max(projection)))
+        .max(neighbours)
+        .max(map)
+}
+
+/// Worker threads whose scratch an estimate allows for: a constant, so an
+/// estimate (and a refusal) never depends on the thread count.
+pub const ESTIMATE_THREADS: u64 = 4;
+
 /// Builds the jump map of `exemplar` (any channel count; all channels are
 /// compared). See [`analyse_with_stats`].
 ///
@@ -72,14 +152,6 @@ pub fn check_exemplar(exemplar: &Image) -> Result<(), JumpMapError> {
 /// As [`analyse_with_stats`].
 pub fn analyse(exemplar: &Image, settings: &JumpMapSettings) -> Result<JumpMap, JumpMapError> {
     analyse_with_stats(exemplar, settings).map(|(m, _)| m)
-}
-
-/// The per-pixel result before normalisation.
-struct PixelJumps {
-    count: u8,
-    to: [TexelCoord; 16],
-    diff: [f32; 16],
-    disc: f32,
 }
 
 /// Builds the jump map of `exemplar` under `settings` and reports statistics.
@@ -134,26 +206,43 @@ pub fn analyse_with_progress(
     progress.set_length(2 * pixels);
     progress.set_part("neighbourhoods");
 
-    let vectors = {
-        let _s = tracing::info_span!("neighbourhoods").entered();
-        let pyramid = gaussian_pyramid(exemplar, widths.len(), wrap_for(boundary));
-        neighbourhood_vectors(&pyramid, widths, region, wrap_for(boundary))
+    // Neighbourhood vectors are never all held (issue 43: 4 · dim bytes a
+    // pixel, 23 GB at 4096²): the PCA sample's are computed for the sample,
+    // then the rest a block at a time, projected and dropped. The blocks
+    // start at multiples of the projection's chunk, so the result is the
+    // same as projecting one buffer of all of them.
+    let pyramid = {
+        let _s = tracing::info_span!("pyramid").entered();
+        gaussian_pyramid(exemplar, widths.len(), wrap_for(boundary))
     };
+    let hoods = Neighbourhoods::new(&pyramid, widths, wrap_for(boundary));
+    let n_src = pixels as usize;
     progress.set_part("pca");
-    let (pca, projected) = {
+    let pca = {
         let _s = tracing::info_span!("pca").entered();
-        let pca = pca::fit(
-            &vectors,
+        let rows = pca::sample_rows(n_src, settings.pca_sample_fraction, settings.seed);
+        let sample = hoods.pixels(region, &rows);
+        drop(rows);
+        pca::fit_sample(
+            &sample,
             dim,
-            settings.pca_sample_fraction,
             settings.pca_variance,
             settings.max_components as usize,
-            settings.seed,
-        )?;
-        let projected = pca.project(&vectors);
-        (pca, projected)
+        )?
     };
-    drop(vectors);
+    progress.set_part("neighbourhoods");
+    let projected = {
+        let _s = tracing::info_span!("neighbourhoods").entered();
+        let block = projection_block(dim);
+        let mut projected = Vec::with_capacity(n_src * pca.components);
+        for first in (0..n_src).step_by(block) {
+            let vectors = hoods.rows(region, first, block.min(n_src - first));
+            projected.extend_from_slice(&pca.project(&vectors));
+        }
+        projected
+    };
+    drop(hoods);
+    drop(pyramid);
 
     let k = settings.jumps_per_pixel as usize;
     let m = k * settings.candidate_factor as usize + 1;
@@ -168,48 +257,66 @@ pub fn analyse_with_progress(
     };
     let rw = region.width();
     let coord = |i: usize| TexelCoord::new(region.x0 + i as u32 % rw, region.y0 + i as u32 / rw);
-    let per_pixel: Vec<PixelJumps> = {
+    // Per source pixel (row-major over the region): its jump count, disc,
+    // and k differences and destinations. Each block of queries' nearest
+    // neighbours is filtered as soon as it is found.
+    let mut r_counts = vec![0u8; n_src];
+    let mut r_discs = vec![0.0f32; n_src];
+    let mut r_diffs = vec![0.0f32; n_src * k];
+    let mut r_dests = vec![TexelCoord::default(); n_src * k];
+    {
         let _s = tracing::info_span!("nearest_neighbours").entered();
         progress.set_part("nearest neighbours");
-        let nbrs = all_knn_with_progress(
-            &projected,
-            pca.components,
-            m,
-            eps,
-            settings.ann_search,
-            progress,
-        );
-        let m = m.min(region.width() as usize * region.height() as usize);
-        progress.set_part("filtering");
-        nbrs.par_chunks(m)
+        let knn = KnnSearch::new(&projected, pca.components, m, eps, settings.ann_search);
+        let m = knn.m();
+        let b = KnnSearch::BLOCK;
+        r_counts
+            .par_chunks_mut(b)
+            .zip(r_discs.par_chunks_mut(b))
+            .zip(r_diffs.par_chunks_mut(b * k))
+            .zip(r_dests.par_chunks_mut(b * k))
             .enumerate()
-            .inspect(|_| progress.inc(1))
-            .map_init(
-                || (Vec::<(TexelCoord, f32)>::new(), Vec::<usize>::new()),
-                |(cands, acc), (i, nbrs)| {
-                    cands.clear();
-                    cands.extend(
-                        nbrs.iter()
-                            .map(|n| (coord(n.index as usize), n.dist2.max(0.0).sqrt()))
-                            .filter(|(c, _)| destinations.contains(c.x, c.y)),
-                    );
-                    let source = coord(i);
-                    let d = disc.filter(source, cands, acc);
-                    let mut r = PixelJumps {
-                        count: acc.len() as u8,
-                        to: [TexelCoord::default(); 16],
-                        diff: [0.0; 16],
-                        disc: d,
-                    };
-                    for (j, &a) in acc.iter().enumerate() {
-                        r.to[j] = cands[a].0;
-                        r.diff[j] = cands[a].1;
-                    }
-                    r
+            .for_each_init(
+                || {
+                    (
+                        Vec::<Neighbour>::new(),
+                        Vec::<(TexelCoord, f32)>::new(),
+                        Vec::<usize>::new(),
+                    )
                 },
-            )
-            .collect()
-    };
+                |(nbrs, cands, acc), (block, (((counts, discs), diffs), dests))| {
+                    let qn = counts.len();
+                    nbrs.clear();
+                    nbrs.resize(
+                        qn * m,
+                        Neighbour {
+                            index: 0,
+                            dist2: 0.0,
+                        },
+                    );
+                    knn.block(block, nbrs);
+                    progress.inc(qn as u64);
+                    for q in 0..qn {
+                        let row = &nbrs[q * m..][..m];
+                        cands.clear();
+                        cands.extend(
+                            row.iter()
+                                .map(|n| (coord(n.index as usize), n.dist2.max(0.0).sqrt()))
+                                .filter(|(c, _)| destinations.contains(c.x, c.y)),
+                        );
+                        let source = coord(block * b + q);
+                        discs[q] = disc.filter(source, cands, acc);
+                        counts[q] = acc.len() as u8;
+                        for (j, &a) in acc.iter().enumerate() {
+                            dests[q * k + j] = cands[a].0;
+                            diffs[q * k + j] = cands[a].1;
+                        }
+                    }
+                    progress.inc(qn as u64);
+                },
+            );
+    }
+    drop(projected);
 
     let n = w as usize * h as usize;
     let mut counts = vec![0u8; n];
@@ -218,31 +325,34 @@ pub fn analyse_with_progress(
     let mut dests = vec![TexelCoord::default(); n * k];
     let initial = disc.diameter.max(disc.min_diameter);
     let (mut total, mut full, mut halved) = (0usize, 0usize, 0usize);
-    for (i, r) in per_pixel.iter().enumerate() {
+    for i in 0..n_src {
         let c = coord(i);
         let p = (c.y * w + c.x) as usize;
-        counts[p] = r.count;
-        discs[p] = r.disc;
-        let nj = r.count as usize;
-        diffs[p * k..][..nj].copy_from_slice(&r.diff[..nj]);
-        dests[p * k..][..nj].copy_from_slice(&r.to[..nj]);
+        counts[p] = r_counts[i];
+        discs[p] = r_discs[i];
+        let nj = r_counts[i] as usize;
+        diffs[p * k..][..nj].copy_from_slice(&r_diffs[i * k..][..nj]);
+        dests[p * k..][..nj].copy_from_slice(&r_dests[i * k..][..nj]);
         total += nj;
         full += usize::from(nj == k);
-        halved += usize::from(r.disc < initial);
+        halved += usize::from(r_discs[i] < initial);
     }
+    drop((r_counts, r_discs, r_diffs, r_dests));
     let weights = normalise_weights(&diffs, &counts, k, settings.alpha);
+    drop(diffs);
     let slots = dests
         .iter()
         .zip(&weights)
         .map(|(&to, &weight)| Jump { to, weight })
         .collect();
-    let src = per_pixel.len().max(1) as f64;
+    drop((dests, weights));
+    let src = n_src.max(1) as f64;
     let stats = AnalysisStats {
         vector_len: dim,
         components: pca.components,
         explained_variance: pca.explained,
         pca_sample_size: pca.sample_size,
-        source_pixels: per_pixel.len(),
+        source_pixels: n_src,
         mean_jumps: total as f64 / src,
         full_fraction: full as f64 / src,
         halved_fraction: halved as f64 / src,

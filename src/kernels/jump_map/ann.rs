@@ -89,122 +89,185 @@ pub fn all_knn_with_progress(
     search: AnnSearch,
     progress: &Progress,
 ) -> Vec<Neighbour> {
-    let n = points.len() / dim;
-    let m = m.min(n);
+    let knn = KnnSearch::new(points, dim, m, eps, search);
+    let m = knn.m();
     let mut out = vec![
         Neighbour {
             index: 0,
             dist2: 0.0
         };
-        n * m
+        knn.len() * m
     ];
     if m == 0 {
         return out;
     }
-    let kd = match search {
-        AnnSearch::Auto => dim <= TREE_DIMS && n >= KD_MIN_POINTS,
-        AnnSearch::KdTree => true,
-        AnnSearch::Exhaustive => false,
-    };
-    if kd {
-        let index = AnnIndex::new(points, dim);
-        out.par_chunks_mut(QUERY_BLOCK * m)
-            .enumerate()
-            .for_each(|(b, o)| {
-                let mut list = Vec::with_capacity(m);
-                for (i, row) in o.chunks_exact_mut(m).enumerate() {
-                    index.knn(b * QUERY_BLOCK + i, m, eps, &mut list);
-                    row.copy_from_slice(&list);
-                }
-                progress.inc((o.len() / m) as u64);
-            });
-    } else {
-        exhaustive(points, dim, m, &mut out, progress);
-    }
-    out
-}
-
-/// Blocked brute-force k nearest neighbours into `out` (`m` per point).
-///
-/// Ranking uses the score `|p|² − 2 q·p` (the squared distance minus the
-/// constant `|q|²`), obtained for a whole tile by one product of the augmented
-/// matrices `[−2q, 1]` and `[p, |p|²]`; the scan over a tile is then a
-/// vectorised compare against the current m-th best. Tiles are visited
-/// starting with the query block's own (image neighbours are similar, so the
-/// threshold drops fast).
-fn exhaustive(points: &[f32], dim: usize, m: usize, out: &mut [Neighbour], progress: &Progress) {
-    let n = points.len() / dim;
-    let da = dim + 1;
-    let mut aug_p = vec![0.0f32; n * da];
-    for (a, p) in aug_p.chunks_exact_mut(da).zip(points.chunks_exact(dim)) {
-        a[..dim].copy_from_slice(p);
-        a[dim] = p.iter().map(|x| x * x).sum();
-    }
-    let tiles = n.div_ceil(POINT_TILE);
     out.par_chunks_mut(QUERY_BLOCK * m)
         .enumerate()
         .for_each(|(b, o)| {
-            let q0 = b * QUERY_BLOCK;
-            let qn = o.len() / m;
-            let mut aug_q = vec![0.0f32; qn * da];
-            for (a, p) in aug_q
-                .chunks_exact_mut(da)
-                .zip(points[q0 * dim..].chunks_exact(dim))
-            {
-                for (x, y) in a.iter_mut().zip(p) {
-                    *x = -2.0 * y;
-                }
-                a[dim] = 1.0;
-            }
-            let q = MatRef::from_row_major_slice(&aug_q, qn, da);
-            let mut g = vec![0.0f32; qn * POINT_TILE.min(n)];
-            let mut lists: Vec<Vec<Neighbour>> = vec![Vec::with_capacity(4 * m); qn];
-            let mut thrs = vec![f32::INFINITY; qn];
-            let first = q0 / POINT_TILE;
-            for t in 0..tiles {
-                let t0 = ((first + t) % tiles) * POINT_TILE;
-                let tn = POINT_TILE.min(n - t0);
-                let p = MatRef::from_row_major_slice(&aug_p[t0 * da..(t0 + tn) * da], tn, da);
-                let gm = MatMut::from_row_major_slice_mut(&mut g[..qn * tn], qn, tn);
-                faer::linalg::matmul::matmul(
-                    gm,
-                    Accum::Replace,
-                    q,
-                    p.transpose(),
-                    1.0f32,
-                    Par::Seq,
-                );
-                crate::kernels::simd_state::after_faer();
-                for (i, (list, thr)) in lists.iter_mut().zip(&mut thrs).enumerate() {
-                    let row = &g[i * tn..][..tn];
-                    let mut chunks = row.chunks_exact(16);
-                    let mut j0 = t0;
-                    for c in &mut chunks {
-                        let mut any = false;
-                        for &x in c {
-                            any |= x < *thr;
-                        }
-                        if any {
-                            scan(c, j0, list, m, thr);
-                        }
-                        j0 += 16;
-                    }
-                    scan(chunks.remainder(), j0, list, m, thr);
-                }
-            }
-            // Re-rank with directly computed distances (the expansion above loses
-            // precision for near neighbours).
-            for (i, (list, row)) in lists.iter_mut().zip(o.chunks_exact_mut(m)).enumerate() {
-                prune(list, m);
-                let qi = &points[(q0 + i) * dim..][..dim];
-                for nb in list.iter_mut() {
-                    nb.dist2 = dist2(qi, &points[nb.index as usize * dim..][..dim]);
-                }
-                list.sort_by(|a, b| a.dist2.total_cmp(&b.dist2).then(a.index.cmp(&b.index)));
-                row.copy_from_slice(list);
-            }
-            progress.inc(qn as u64);
+            knn.block(b, o);
+            progress.inc((o.len() / m) as u64);
         });
+    out
+}
+
+/// The search of [`all_knn`] one block of [`QUERY_BLOCK`] queries at a
+/// time ([`KnnSearch::block`]), so a caller can use each block's
+/// neighbours and drop them (the analysis filters them at once instead of
+/// holding `m` neighbours of every pixel).
+pub struct KnnSearch<'a> {
+    points: &'a [f32],
+    dim: usize,
+    n: usize,
+    m: usize,
+    eps: f32,
+    tree: Option<AnnIndex<'a>>,
+}
+
+impl<'a> KnnSearch<'a> {
+    /// Prepares the search of [`all_knn`] (builds the kd-tree when `search`
+    /// picks it).
+    ///
+    /// Preconditions: as [`all_knn`].
+    pub fn new(points: &'a [f32], dim: usize, m: usize, eps: f32, search: AnnSearch) -> Self {
+        let n = points.len() / dim;
+        let kd = match search {
+            AnnSearch::Auto => dim <= TREE_DIMS && n >= KD_MIN_POINTS,
+            AnnSearch::KdTree => true,
+            AnnSearch::Exhaustive => false,
+        };
+        let m = m.min(n);
+        Self {
+            points,
+            dim,
+            n,
+            m,
+            eps,
+            tree: (kd && m > 0).then(|| AnnIndex::new(points, dim)),
+        }
+    }
+
+    /// Whether the kd-tree is used (else the exhaustive search).
+    pub fn uses_tree(&self) -> bool {
+        self.tree.is_some()
+    }
+
+    /// Points searched (and queried).
+    pub fn len(&self) -> usize {
+        self.n
+    }
+
+    /// Whether there are no points.
+    pub fn is_empty(&self) -> bool {
+        self.n == 0
+    }
+
+    /// Neighbours per query: `min(m, n)`.
+    pub fn m(&self) -> usize {
+        self.m
+    }
+
+    /// Queries per block.
+    pub const BLOCK: usize = QUERY_BLOCK;
+
+    /// Blocks of queries.
+    pub fn blocks(&self) -> usize {
+        self.n.div_ceil(QUERY_BLOCK)
+    }
+
+    /// The neighbours of queries `b·BLOCK ..` (as many as `out` holds rows
+    /// of [`Self::m`]) into `out`, each row nearest first.
+    pub fn block(&self, b: usize, out: &mut [Neighbour]) {
+        let m = self.m;
+        if m == 0 {
+            return;
+        }
+        match &self.tree {
+            Some(index) => {
+                let mut list = Vec::with_capacity(m);
+                for (i, row) in out.chunks_exact_mut(m).enumerate() {
+                    index.knn(b * QUERY_BLOCK + i, m, self.eps, &mut list);
+                    row.copy_from_slice(&list);
+                }
+            }
+            None => exhaustive_block(self.points, self.dim, m, b, out),
+        }
+    }
+}
+
+/// Blocked brute-force k nearest neighbours of the queries of block `b`
+/// into `out` (`m` per query).
+///
+/// Ranking uses the score `|p|² − 2 q·p` (the squared distance minus the
+/// constant `|q|²`), obtained for a whole tile by one product of the augmented
+/// matrices `[−2q, 1]` and `[p, |p|²]` (a tile's `[p, |p|²]` built as it is
+/// visited, not held for all points); the scan over a tile is then a
+/// vectorised compare against the current m-th best. Tiles are visited
+/// starting with the query block's own (image neighbours are similar, so the
+/// threshold drops fast).
+fn exhaustive_block(points: &[f32], dim: usize, m: usize, b: usize, o: &mut [Neighbour]) {
+    let n = points.len() / dim;
+    let da = dim + 1;
+    let tiles = n.div_ceil(POINT_TILE);
+    let q0 = b * QUERY_BLOCK;
+    let qn = o.len() / m;
+    let mut aug_q = vec![0.0f32; qn * da];
+    for (a, p) in aug_q
+        .chunks_exact_mut(da)
+        .zip(points[q0 * dim..].chunks_exact(dim))
+    {
+        for (x, y) in a.iter_mut().zip(p) {
+            *x = -2.0 * y;
+        }
+        a[dim] = 1.0;
+    }
+    let q = MatRef::from_row_major_slice(&aug_q, qn, da);
+    let mut aug_p = vec![0.0f32; POINT_TILE.min(n) * da];
+    let mut g = vec![0.0f32; qn * POINT_TILE.min(n)];
+    let mut lists: Vec<Vec<Neighbour>> = vec![Vec::with_capacity(4 * m); qn];
+    let mut thrs = vec![f32::INFINITY; qn];
+    let first = q0 / POINT_TILE;
+    for t in 0..tiles {
+        let t0 = ((first + t) % tiles) * POINT_TILE;
+        let tn = POINT_TILE.min(n - t0);
+        for (a, p) in aug_p[..tn * da]
+            .chunks_exact_mut(da)
+            .zip(points[t0 * dim..(t0 + tn) * dim].chunks_exact(dim))
+        {
+            a[..dim].copy_from_slice(p);
+            a[dim] = p.iter().map(|x| x * x).sum();
+        }
+        let p = MatRef::from_row_major_slice(&aug_p[..tn * da], tn, da);
+        let gm = MatMut::from_row_major_slice_mut(&mut g[..qn * tn], qn, tn);
+        faer::linalg::matmul::matmul(gm, Accum::Replace, q, p.transpose(), 1.0f32, Par::Seq);
+        crate::kernels::simd_state::after_faer();
+        for (i, (list, thr)) in lists.iter_mut().zip(&mut thrs).enumerate() {
+            let row = &g[i * tn..][..tn];
+            let mut chunks = row.chunks_exact(16);
+            let mut j0 = t0;
+            for c in &mut chunks {
+                let mut any = false;
+                for &x in c {
+                    any |= x < *thr;
+                }
+                if any {
+                    scan(c, j0, list, m, thr);
+                }
+                j0 += 16;
+            }
+            scan(chunks.remainder(), j0, list, m, thr);
+        }
+    }
+    // Re-rank with directly computed distances (the expansion above loses
+    // precision for near neighbours).
+    for (i, (list, row)) in lists.iter_mut().zip(o.chunks_exact_mut(m)).enumerate() {
+        prune(list, m);
+        let qi = &points[(q0 + i) * dim..][..dim];
+        for nb in list.iter_mut() {
+            nb.dist2 = dist2(qi, &points[nb.index as usize * dim..][..dim]);
+        }
+        list.sort_by(|a, b| a.dist2.total_cmp(&b.dist2).then(a.index.cmp(&b.index)));
+        row.copy_from_slice(list);
+    }
 }
 
 /// Pushes the scores of `c` (points from `j0` on) that beat `thr`; when the

@@ -13,7 +13,7 @@ use super::JumpMapError;
 
 /// Rows projected per parallel task; fixed so results do not depend on the
 /// thread count.
-const PROJECT_CHUNK: usize = 256;
+pub const PROJECT_CHUNK: usize = 256;
 
 /// A fitted PCA basis.
 #[derive(Clone, Debug, PartialEq)]
@@ -33,14 +33,61 @@ pub struct Pca {
     pub sample_size: usize,
 }
 
+/// The rows of a PCA sample of `n` vectors: `max(round(fraction·n),
+/// min(256, n))` distinct rows (at most `n`), the first entries of a
+/// partial Fisher-Yates shuffle by a PCG seeded with `seed`, in that order.
+pub fn sample_rows(n: usize, fraction: f32, seed: u64) -> Vec<u32> {
+    let m = sample_size(n, fraction);
+    // Partial Fisher-Yates: the first m entries become a uniform sample.
+    let mut idx: Vec<u32> = (0..n as u32).collect();
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    for i in 0..m {
+        let j = rng.random_range(i..n);
+        idx.swap(i, j);
+    }
+    idx.truncate(m);
+    idx.shrink_to_fit();
+    idx
+}
+
+/// Rows in the PCA sample of `n` vectors ([`sample_rows`]).
+pub fn sample_size(n: usize, fraction: f32) -> usize {
+    ((fraction as f64 * n as f64).round() as usize)
+        .max(n.min(256))
+        .min(n)
+}
+
+/// Bytes [`fit_sample`] holds for `m` rows of `dim` beside the sample
+/// itself: the centred sample in `f64`, the right singular vectors, the
+/// singular values and faer's SVD workspace (asked of faer, so it follows
+/// its algorithm: with more dimensions than rows it is several times the
+/// sample, 1.8 GB for 1716 rows of 8649 dimensions).
+pub fn fit_bytes(m: usize, dim: usize) -> u64 {
+    if m == 0 || dim == 0 {
+        return 0;
+    }
+    let size = m.min(dim) as u64;
+    let scratch = svd::svd_scratch::<f64>(
+        m,
+        dim,
+        ComputeSvdVectors::No,
+        ComputeSvdVectors::Thin,
+        Par::Seq,
+        Default::default(),
+    )
+    .unaligned_bytes_required() as u64;
+    let (m, dim) = (m as u64, dim as u64);
+    (m * dim * 8)
+        .saturating_add(dim * size * 8)
+        .saturating_add(size * 8 + dim * 8)
+        .saturating_add(scratch)
+}
+
 /// Fits the components of `vectors` (`n` rows of `dim`, row-major).
 ///
 /// A random sample of `max(round(fraction·n), min(256, n))` distinct rows is
-/// drawn with a PCG seeded by `seed`; the sample is centred and decomposed by
-/// a thin SVD (faer, sequential so the result never depends on the thread
-/// count); the fewest leading components whose squared singular values reach
-/// `variance` of the total are kept, at least 1 and at most `max_components`.
-/// A sample with no variance keeps one (arbitrary) component.
+/// drawn with a PCG seeded by `seed` ([`sample_rows`]) and fitted by
+/// [`fit_sample`].
 ///
 /// Preconditions: `dim > 0`, `vectors.len()` a non-zero multiple of `dim`,
 /// `fraction` and `variance` in `(0, 1]`.
@@ -56,29 +103,45 @@ pub fn fit(
     seed: u64,
 ) -> Result<Pca, JumpMapError> {
     let n = vectors.len() / dim;
-    let m = ((fraction as f64 * n as f64).round() as usize)
-        .max(n.min(256))
-        .min(n);
-    // Partial Fisher-Yates: the first m entries become a uniform sample.
-    let mut idx: Vec<u32> = (0..n as u32).collect();
-    let mut rng = Pcg64Mcg::seed_from_u64(seed);
-    for i in 0..m {
-        let j = rng.random_range(i..n);
-        idx.swap(i, j);
-    }
-    let sample = &idx[..m];
+    let sample: Vec<f32> = sample_rows(n, fraction, seed)
+        .iter()
+        .flat_map(|&r| &vectors[r as usize * dim..][..dim])
+        .copied()
+        .collect();
+    fit_sample(&sample, dim, variance, max_components)
+}
+
+/// Fits the components of a sample of vectors (`m` rows of `dim`,
+/// row-major, in sample order): the sample is centred and decomposed by a
+/// thin SVD (faer, sequential so the result never depends on the thread
+/// count); the fewest leading components whose squared singular values
+/// reach `variance` of the total are kept, at least 1 and at most
+/// `max_components`. A sample with no variance keeps one (arbitrary)
+/// component. Memory: the sample in `f64` (`8·m·dim` bytes) and the SVD's
+/// work ([`fit_bytes`]).
+///
+/// Preconditions: `dim > 0`, `sample.len()` a non-zero multiple of `dim`,
+/// `variance` in `(0, 1]`.
+///
+/// # Errors
+/// [`JumpMapError::Pca`] when the SVD does not converge.
+pub fn fit_sample(
+    sample: &[f32],
+    dim: usize,
+    variance: f32,
+    max_components: usize,
+) -> Result<Pca, JumpMapError> {
+    let m = sample.len() / dim;
     let mut mean = vec![0.0f64; dim];
-    for &r in sample {
-        for (a, v) in mean.iter_mut().zip(&vectors[r as usize * dim..][..dim]) {
+    for row in sample.chunks_exact(dim) {
+        for (a, v) in mean.iter_mut().zip(row) {
             *a += *v as f64;
         }
     }
     for a in &mut mean {
         *a /= m as f64;
     }
-    let a = Mat::<f64>::from_fn(m, dim, |i, j| {
-        vectors[sample[i] as usize * dim + j] as f64 - mean[j]
-    });
+    let a = Mat::<f64>::from_fn(m, dim, |i, j| sample[i * dim + j] as f64 - mean[j]);
     let size = m.min(dim);
     let mut s = faer::diag::Diag::<f64>::zeros(size);
     let mut v = Mat::<f64>::zeros(dim, size);

@@ -143,6 +143,13 @@ const NIL: u32 = u32::MAX;
 /// holes in the heap; pages of a chunk not yet written are not resident.
 const CHUNK: usize = 1 << 20;
 
+/// Bytes of one chunk of the layer pool (36 MiB, allocated whole; a memory
+/// estimate counts it as address space).
+pub const POOL_CHUNK_BYTES: u64 = (CHUNK * std::mem::size_of::<Node>()) as u64;
+
+/// Nodes per chunk of the layer pool.
+pub const POOL_CHUNK_NODES: u64 = CHUNK as u64;
+
 /// A layer in a face's list: the layer without its texture patch (which
 /// the paste gives, [`Coverage::paste_texture`]) and the next one in paste
 /// order; 36 bytes.

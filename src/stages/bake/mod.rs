@@ -30,6 +30,7 @@ use crate::kernels::jump_surface::Blend;
 use crate::kernels::retile::SurfaceProjector;
 use crate::kernels::triplanar::TriplanarSource;
 use crate::mesh::PolyMesh;
+use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::lapped_paste::components::*;
@@ -170,6 +171,15 @@ impl StageSettings for BakeSettings {
     }
 }
 
+/// Bytes per atlas texel at the stage's peak (measured: 18.1 at 512² to
+/// 2048²): the RGB colour (12), the texel's face (4) and the kernels'
+/// buffers; each exemplar map channel adds 4.
+pub const BYTES_PER_TEXEL: u64 = 18;
+
+/// Bytes per triangle of the source mesh for the atlas layout (charts,
+/// flattening, corner UVs, frames; measured 40-55).
+pub const BYTES_PER_TRIANGLE: u64 = 60;
+
 /// Share of the atlas the charts are assumed to fill when the size is
 /// derived (the packer reaches 0.5-0.7 on closed meshes).
 pub const ASSUMED_ATLAS_FILL: f64 = 0.5;
@@ -259,6 +269,34 @@ impl Stage for Bake {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::BakedAtlas]
+    }
+    /// The atlas (`size`, or the size the texture scale gives): colour,
+    /// the exemplar's maps and the texel-to-face map per texel, and the
+    /// layout per triangle of the source mesh.
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        let derived = settings.size == 0;
+        if derived && !sizes.loaded {
+            return Vec::new();
+        }
+        let size = if derived {
+            auto_atlas_size(sizes.texels_per_unit, sizes.area)
+        } else {
+            settings.size
+        };
+        let per_texel = BYTES_PER_TEXEL + 4 * u64::from(sizes.map_channels);
+        let per_mesh = BYTES_PER_TRIANGLE * sizes.triangles;
+        let mut e = MemoryEstimate::growing(
+            "size",
+            "the baked atlas: colour, maps and texel-to-face map per texel, the layout per triangle",
+            u64::from(size),
+            (256, 8192),
+            move |s| (s * s).saturating_mul(per_texel).saturating_add(per_mesh),
+            |s| s.to_string(),
+        );
+        if derived {
+            e.value = format!("0 (from the texture scale: {size})");
+        }
+        vec![e]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,

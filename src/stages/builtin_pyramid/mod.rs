@@ -9,6 +9,7 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::flatten::{mean_fan_triangle_area, template_spacing};
 use crate::mesh::PolyMesh;
 use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
+use crate::pipeline::memory_budget::{BYTES_PER_MESH_VERTEX, InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::stages::world::*;
 use bevy_ecs::prelude::*;
@@ -185,6 +186,23 @@ impl Stage for BuiltinPyramid {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::MeshPyramid]
+    }
+    /// A grid's `resolution` (plane, torus, uv_sphere) at the finest
+    /// level, at the coarse whole-pipeline bound per vertex
+    /// (`memory_budget::BYTES_PER_MESH_VERTEX`): the mesh it makes is what
+    /// every later stage works on.
+    fn memory_estimate(settings: &Self::Settings, _sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        if !matches!(settings.mesh.as_str(), "plane" | "torus" | "uv_sphere") {
+            return Vec::new();
+        }
+        let [u, v] = settings.resolution;
+        vec![MemoryEstimate::image(
+            "resolution",
+            "the finest level's vertices over the whole pipeline",
+            (u, v),
+            4096,
+            |a, b| (a * b).saturating_mul(BYTES_PER_MESH_VERTEX),
+        )]
     }
     fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
         crate::pipeline::PlaneRole::ReplacesMesh {

@@ -5,6 +5,7 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::jump_surface::Blend;
 use crate::output::render::{Layer, RenderOptions, Shading, render_views};
+use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::stages::lapped_paste::components::*;
 use crate::stages::world::*;
@@ -14,6 +15,20 @@ use bevy_ecs::system::ScheduleSystem;
 use serde::{Deserialize, Serialize};
 
 pub mod plane;
+
+/// Bytes per preview pixel of the three views together (measured 36.5 at
+/// 512² and 1024², 73 when a `bake` before adds its three views of the
+/// baked asset): each view's colour, depth and shading buffers.
+pub const BYTES_PER_PREVIEW_PIXEL: u64 = 45;
+
+/// Bytes per texel of format `baked` (measured 12 in the stage): the RGB
+/// atlas, then its 8-bit copy and the encoder's buffers when written.
+pub const BYTES_PER_BAKED_TEXEL: u64 = 16;
+
+/// Bytes per pixel of format `plane` (measured 40-43 at 256² and 1024²):
+/// the pixel hits, the RGB image and its sources, the 16-bit source map
+/// and the encoded copies.
+pub const BYTES_PER_PLANE_PIXEL: u64 = 44;
 
 /// Settings of `export`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -212,6 +227,54 @@ impl Stage for Export {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![]
+    }
+    /// Per format asked for: the preview views (`preview_size`), the
+    /// baked atlas (`baked`: `bake_size`) and the plane image (`plane`:
+    /// `plane_size`). An `obj` of a jump-map result is baked at
+    /// `bake_size` too; that result is only known at run time, so it is not
+    /// estimated here.
+    fn memory_estimate(settings: &Self::Settings, _sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        let has = |f: &str| settings.formats.iter().any(|g| g == f);
+        let side = |param: &'static str, what: &str, value: u32, range: (u64, u64), per: u64| {
+            MemoryEstimate::growing(
+                param,
+                what,
+                u64::from(value),
+                range,
+                move |s| (s * s).saturating_mul(per),
+                |s| s.to_string(),
+            )
+        };
+        let mut out = Vec::new();
+        if has("preview") {
+            out.push(side(
+                "preview_size",
+                "the three preview views and their renderer buffers",
+                settings.preview_size,
+                (64, 4096),
+                BYTES_PER_PREVIEW_PIXEL,
+            ));
+        }
+        if has("baked") {
+            out.push(side(
+                "bake_size",
+                "the baked per-triangle atlas and its written copy",
+                settings.bake_size,
+                (64, 16384),
+                BYTES_PER_BAKED_TEXEL,
+            ));
+        }
+        if has("plane") {
+            let [w, h] = settings.plane_size;
+            out.push(MemoryEstimate::image(
+                "plane_size",
+                "plane.png and plane_sources.png: pixel hits, colours, sources and encoded copies",
+                (w, h),
+                16384,
+                |a, b| (a * b).saturating_mul(BYTES_PER_PLANE_PIXEL),
+            ));
+        }
+        out
     }
     fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
         if settings.formats.iter().any(|f| f == "plane") {

@@ -19,6 +19,7 @@ use crate::kernels::jump_map::{
     PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
     synthesize_patches_with_progress, synthesize_pixels_with_progress,
 };
+use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::world::*;
@@ -202,6 +203,13 @@ fn source_image(width: u32, height: u32, sources: &[[f32; 2]], ew: u32, eh: u32)
     out
 }
 
+/// Bytes per output pixel at the stage's peak, measured with a counting
+/// allocator (`tests/memory_estimates.rs`; 56-60 by method at 1024²): the
+/// RGB result (12), its source texels (8) and coordinates (8), the
+/// resource's copy (12), the source and patch images (12 each) and the
+/// kernels' buffers.
+pub const BYTES_PER_PIXEL: u64 = 60;
+
 /// The `jump_image` stage.
 pub struct JumpImage;
 
@@ -217,6 +225,17 @@ impl Stage for JumpImage {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Image]
+    }
+    /// The output (`width x height`): the image, its source map, the
+    /// written copies and the kernels' buffers.
+    fn memory_estimate(settings: &Self::Settings, _sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        vec![MemoryEstimate::image(
+            "width x height",
+            "the synthesised image, its source coordinates, the images written and the synthesis buffers",
+            (settings.width, settings.height),
+            32768,
+            |w, h| (w * h).saturating_mul(BYTES_PER_PIXEL),
+        )]
     }
     fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
         crate::pipeline::PlaneRole::Image {

@@ -5,9 +5,11 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::sample::Wrap;
+use crate::kernels::jump_map::analysis::analysis_bytes;
 use crate::kernels::jump_map::{
     Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress,
 };
+use crate::pipeline::memory_budget::{Fit, InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::world::*;
@@ -220,6 +222,98 @@ impl Stage for JumpMapStage {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::JumpMap]
+    }
+    /// The analysis (`analysis_bytes`): estimated whether or not the map is
+    /// cached (a cache hit needs far less). Ways out: narrower
+    /// neighbourhoods (every level capped at one width), a smaller PCA
+    /// sample, fewer principal components (at most 8 also lets the search
+    /// use the kd-tree), a smaller exemplar.
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        if sizes.exemplar_pixels() == 0 {
+            return Vec::new();
+        }
+        let wrap = if sizes.exemplar_repeats {
+            Wrap::Repeat
+        } else {
+            Wrap::Clamp
+        };
+        let ks = settings.kernel_settings(wrap, 0);
+        let (w, h, c) = (
+            sizes.exemplar_width,
+            sizes.exemplar_height,
+            sizes.exemplar_channels,
+        );
+        let widths = ks.neighbourhood_widths.clone();
+        let capped =
+            move |cap: u64| -> Vec<u32> { widths.iter().map(|&n| n.min(cap as u32)).collect() };
+        let show = {
+            let capped = capped.clone();
+            move |cap: u64| format!("{:?}", capped(cap))
+        };
+        let with_cap = {
+            let ks = ks.clone();
+            move |cap: u64| {
+                let mut s = ks.clone();
+                s.neighbourhood_widths = capped(cap);
+                analysis_bytes(w, h, c, &s)
+            }
+        };
+        let widest = u64::from(ks.neighbourhood_widths.iter().copied().max().unwrap_or(1));
+        let bytes = analysis_bytes(w, h, c, &ks);
+        let sample = {
+            let ks = ks.clone();
+            move |thousandths: u64| {
+                let mut s = ks.clone();
+                s.pca_sample_fraction = thousandths as f32 / 1000.0;
+                analysis_bytes(w, h, c, &s)
+            }
+        };
+        let now_sample = (f64::from(ks.pca_sample_fraction) * 1000.0).floor() as u64;
+        let exemplar = {
+            let ks = ks.clone();
+            move |side: u64| {
+                let long = u64::from(w.max(h));
+                let scale = |d: u32| ((u64::from(d) * side).div_ceil(long)).max(1) as u32;
+                analysis_bytes(scale(w), scale(h), c, &ks)
+            }
+        };
+        let long = u64::from(w.max(h));
+        let show_exemplar = move |side: u64| {
+            let scale = |d: u32| ((u64::from(d) * side).div_ceil(long)).max(1);
+            format!("{}x{} pixels", scale(w), scale(h))
+        };
+        let components = {
+            let ks = ks.clone();
+            move |m: u64| {
+                let mut s = ks.clone();
+                s.max_components = m as u32;
+                analysis_bytes(w, h, c, &s)
+            }
+        };
+        let now_components = u64::from(ks.max_components);
+        vec![MemoryEstimate {
+            param: "neighbourhoods",
+            value: format!("{:?}", ks.neighbourhood_widths),
+            what: format!(
+                "the jump-map analysis of the {w}x{h} exemplar: the PCA sample and its SVD, the projected neighbourhoods, the nearest neighbours and the map"
+            ),
+            bytes,
+            fits: vec![
+                Fit::scan(
+                    "neighbourhoods",
+                    (1..=widest).step_by(2).collect(),
+                    with_cap,
+                    show,
+                ),
+                Fit::growing("pca_sample", (1, now_sample.max(1)), sample, |t| {
+                    format!("{}", t as f64 / 1000.0)
+                }),
+                Fit::growing("max_components", (1, now_components), components, |m| {
+                    m.to_string()
+                }),
+                Fit::growing("an exemplar of", (1, long), exemplar, show_exemplar).separated(" "),
+            ],
+        }]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,

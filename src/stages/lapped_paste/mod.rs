@@ -39,6 +39,7 @@ use crate::kernels::lapped::paste::{
     LappedTexture, PASTING_PROGRESS_STEPS, PasteSettings, paste_until_covered,
 };
 use crate::mesh::PolyMesh;
+use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::tangent_field::FaceField;
@@ -831,6 +832,59 @@ fn expected_pastes(faces: usize, area: f64, side_world: f64) -> f64 {
     (PASTE_OVERLAP * area / splotch).clamp(1.0, 4.0 * faces as f64 + 64.0)
 }
 
+/// Bytes per texture-patch pixel: RGBA colours (16) and alpha (4).
+pub const BYTES_PER_PATCH_PIXEL: u64 = 20;
+
+/// Bytes per face of the pasting's per-face state beside the layer pool
+/// (coverage, levels, seeds, drawn flags; measured about 110).
+pub const PASTE_BYTES_PER_FACE: u64 = 150;
+
+/// Layers per face the pool is assumed to hold at once.
+pub const LAYERS_PER_FACE: u64 = 5;
+
+/// Bytes per atlas texel (RGBA `f32`) and per triangle of the atlas layout.
+pub const ATLAS_BYTES_PER_TEXEL: u64 = 16;
+/// See [`ATLAS_BYTES_PER_TEXEL`].
+pub const ATLAS_BYTES_PER_TRIANGLE: u64 = 150;
+
+/// The texture patches and the pasting of `settings` on an input of
+/// `sizes`: the patches' pixels as [`auto_patches`] chooses them at the
+/// run's texture scale (or as set), and the pasting's layer pool chunks and
+/// per-face state.
+fn paste_bytes(settings: &LappedPasteSettings, sizes: &InputSizes) -> (u64, u64) {
+    let (w, h) = (sizes.exemplar_width, sizes.exemplar_height);
+    let (pixels, patches) = if settings.patches == 0 && settings.patch_pixels == 0 {
+        auto_patches(
+            settings,
+            (w.max(1), h.max(1)),
+            sizes.texels_per_unit as f32,
+            sizes.diagonal as f32,
+        )
+    } else if settings.patch_pixels == 0 {
+        (w.min(h), settings.patches.max(1))
+    } else {
+        (settings.patch_pixels, settings.patches.max(1))
+    };
+    let patch_bytes =
+        u64::from(patches) * u64::from(pixels) * u64::from(pixels) * BYTES_PER_PATCH_PIXEL;
+    let chunks = (LAYERS_PER_FACE * sizes.triangles)
+        .div_ceil(crate::kernels::lapped::coverage::POOL_CHUNK_NODES)
+        .max(1);
+    let pasting = chunks * crate::kernels::lapped::coverage::POOL_CHUNK_BYTES
+        + PASTE_BYTES_PER_FACE * sizes.triangles;
+    (patch_bytes, pasting)
+}
+
+/// The atlas of side `size` (0: none) on `triangles`.
+fn atlas_bytes(size: u64, triangles: u64) -> u64 {
+    if size == 0 {
+        return 0;
+    }
+    (size * size)
+        .saturating_mul(ATLAS_BYTES_PER_TEXEL)
+        .saturating_add(ATLAS_BYTES_PER_TRIANGLE * triangles)
+}
+
 /// Returns the heap pages freed so far to the system (glibc's
 /// `malloc_trim`). Measured before `main` fixed glibc's mmap threshold: the
 /// paste loop's per-face arrays were freed in the middle of the heap, where
@@ -862,6 +916,24 @@ impl Stage for LappedPaste {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Patches]
+    }
+    /// The texture patches, then the larger of the pasting (the layer
+    /// pool and per-face state) and the atlas (`atlas_size`: RGBA per
+    /// texel and the layout per triangle).
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        if settings.atlas_size == 0 && !sizes.loaded {
+            return Vec::new();
+        }
+        let (patches, pasting) = paste_bytes(settings, sizes);
+        let triangles = sizes.triangles;
+        vec![MemoryEstimate::growing(
+            "atlas_size",
+            "the texture patches, the pasting's layers and the RGBA atlas",
+            u64::from(settings.atlas_size),
+            (0, 16384),
+            move |s| patches + pasting.max(atlas_bytes(s, triangles)),
+            |s| s.to_string(),
+        )]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         // The user mask is read when the schedule is built (systems do no

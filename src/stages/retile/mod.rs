@@ -7,6 +7,7 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::retile::{RetileSettings, RetileTarget, retile_with_progress};
 use crate::mesh::{PolyMesh, Topology};
+use crate::pipeline::memory_budget::{Fit, InputSizes, MemoryEstimate};
 use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
 use crate::stages::world::*;
@@ -14,6 +15,17 @@ use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use serde::{Deserialize, Serialize};
+
+/// Largest `vertices` (explicit or derived from the texture scale).
+pub const MAX_VERTICES: u64 = 50_000_000;
+
+/// Bytes per finest-level vertex of the retiled pyramid at the stage's
+/// peak (measured 360-700 from 4 000 to 64 000 vertices: growing arrays
+/// hold spare capacity).
+pub const BYTES_PER_VERTEX: u64 = 500;
+
+/// Bytes per input triangle (the projection tree and the prepared input).
+pub const BYTES_PER_INPUT_TRIANGLE: u64 = 120;
 
 /// Settings of `retile`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -49,7 +61,7 @@ impl StageSettings for RetileStageSettings {
         ParamDoc {
             name: "vertices",
             unit: "vertices",
-            range: ParamRange::Int(0, 50_000_000),
+            range: ParamRange::Int(0, MAX_VERTICES as i64),
             doc: "vertices of the finest level (the density sets the texture scale of `match`, Wei & Levoy Fig. 2); 0 = derived from `[input] texture_scale`: surface area × (exemplar pixels per unit)², one exemplar pixel per finest vertex spacing; 1..=11 is refused",
         },
         ParamDoc {
@@ -79,7 +91,8 @@ impl StageSettings for RetileStageSettings {
     ];
 
     fn check(&self) -> Result<(), (String, String)> {
-        check_vertex_count(u64::from(self.vertices), 50_000_000).map_err(|m| ("vertices".into(), m))
+        check_vertex_count(u64::from(self.vertices), MAX_VERTICES)
+            .map_err(|m| ("vertices".into(), m))
     }
 }
 
@@ -122,6 +135,61 @@ impl Stage for Retile {
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::MeshPyramid]
     }
+    /// The remeshed pyramid and the remesher's work per finest vertex, and
+    /// the input's projection tree per input triangle. The finest count is
+    /// `vertices`, or derived from the texture scale (`vertices = 0`) or from
+    /// `edge_length` and the input's area (then known only once it loads).
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        let input = BYTES_PER_INPUT_TRIANGLE * sizes.triangles;
+        let bytes = move |v: u64| v.saturating_mul(BYTES_PER_VERTEX).saturating_add(input);
+        let what =
+            "the retiled pyramid and the remesher's work per vertex, the input's projection tree";
+        if settings.edge_length > 0.0 {
+            if !sizes.loaded {
+                return Vec::new();
+            }
+            // Equilateral triangles of side e: 2 / (√3 e²) vertices per unit².
+            let per_area = 2.0 / 3f64.sqrt();
+            let area = sizes.area;
+            let count = |e: f64| (per_area * area / (e * e)).min(u64::MAX as f64) as u64;
+            let e = f64::from(settings.edge_length);
+            return vec![MemoryEstimate {
+                param: "edge_length",
+                value: format!(
+                    "{} ({} vertices on this input)",
+                    settings.edge_length,
+                    count(e)
+                ),
+                what: what.into(),
+                bytes: bytes(count(e)),
+                fits: vec![Fit::with("edge_length", move |budget| {
+                    let v = budget.saturating_sub(input) / BYTES_PER_VERTEX;
+                    (v > 0).then(|| format!("{:.6} or more", (per_area * area / v as f64).sqrt()))
+                })],
+            }];
+        }
+        let derived = settings.vertices == 0;
+        if derived && !sizes.loaded {
+            return Vec::new();
+        }
+        let vertices = if derived {
+            sizes.vertices_for_area(sizes.area / settings.texels_per_vertex) as u64
+        } else {
+            u64::from(settings.vertices)
+        };
+        let mut e = MemoryEstimate::growing(
+            "vertices",
+            what,
+            vertices,
+            (MIN_DERIVED_VERTICES as u64, MAX_VERTICES),
+            bytes,
+            |v| v.to_string(),
+        );
+        if derived {
+            e.value = format!("0 (from the texture scale: {vertices})");
+        }
+        vec![e]
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,
                mut active: ResMut<ActiveMesh>,
@@ -146,7 +214,8 @@ impl Stage for Retile {
                 RetileTarget::Vertices(settings.vertices)
             } else {
                 let area = f64::from(source.0.area()) / settings.texels_per_vertex;
-                match texture_scale.derived_vertices(area, "retile.vertices") {
+                match texture_scale.derived_vertices(area, "retile.vertices", MAX_VERTICES as usize)
+                {
                     Ok(n) => {
                         metrics.record(ctx.index, "vertices_from_texture_scale", n);
                         tracing::info!(

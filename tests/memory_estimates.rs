@@ -1,0 +1,366 @@
+//! The memory estimates against the allocation measured (issue 43): a
+//! counting global allocator tracks the bytes live and their peak; a
+//! tracing layer resets the peak when a stage's span is entered and reads
+//! it when it is left, so each stage's peak is the most it held beyond
+//! what was live when it started. Runs in-process, one at a time.
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex};
+use tracing::span::Id;
+use tracing::subscriber::Subscriber;
+use tracing_subscriber::layer::{Context, Layer, SubscriberExt};
+use tracing_subscriber::registry::LookupSpan;
+
+/// [`System`] with the bytes live and their peak counted.
+struct Counting;
+
+static CURRENT: AtomicUsize = AtomicUsize::new(0);
+static PEAK: AtomicUsize = AtomicUsize::new(0);
+
+impl Counting {
+    fn add(bytes: usize) {
+        let now = CURRENT.fetch_add(bytes, Ordering::Relaxed) + bytes;
+        PEAK.fetch_max(now, Ordering::Relaxed);
+    }
+    fn sub(bytes: usize) {
+        CURRENT.fetch_sub(bytes, Ordering::Relaxed);
+    }
+}
+
+// SAFETY: every call is forwarded to `System` with the same arguments; the
+// counters only observe.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            Self::add(layout.size());
+        }
+        p
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        let p = unsafe { System.alloc_zeroed(layout) };
+        if !p.is_null() {
+            Self::add(layout.size());
+        }
+        p
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) };
+        Self::sub(layout.size());
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        let p = unsafe { System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            // Old and new blocks may both be live while the bytes move.
+            Self::add(new_size);
+            Self::sub(layout.size());
+        }
+        p
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Counting = Counting;
+
+/// One measurement at a time: the counters are the process's.
+static SERIAL: Mutex<()> = Mutex::new(());
+
+/// Per stage, in order: the peak bytes beyond those live at its start.
+#[derive(Clone, Default)]
+struct StagePeaks {
+    peaks: Arc<Mutex<Vec<usize>>>,
+    start: Arc<AtomicUsize>,
+}
+
+impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for StagePeaks {
+    fn on_enter(&self, id: &Id, ctx: Context<'_, S>) {
+        if ctx
+            .span(id)
+            .is_some_and(|s| s.name() == surfsynth::telemetry::STAGE_SPAN)
+        {
+            let now = CURRENT.load(Ordering::SeqCst);
+            self.start.store(now, Ordering::SeqCst);
+            PEAK.store(now, Ordering::SeqCst);
+        }
+    }
+    fn on_exit(&self, id: &Id, ctx: Context<'_, S>) {
+        if ctx
+            .span(id)
+            .is_some_and(|s| s.name() == surfsynth::telemetry::STAGE_SPAN)
+        {
+            let peak = PEAK.load(Ordering::SeqCst);
+            let start = self.start.load(Ordering::SeqCst);
+            self.peaks.lock().unwrap().push(peak.saturating_sub(start));
+        }
+    }
+}
+
+/// Runs `config` in-process and returns each stage's measured peak.
+fn measure(config: &str) -> Vec<usize> {
+    let layer = StagePeaks::default();
+    let subscriber = tracing_subscriber::registry().with(layer.clone());
+    tracing::subscriber::with_default(subscriber, || {
+        common::world_for(config).unwrap_or_else(|e| panic!("{e}\n{config}"));
+    });
+    layer.peaks.lock().unwrap().clone()
+}
+
+/// Each stage's largest estimate for `config`'s loaded input.
+fn estimates(config: &str) -> Vec<u64> {
+    use surfsynth::pipeline::memory_budget::InputSizes;
+    use surfsynth::pipeline::{Pipeline, load_input};
+    let p = Pipeline::from_source(surfsynth::config::ConfigSource::from_text("t.toml", config))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let sizes = InputSizes::of(&input, &p.input);
+    p.stages
+        .iter()
+        .map(|s| {
+            s.memory_estimate(&sizes)
+                .iter()
+                .map(|e| e.bytes)
+                .max()
+                .unwrap_or(0)
+        })
+        .collect()
+}
+
+fn mib(bytes: u64) -> f64 {
+    bytes as f64 / (1 << 20) as f64
+}
+
+/// Runs `config` at each size (`{}` in it replaced) and checks the
+/// estimate of stage `stage` (0-based) within [0.5, 2] of its measured
+/// peak; returns the table rows.
+fn check(label: &str, stage: usize, config: &str, sizes: &[&str]) -> Vec<String> {
+    let mut rows = Vec::new();
+    let mut bad = Vec::new();
+    for size in sizes {
+        let text = config.replace("{}", size);
+        let estimate = estimates(&text)[stage];
+        let measured = measure(&text)[stage] as u64;
+        let ratio = estimate as f64 / measured.max(1) as f64;
+        let row = format!(
+            "| {label} | {size} | {:.1} MiB | {:.1} MiB | {ratio:.2} |",
+            mib(estimate),
+            mib(measured)
+        );
+        eprintln!("{row}");
+        if !(0.5..=2.0).contains(&ratio) {
+            bad.push(row.clone());
+        }
+        rows.push(row);
+    }
+    assert!(
+        bad.is_empty(),
+        "estimates off by more than 2x:\n{}",
+        bad.join("\n")
+    );
+    rows
+}
+
+/// One-time allocations (the thread pool, lazily built tables) happen in
+/// the first run of the process: a small run first keeps them out of the
+/// measurements.
+fn warm_up() {
+    measure(&JUMP_MAP.replace("{}", "64"));
+}
+
+const JUMP_MAP: &str = r#"
+seed = 1
+[input]
+exemplar = "builtin:noise"
+[input.exemplar_options]
+size = {}
+[[stage]]
+kind = "jump_map"
+cache = false
+"#;
+
+const JUMP_IMAGE: &str = r#"
+seed = 1
+[input]
+exemplar = "builtin:noise"
+[[stage]]
+kind = "jump_map"
+cache = false
+[[stage]]
+kind = "jump_image"
+width = {}
+height = {}
+"#;
+
+const BAKE: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.mesh_options]
+subdivisions = 2
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+[[stage]]
+kind = "jump_map"
+cache = false
+[[stage]]
+kind = "jump_surface"
+[[stage]]
+kind = "bake"
+size = {}
+"#;
+
+const LAPPED: &str = r#"
+seed = 4
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+[input.mesh_options]
+subdivisions = 2
+[[stage]]
+kind = "tangent_field"
+[[stage]]
+kind = "lapped_paste"
+cache = false
+atlas_size = {}
+"#;
+
+const RETILE: &str = r#"
+seed = 5
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+[input.mesh_options]
+subdivisions = 2
+[[stage]]
+kind = "retile"
+vertices = {}
+"#;
+
+const SUBDIVIDE: &str = r#"
+seed = 5
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+[input.mesh_options]
+subdivisions = 1
+[[stage]]
+kind = "subdivide_sqrt2"
+target_vertices = {}
+"#;
+
+const EXPORT: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.mesh_options]
+subdivisions = 2
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+[[stage]]
+kind = "jump_map"
+cache = false
+[[stage]]
+kind = "jump_surface"
+[[stage]]
+kind = "export"
+FORMAT
+"#;
+
+#[test]
+fn each_stage_estimate_is_within_2x_of_its_measured_peak_at_three_sizes() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    warm_up();
+    let mut rows = vec![
+        "| stage | size | estimate | measured peak | ratio |".to_string(),
+        "|---|---|---|---|---|".to_string(),
+    ];
+    rows.extend(check(
+        "jump_map (analysis)",
+        0,
+        JUMP_MAP,
+        &["64", "128", "256"],
+    ));
+    // Wide neighbourhoods and the whole sample: the PCA's SVD dominates.
+    let wide = JUMP_MAP.replace(
+        "cache = false",
+        "cache = false\nneighbourhoods = [15, 7]\npca_sample = 1.0",
+    );
+    rows.extend(check(
+        "jump_map [15, 7], pca_sample 1",
+        0,
+        &wide,
+        &["96", "128", "192"],
+    ));
+    // The kd-tree search over 8 components.
+    let tree = JUMP_MAP.replace(
+        "cache = false",
+        "cache = false\nmax_components = 8\nann_search = \"kd_tree\"",
+    );
+    rows.extend(check("jump_map kd-tree", 0, &tree, &["128", "256", "384"]));
+    rows.extend(check("jump_image", 1, JUMP_IMAGE, &["256", "512", "1024"]));
+    rows.extend(check("bake", 3, BAKE, &["512", "1024", "2048"]));
+    rows.extend(check(
+        "lapped_paste atlas_size",
+        1,
+        LAPPED,
+        &["1024", "2048", "4096"],
+    ));
+    rows.extend(check(
+        "retile vertices",
+        0,
+        RETILE,
+        &["4000", "16000", "64000"],
+    ));
+    rows.extend(check(
+        "subdivide_sqrt2 target_vertices",
+        0,
+        SUBDIVIDE,
+        &["10000", "40000", "160000"],
+    ));
+    let baked = EXPORT.replace("FORMAT", "formats = [\"baked\"]\nbake_size = {}");
+    rows.extend(check(
+        "export bake_size",
+        3,
+        &baked,
+        &["512", "1024", "2048"],
+    ));
+    let preview = EXPORT.replace("FORMAT", "formats = [\"preview\"]\npreview_size = {}");
+    rows.extend(check(
+        "export preview_size",
+        3,
+        &preview,
+        &["256", "512", "1024"],
+    ));
+    eprintln!("{}", rows.join("\n"));
+}
+
+#[test]
+fn plane_size_estimate_is_within_2x_of_its_measured_peak_at_three_sizes() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    warm_up();
+    let plane = r#"
+seed = 3
+[input]
+mesh = "builtin:plane"
+exemplar = "builtin:bricks"
+[input.mesh_options]
+resolution = [64, 64]
+[[stage]]
+kind = "orientation"
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "export"
+formats = ["plane"]
+plane_size = [{}, {}]
+"#;
+    check("export plane_size", 2, plane, &["256", "512", "1024"]);
+}
