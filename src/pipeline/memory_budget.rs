@@ -281,7 +281,9 @@ impl MemoryEstimate {
 /// Shows a byte count in GiB (two decimals), else MiB, else KiB.
 pub fn show_bytes(bytes: u64) -> String {
     let b = bytes as f64;
-    if bytes >= 1 << 30 {
+    if bytes >= 1 << 40 {
+        format!("{:.2} TiB", b / (1u64 << 40) as f64)
+    } else if bytes >= 1 << 30 {
         format!("{:.2} GiB", b / (1u64 << 30) as f64)
     } else if bytes >= 1 << 20 {
         format!("{:.1} MiB", b / (1u64 << 20) as f64)

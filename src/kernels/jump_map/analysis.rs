@@ -179,8 +179,9 @@ pub fn analyse_with_stats(
 }
 
 /// [`analyse_with_stats`], reporting to `progress`: two steps per source
-/// pixel (its nearest neighbours, then their filtering), the neighbourhood
-/// vectors and the PCA fit as parts without steps.
+/// pixel in the part "nearest neighbours and filtering" (a block's
+/// neighbours, then their filtering), the PCA fit of the sample and the
+/// projection of the neighbourhood vectors as parts without steps.
 ///
 /// # Errors
 /// As [`analyse_with_stats`].
@@ -204,7 +205,6 @@ pub fn analyse_with_progress(
     let dim = vector_len(widths, exemplar.channels);
     let pixels = region.width() as u64 * region.height() as u64;
     progress.set_length(2 * pixels);
-    progress.set_part("neighbourhoods");
 
     // Neighbourhood vectors are never all held (issue 43: 4 · dim bytes a
     // pixel, 23 GB at 4096²): the PCA sample's are computed for the sample,
@@ -230,7 +230,7 @@ pub fn analyse_with_progress(
             settings.max_components as usize,
         )?
     };
-    progress.set_part("neighbourhoods");
+    progress.set_part("projection");
     let projected = {
         let _s = tracing::info_span!("neighbourhoods").entered();
         let block = projection_block(dim);
@@ -266,7 +266,7 @@ pub fn analyse_with_progress(
     let mut r_dests = vec![TexelCoord::default(); n_src * k];
     {
         let _s = tracing::info_span!("nearest_neighbours").entered();
-        progress.set_part("nearest neighbours");
+        progress.set_part("nearest neighbours and filtering");
         let knn = KnnSearch::new(&projected, pca.components, m, eps, settings.ann_search);
         let m = knn.m();
         let b = KnnSearch::BLOCK;

@@ -294,7 +294,9 @@ impl Stage for Bake {
             |s| s.to_string(),
         );
         if derived {
-            e.value = format!("0 (from the texture scale: {size})");
+            e.value = format!(
+                "0, derived from [input] texture_scale: {size} (set bake.size to choose it)"
+            );
         }
         vec![e]
     }

@@ -439,7 +439,9 @@ impl Stage for SubdivideSqrt2 {
             |v| v.to_string(),
         );
         if derived {
-            e.value = format!("0 (from the texture scale: {vertices})");
+            e.value = format!(
+                "0, derived from [input] texture_scale: {vertices} (lower the vertex count by the texture scale, or set subdivide_sqrt2.target_vertices)"
+            );
         }
         vec![e]
     }
