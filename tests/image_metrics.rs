@@ -496,17 +496,8 @@ fn turned_copy_quality(
 ) -> surfsynth::kernels::metrics::surface_quality::SurfaceQuality {
     use surfsynth::kernels::metrics::surface_quality::{SurfaceResult, surface_quality};
     let n = (ex.width as f32 / step) as u32;
-    let positions: Vec<Vec3> = (0..n)
-        .flat_map(|y| (0..n).map(move |x| Vec3::new(x as f32 * step, -(y as f32 * step), 0.0)))
-        .collect();
-    let mut faces = Vec::new();
-    for y in 0..n - 1 {
-        for x in 0..n - 1 {
-            let v = y * n + x;
-            faces.push([v, v + n, v + n + 1, v + 1]);
-        }
-    }
-    let mesh = PolyMesh::from_polygons(positions, faces.iter().map(|f| &f[..]));
+    let mut mesh = grid(n, n);
+    mesh.positions.iter_mut().for_each(|p| *p *= step);
     let (s, c) = angle.sin_cos();
     let size = Vec2::new(ex.width as f32, ex.height as f32);
     let uvs: Vec<Vec2> = mesh

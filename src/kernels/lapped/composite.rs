@@ -314,7 +314,7 @@ impl<'a> LappedComposite<'a> {
             if self.index.layers(f).len() == 0 {
                 continue;
             }
-            let k = ((mesh.face_area(f) * per_area).max(0.0).sqrt().round() as u16).clamp(1, 8);
+            let k = super::coverage::lattice_level(mesh.face_area(f), per_area);
             for b in super::coverage::lattice_samples(k) {
                 self.eval_face(f, b, &mut px);
                 out.extend_from_slice(&px);

@@ -70,6 +70,12 @@ pub fn sample_levels(
         .collect()
 }
 
+/// The lattice level of a face of `area` sampled at about `per_area`
+/// points per unit area: `k²` points, `k` in `1..=8`.
+pub fn lattice_level(area: f32, per_area: f32) -> u16 {
+    ((area * per_area).max(0.0).sqrt().round() as u16).clamp(1, 8)
+}
+
 /// The `k²` sample points of a face at level `k`: barycentric coordinates
 /// of the centroids of the sub-triangles of its `k`-fold subdivision.
 pub fn lattice_samples(k: u16) -> Vec<[f32; 3]> {

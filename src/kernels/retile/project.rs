@@ -441,60 +441,51 @@ impl SurfaceProjector {
     /// local orientation test wants. Without adjacency (a projector not
     /// built from a [`TriMesh`]) or a valid hint, it is [`Self::project_near`].
     pub fn project_local(&self, p: Vec3, hint: u32) -> Option<SurfacePoint> {
-        /// A walk longer than this is far from its hint: search the tree.
-        const MAX_STEPS: usize = 64;
         if self.neighbours.is_empty() || hint as usize >= self.triangles.len() {
             return self.project_near(p, hint);
         }
-        let mut face = hint;
-        let (mut point, mut bary) = self.tri_closest(face, p);
-        let mut d2 = (point - p).length_squared();
-        // The face the walk came from is farther than `face` (each step is
-        // a strict improvement), so it is not tested again.
-        let mut came_from = NONE;
-        for _ in 0..MAX_STEPS {
-            let mut step = None;
-            for &g in &self.neighbours[face as usize] {
-                if g == NONE || g == came_from {
-                    continue;
-                }
-                let (q, b) = self.tri_closest(g, p);
-                let e = (q - p).length_squared();
-                if e < d2 {
-                    (d2, step) = (e, Some((g, q, b)));
-                }
-            }
-            match step {
-                Some((g, q, b)) => {
-                    came_from = face;
-                    (face, point, bary) = (g, q, b);
-                }
-                None => return Some(SurfacePoint { point, face, bary }),
-            }
-        }
-        self.project_near(p, face)
+        self.walk(p, hint, |_| true)
+            .unwrap_or_else(|face| self.project_near(p, face))
     }
 
     /// [`Self::project_local`] among the triangles facing the same way as
     /// `normal` ([`Self::project_facing`]): from `hint`, steps to whichever
     /// facing neighbour is closer to `p`, until none is — "the surface
     /// here", facing that way. A hint that does not face that way, a walk
-    /// longer than 64 steps, or a projector without adjacency search the
-    /// tree ([`Self::project_facing`]).
+    /// longer than [`Self::MAX_WALK`] steps, or a projector without adjacency
+    /// search the tree ([`Self::project_facing`]).
     pub fn project_facing_local(&self, p: Vec3, normal: Vec3, hint: u32) -> Option<SurfacePoint> {
-        const MAX_STEPS: usize = 64;
         let facing = |t: u32| self.normals[t as usize].dot(normal) > 0.0;
         if self.neighbours.is_empty() || hint as usize >= self.triangles.len() || !facing(hint) {
             return self.project_facing(p, normal, hint);
         }
+        self.walk(p, hint, facing)
+            .unwrap_or_else(|face| self.project_facing(p, normal, face))
+    }
+
+    /// A walk longer than this is far from its hint: search the tree.
+    const MAX_WALK: usize = 64;
+
+    /// From triangle `hint` (which needs adjacency), steps to whichever
+    /// neighbour that `allowed` admits is closer to `p`, until none is: the
+    /// closest point there, or `Err(face)` with the face reached after
+    /// [`Self::MAX_WALK`] steps.
+    fn walk(
+        &self,
+        p: Vec3,
+        hint: u32,
+        allowed: impl Fn(u32) -> bool,
+    ) -> Result<Option<SurfacePoint>, u32> {
         let mut face = hint;
         let (mut point, mut bary) = self.tri_closest(face, p);
         let mut d2 = (point - p).length_squared();
+        // The face the walk came from is farther than `face` (each step is
+        // a strict improvement), so it is not tested again.
         let mut came_from = NONE;
-        for _ in 0..MAX_STEPS {
+        for _ in 0..Self::MAX_WALK {
             let mut step = None;
             for &g in &self.neighbours[face as usize] {
-                if g == NONE || g == came_from || !facing(g) {
+                if g == NONE || g == came_from || !allowed(g) {
                     continue;
                 }
                 let (q, b) = self.tri_closest(g, p);
@@ -508,10 +499,10 @@ impl SurfaceProjector {
                     came_from = face;
                     (face, point, bary) = (g, q, b);
                 }
-                None => return Some(SurfacePoint { point, face, bary }),
+                None => return Ok(Some(SurfacePoint { point, face, bary })),
             }
         }
-        self.project_facing(p, normal, face)
+        Err(face)
     }
 
     /// Whether `pred` holds for the normal of any input triangle through the

@@ -14,7 +14,7 @@ use crate::config::params::to_json;
 use crate::image::Image;
 use crate::kernels::frames::frames_from_global_direction;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
-use crate::kernels::lapped::coverage::lattice_samples_into;
+use crate::kernels::lapped::coverage::{lattice_level, lattice_samples_into};
 use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality, surface_verbatim};
 use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
@@ -318,7 +318,7 @@ fn baked_quality(
         if corners.len() != 3 {
             continue;
         }
-        let k = ((mesh.face_area(f) * per_area).max(0.0).sqrt().round() as u16).clamp(1, 8);
+        let k = lattice_level(mesh.face_area(f), per_area);
         lattice_samples_into(k, &mut lattice);
         let uv = &asset.uvs[corners];
         for b in &lattice {
