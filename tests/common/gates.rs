@@ -51,7 +51,7 @@ pub struct Gate {
 ///   of the windows; 1.5× leaves room for a method's own seams but not for a
 ///   grid of tears or garbage.
 /// - completeness ≤ 1.5 × the peer's: the metric sanity test
-///   (`tests/quality_metrics.rs`) measures a flat mean-colour image at ≥ 2×
+///   (`tests/it/quality_metrics.rs`) measures a flat mean-colour image at ≥ 2×
 ///   and a tiling of one 32-px block at ≥ 1.5× the peer's, so both fail (the
 ///   tiling at the edge).
 /// - sharpness ≥ 0.8 × the peer's: the exemplar blurred by σ = 2 px measures

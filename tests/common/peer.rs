@@ -10,7 +10,7 @@
 //! random sample locations, Cauchy dispersion 1.0, backtrack 50 % over 5
 //! stages, no tiling, no guides, no input resize).
 //!
-//! Determinism (checked by `tests/peer.rs`): with a fixed seed and one thread
+//! Determinism (checked by `tests/it/peer.rs`): with a fixed seed and one thread
 //! the output and its source map are identical from run to run (Embark
 //! documents this for `max_thread_count(1)`; `one_thread_same_seed_same_result`
 //! asserts it). With more than one thread the workers race for pixels

@@ -193,7 +193,7 @@ impl StageSettings for SubdivideSqrt2Settings {
             name: "on_input_surface",
             unit: "",
             range: ParamRange::Any("true | false"),
-            doc: "put every subdivided vertex back on the input surface (closest point on an input triangle facing the same way) and keep the input's corners (3+ face-normal directions over 30° apart) where they are: thin walls and sharp edges keep their shape (tests/subdivision.rs, perforated plate, 0.1 walls, four steps: two-sided Hausdorff 0.083 / 0.050 against 0.133 / 0.376 for the paper's surface); false = the paper's approximating surface, which rounds edges and shrinks thin parts",
+            doc: "put every subdivided vertex back on the input surface (closest point on an input triangle facing the same way) and keep the input's corners (3+ face-normal directions over 30° apart) where they are: thin walls and sharp edges keep their shape (tests/it/subdivision.rs, perforated plate, 0.1 walls, four steps: two-sided Hausdorff 0.083 / 0.050 against 0.133 / 0.376 for the paper's surface); false = the paper's approximating surface, which rounds edges and shrinks thin parts",
         },
         ParamDoc {
             name: "coarsen_dense_input",
