@@ -12,6 +12,7 @@
 //! * [`output`]: exporters, preview renderer, atomic writes.
 
 pub mod cache;
+pub mod cache_format;
 pub mod config;
 pub mod image;
 pub mod kernels;
@@ -20,9 +21,11 @@ pub mod output;
 pub mod pipeline;
 pub mod preflight;
 pub mod progress;
+pub mod stage;
 pub mod stages;
 pub mod sweep;
 pub mod telemetry;
+pub mod world;
 
 #[cfg(test)]
 mod layer_check;

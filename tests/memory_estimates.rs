@@ -110,8 +110,8 @@ fn measure(config: &str) -> Vec<usize> {
 
 /// Each stage's largest estimate for `config`'s loaded input.
 fn estimates(config: &str) -> Vec<u64> {
-    use surfsynth::pipeline::memory_budget::InputSizes;
     use surfsynth::pipeline::{Pipeline, load_input};
+    use surfsynth::stage::memory::InputSizes;
     let p = Pipeline::from_source(surfsynth::config::ConfigSource::from_text("t.toml", config))
         .unwrap_or_else(|e| panic!("{e}"));
     let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();

@@ -3,7 +3,7 @@
 use super::{OutputError, write_atomic, write_png};
 use crate::mesh::PolyMesh;
 use crate::progress::Progress;
-use crate::stages::world::{ExportJob, PasteExport};
+use crate::world::{ExportJob, PasteExport};
 use std::fmt::Write as _;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -298,7 +298,7 @@ pub fn write_pastes(
 pub fn write_baked_obj(
     dir: &Path,
     stem: &str,
-    asset: &crate::stages::world::BakedAsset,
+    asset: &crate::world::BakedAsset,
 ) -> Result<Vec<PathBuf>, OutputError> {
     let obj_path = dir.join(format!("{stem}.obj"));
     let mtl_name = format!("{stem}.mtl");

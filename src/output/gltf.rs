@@ -13,7 +13,7 @@
 use super::{OutputError, encode_png};
 use crate::image::Image;
 use crate::mesh::PolyMesh;
-use crate::stages::world::BakedAsset;
+use crate::world::BakedAsset;
 use glam::{Vec2, Vec3};
 use serde_json::{Value, json};
 use std::io::Write;

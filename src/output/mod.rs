@@ -121,7 +121,7 @@ pub fn encode_png_rgb16(width: u32, height: u32, rgb: &[[u16; 3]]) -> Result<Vec
 /// The source map of a plane image as 16-bit RGB pixels: R, G = the exemplar
 /// pixel index `x`, `y` (`floor` of the source coordinate), B = 65535 where
 /// the source is known, all 0 where not (or when the result has no sources).
-pub fn plane_source_pixels(plane: &crate::stages::world::PlaneImage) -> Vec<[u16; 3]> {
+pub fn plane_source_pixels(plane: &crate::world::PlaneImage) -> Vec<[u16; 3]> {
     let n = plane.image.pixel_count();
     match &plane.sources {
         Some(s) => s

@@ -2,6 +2,7 @@ use crate::config::ConfigError;
 use crate::image::ImageError;
 use crate::mesh::MeshError;
 use crate::output::OutputError;
+use crate::stage::StageError;
 
 /// Any failure of a run, with the exit code the CLI maps it to.
 #[derive(Debug, thiserror::Error)]
@@ -19,12 +20,8 @@ pub enum PipelineError {
     #[error(transparent)]
     Output(#[from] OutputError),
     /// A stage refused its input: what and where (exit 2).
-    #[error("stage {index} ({kind}): {message}")]
-    Stage {
-        index: usize,
-        kind: String,
-        message: String,
-    },
+    #[error(transparent)]
+    Stage(#[from] StageError),
     /// A bug or an environment failure (exit 1).
     #[error("internal error: {0}")]
     Internal(String),
@@ -37,7 +34,7 @@ impl PipelineError {
             PipelineError::Config(_)
             | PipelineError::Mesh(_)
             | PipelineError::Image(_)
-            | PipelineError::Stage { .. } => 2,
+            | PipelineError::Stage(_) => 2,
             PipelineError::Output(_) | PipelineError::Internal(_) => 1,
         }
     }

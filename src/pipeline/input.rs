@@ -18,7 +18,7 @@ pub struct LoadedInput {
     /// Its display name.
     pub exemplar_name: String,
     /// Extra exemplar maps (height, normal, roughness), the exemplar's size.
-    pub channels: crate::stages::world::ExemplarChannels,
+    pub channels: crate::world::ExemplarChannels,
 }
 
 fn table_into<T: serde::de::DeserializeOwned>(
@@ -214,7 +214,7 @@ fn load_channels(
     exemplar: &Image,
     exemplar_name: &str,
     opts: &crate::image::ExemplarOptions,
-) -> Result<crate::stages::world::ExemplarChannels, PipelineError> {
+) -> Result<crate::world::ExemplarChannels, PipelineError> {
     use crate::kernels::channels as ch;
     let file = source.file.as_str();
     let value_err = |key: &str, message: String| -> PipelineError {
@@ -347,7 +347,7 @@ fn load_channels(
         Some(spec) => Some(grey(load_file("input.roughness_map", spec)?)),
     };
 
-    Ok(crate::stages::world::ExemplarChannels {
+    Ok(crate::world::ExemplarChannels {
         normal,
         roughness,
         height,

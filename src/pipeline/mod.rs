@@ -11,13 +11,13 @@ mod input;
 pub mod memory_budget;
 pub mod memory_limit;
 pub mod plane_check;
-pub mod registry;
 mod report;
 mod run;
 
+use crate::stage::{Datum, PlaneRole, StagePlan};
+use crate::stages::registry;
 pub use error::PipelineError;
 pub use input::{LoadedInput, check_input_files, input_file, load_input, load_input_from};
-pub use registry::{Datum, PlaneRole, Stage, StageCtx, StageInfo, StagePlan, registry};
 pub use report::{describe_stages, format_report};
 pub use run::{
     RunOptions, RunReport, StageSet, build_schedule, peak_rss_bytes, run, run_in_world, setup_world,
@@ -199,7 +199,7 @@ impl Pipeline {
             })?;
             for need in plan.requires() {
                 if !available.contains(&need) {
-                    let producers = need.producers();
+                    let producers = crate::stages::producers(need);
                     return Err(ConfigError::MissingInput {
                         file: file.clone(),
                         line: kind_line,
@@ -221,7 +221,7 @@ impl Pipeline {
                     });
                 }
             }
-            if matches!(plan.plane_role(), registry::PlaneRole::Request { .. })
+            if matches!(plan.plane_role(), PlaneRole::Request { .. })
                 && !plane_check::PLANE_RESULTS
                     .iter()
                     .any(|d| available.contains(d))

@@ -3,9 +3,10 @@
 //! after the synthesis: the mesh the export will see must be flat in xy, and
 //! a `jump_image` result must have the requested size.
 
-use super::{Datum, Pipeline, PipelineError, PlaneRole};
+use super::{Pipeline, PipelineError};
 use crate::kernels::plane_raster::check_planar_xy;
 use crate::mesh::PolyMesh;
+use crate::stage::{Datum, PlaneRole, StageError};
 use crate::stages::export::plane::{planar_message, size_message};
 
 /// The data that count as a result a plane image can be drawn from.
@@ -22,7 +23,7 @@ pub const PLANE_RESULTS: [Datum; 4] = [
 /// size than `plane_size`.
 ///
 /// # Errors
-/// [`PipelineError::Stage`] of the requesting `export` stage.
+/// [`StageError`] of the requesting `export` stage.
 pub fn check_plane_requests(
     pipeline: &Pipeline,
     input_mesh: &PolyMesh,
@@ -35,11 +36,8 @@ pub fn check_plane_requests(
     let mut image: Option<(u32, u32)> = None;
     let mut surface_result = false;
     for (i, stage) in pipeline.stages.iter().enumerate() {
-        let refuse = |message: String| PipelineError::Stage {
-            index: i + 1,
-            kind: stage.kind().to_string(),
-            message,
-        };
+        let refuse =
+            |message: String| PipelineError::from(StageError::new(i, stage.kind(), message));
         match stage.plane_role() {
             PlaneRole::Keeps => {}
             PlaneRole::ReplacesMesh { planar: p, what: w } => {

@@ -1,7 +1,8 @@
 //! Human-readable text: the end-of-run table and the stage reference.
 
-use super::{RunReport, registry};
+use super::RunReport;
 use crate::config::params::value_text;
+use crate::stages::registry;
 use std::fmt::Write;
 
 /// The per-stage time table printed at the end of a run.

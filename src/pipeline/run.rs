@@ -1,9 +1,10 @@
 //! Running a pipeline: inputs into a fresh `World`, the schedule, the result
 //! metrics, then the files.
 
-use super::{LoadedInput, Pipeline, PipelineError, StageCtx, load_input_from};
+use super::{LoadedInput, Pipeline, PipelineError, load_input_from};
+use crate::stage::{StageCtx, StageError};
 use crate::stages::tangent_field::FaceField;
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::SingleThreadedExecutor;
 use std::path::PathBuf;
@@ -146,6 +147,7 @@ pub fn run_in_world(
 ) -> Result<(), PipelineError> {
     run_schedule(pipeline, world, input, Keep::All)?;
     crate::stages::export::finish_export_job(world, crate::stages::export::Transfer::Copy)
+        .map_err(Into::into)
 }
 
 /// What the world keeps once the stages are done.
@@ -183,10 +185,10 @@ fn run_schedule(
 ) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
     // Every stage's memory estimate for the loaded input, before any work.
-    let sizes = super::memory_budget::InputSizes::of(&input, &pipeline.input);
+    let sizes = crate::stage::memory::InputSizes::of(&input, &pipeline.input);
     let estimates =
         super::memory_budget::check_stages(&pipeline.stages, &sizes, &pipeline.memory_limit)
-            .map_err(|r| PipelineError::Stage {
+            .map_err(|r| StageError {
                 index: r.index,
                 kind: r.kind.into(),
                 message: r.message,
@@ -215,7 +217,7 @@ fn run_schedule(
     }
     schedule.run(world);
     if let Some(err) = world.resource_mut::<StageFailure>().0.take() {
-        return Err(err);
+        return Err(err.into());
     }
     Ok(())
 }
@@ -274,7 +276,7 @@ pub fn run(pipeline: &Pipeline, options: &RunOptions) -> Result<RunReport, Pipel
     let memory = serde_json::json!({
         "limit_bytes": pipeline.memory_limit.bytes,
         "limit_source": pipeline.memory_limit.source.to_string(),
-        "input_bytes": super::memory_budget::InputSizes::of(&input, &pipeline.input).resident_bytes(),
+        "input_bytes": crate::stage::memory::InputSizes::of(&input, &pipeline.input).resident_bytes(),
     });
     let input_counts = serde_json::json!({
         "vertices": input.mesh.vertex_count(),

@@ -1,5 +1,6 @@
-//! Stages: one folder per stage with its settings, systems and registration.
-//! The world model (components and resources) is in [`world`].
+//! Stages: one folder per stage with its settings, systems and registration,
+//! and the list of them ([`registry`]). The contract every stage implements
+//! is [`crate::stage`]; the world model they share is [`crate::world`].
 
 pub mod bake;
 pub mod builtin_pyramid;
@@ -23,4 +24,49 @@ pub mod subdivide_sqrt2;
 pub mod tangent_field;
 pub mod triplanar;
 pub mod wl_match;
-pub mod world;
+
+use crate::stage::{Datum, StageInfo, entry};
+
+/// Every stage, in the order `surfsynth stages` lists them.
+pub fn registry() -> Vec<StageInfo> {
+    vec![
+        entry::<orientation::Orientation>(),
+        entry::<init_colours::InitColours>(),
+        entry::<retile::Retile>(),
+        entry::<jump_map::JumpMapStage>(),
+        entry::<jump_surface::JumpSurface>(),
+        entry::<jump_image::JumpImage>(),
+        entry::<builtin_pyramid::BuiltinPyramid>(),
+        entry::<relax_orientation::RelaxOrientation>(),
+        entry::<wl_match::Match>(),
+        entry::<coherent::Coherent>(),
+        entry::<tangent_field::TangentField>(),
+        entry::<lapped_paste::LappedPaste>(),
+        entry::<subdivide_sqrt2::SubdivideSqrt2>(),
+        entry::<diffuse_orientation::DiffuseOrientation>(),
+        entry::<graph_match::GraphMatch>(),
+        entry::<map_back::MapBack>(),
+        entry::<export::Export>(),
+        entry::<displace::Displace>(),
+        entry::<bake::Bake>(),
+        entry::<triplanar::Triplanar>(),
+    ]
+}
+
+/// Looks a stage kind up.
+pub fn find(kind: &str) -> Option<StageInfo> {
+    registry().into_iter().find(|s| s.kind == kind)
+}
+
+/// Which stages produce `datum` (for a mesh: the `[input]` section), for
+/// hints.
+pub fn producers(datum: Datum) -> Vec<&'static str> {
+    if datum == Datum::Mesh {
+        return vec!["input.mesh"];
+    }
+    registry()
+        .iter()
+        .filter(|s| (s.produces_any)().contains(&datum))
+        .map(|s| s.kind)
+        .collect()
+}

@@ -22,7 +22,7 @@ use surfsynth::kernels::retile::SurfaceProjector;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{LoadOptions, PolyMesh, load_mesh};
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 fn load(name: &str) -> PolyMesh {
     load_mesh(
@@ -214,7 +214,7 @@ fn atlas_errors_name_the_problem() {
 
 /// A pseudo-random value in [0, 1) for vertex `v`, channel `c`.
 fn hash01(v: u32, c: u32) -> f32 {
-    let x = surfsynth::stages::world::mix(17, v as u64, c as u64);
+    let x = surfsynth::world::mix(17, v as u64, c as u64);
     (x >> 40) as f32 / (1u64 << 24) as f32
 }
 

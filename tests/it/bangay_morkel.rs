@@ -22,7 +22,7 @@ use surfsynth::kernels::sqrt2::sqrt2_subdivide;
 use surfsynth::kernels::sweep::{sweep_field, sweep_order};
 use surfsynth::mesh::{PolyMesh, Topology};
 use surfsynth::pipeline::Pipeline;
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 // ----- shared inputs -------------------------------------------------------------
 

@@ -9,7 +9,7 @@ use bevy_ecs::prelude::*;
 use surfsynth::config::ConfigSource;
 use surfsynth::kernels::channels::{decode_normal, luminance_image};
 use surfsynth::pipeline::{Pipeline, load_input};
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 fn pipeline(text: &str) -> Pipeline {
     Pipeline::from_source(ConfigSource::from_text("channels.toml", text)).expect("valid config")

@@ -51,7 +51,7 @@ fn synthesise(
         .zip(&frames)
         .map(|(mesh, frames)| SynthesisLevel { mesh, frames })
         .collect();
-    coherent_synthesis(&levels, exemplar, settings, None, &Progress::hidden())
+    coherent_synthesis(&levels, exemplar, settings, None, None, &Progress::hidden())
         .expect("synthesis runs")
 }
 
@@ -145,7 +145,7 @@ fn the_stage_colours_every_vertex_with_the_pixel_at_its_source_texel() {
     use bevy_ecs::prelude::*;
     use surfsynth::config::ConfigSource;
     use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
-    use surfsynth::stages::world::{Exemplar, SourceTexels, VertexColours};
+    use surfsynth::world::{Exemplar, SourceTexels, VertexColours};
     let text = format!(
         r#"
 seed = 3
@@ -555,6 +555,7 @@ fn masked_refinement_moves_only_the_masked_vertices_and_lowers_the_energy() {
                     &settings,
                     &start,
                     &mask,
+                    None,
                     &Progress::hidden(),
                 )
                 .expect("refinement runs")

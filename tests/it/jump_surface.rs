@@ -8,7 +8,7 @@ use glam::Vec2;
 use surfsynth::config::ConfigSource;
 use surfsynth::kernels::jump_map::JumpMap;
 use surfsynth::pipeline::Pipeline;
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 fn config(mesh: &str, exemplar: &str, wrap: &str, scale: f32, order: &str) -> String {
     format!(

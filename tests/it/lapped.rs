@@ -27,7 +27,7 @@ use surfsynth::mesh::{LoadOptions, PolyMesh, Topology, load_mesh};
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::progress::Progress;
 use surfsynth::stages::lapped_paste::components::*;
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 const SHARED_CLOSED: [&str; 5] = [
     "bunny_1k8.obj",

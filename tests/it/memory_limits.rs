@@ -10,9 +10,10 @@ use crate::common;
 
 use std::path::Path;
 use surfsynth::config::ConfigSource;
-use surfsynth::pipeline::memory_budget::{InputSizes, check_stages};
+use surfsynth::pipeline::memory_budget::check_stages;
 use surfsynth::pipeline::memory_limit::{LIMIT_VAR, LimitSource, MemoryLimit};
 use surfsynth::pipeline::{Pipeline, load_input};
+use surfsynth::stage::memory::InputSizes;
 
 const ONE_GIB: &[(&str, &str)] = &[(LIMIT_VAR, "1G")];
 

@@ -10,7 +10,7 @@ use crate::common;
 use bevy_ecs::prelude::*;
 use std::path::Path;
 use surfsynth::config::ConfigSource;
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 /// Runs a shipped config in-process, on `mesh` instead of its own when
 /// given (its builtin `mesh_options` dropped).

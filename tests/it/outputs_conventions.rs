@@ -11,7 +11,7 @@ use std::path::Path;
 use surfsynth::config::ConfigSource;
 use surfsynth::image::sample::Wrap;
 use surfsynth::pipeline::{Pipeline, check_input_files, load_input, run_in_world};
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 /// A pipeline on a small builtin sphere with the builtin bricks: `stages`
 /// (TOML `[[stage]]` entries), then `export` with `formats`.

@@ -5,7 +5,7 @@ use crate::common::*;
 use bevy_ecs::prelude::*;
 use surfsynth::config::ConfigSource;
 use surfsynth::pipeline::{Pipeline, RunOptions, load_input, run_in_world};
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 const CONFIG: &str = r#"
 seed = 5

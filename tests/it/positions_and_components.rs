@@ -14,7 +14,7 @@ use surfsynth::mesh::Topology;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::pipeline::PipelineError;
 use surfsynth::stages::tangent_field::FaceField;
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 /// Runs `config` on its input mesh, after `edit` changed that mesh.
 fn world_with(config: &str, edit: impl FnOnce(&mut PolyMesh)) -> Result<World, PipelineError> {

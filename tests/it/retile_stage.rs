@@ -5,7 +5,7 @@ use bevy_ecs::prelude::*;
 use surfsynth::config::ConfigSource;
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::retile::SourceCorrespondence;
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 #[test]
 fn retile_stage_spawns_a_pyramid_and_activates_the_finest_level() {

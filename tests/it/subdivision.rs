@@ -843,7 +843,7 @@ fn hausdorff(a: &PolyMesh, b: &PolyMesh) -> (f32, f32) {
 /// Runs the `subdivide_sqrt2` stage on `mesh` with `extra` settings and
 /// returns the finest level.
 fn subdivide_stage(mesh: &PolyMesh, extra: &str) -> PolyMesh {
-    use surfsynth::stages::world::{ActiveMesh, Geometry};
+    use surfsynth::world::{ActiveMesh, Geometry};
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("plate.ply");
     surfsynth::output::ply::write_ply(&path, mesh, None, &[]).unwrap();

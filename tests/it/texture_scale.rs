@@ -7,7 +7,7 @@ use crate::common;
 
 use glam::Vec3;
 use surfsynth::stages::lapped_paste::components::{PasteOrder, PatchFaces, PatchUvs};
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 use crate::common::methods::{HEADER, METHODS};
 

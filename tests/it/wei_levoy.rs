@@ -28,7 +28,7 @@ use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{PolyMesh, Topology};
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
-use surfsynth::stages::world::*;
+use surfsynth::world::*;
 
 const TEXTURES: [&str; 5] = ["stones", "brick", "water", "planks", "grass"];
 

@@ -10,6 +10,7 @@ use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use std::num::NonZeroUsize;
 
+use crate::cache_format::AnalysisStore;
 use crate::image::{Image, sample::Wrap};
 use crate::kernels::wl_match::features::FeatureMatrix;
 use crate::kernels::wl_match::search::pca_kdtree::{TREE_DIMS, fit, project};
@@ -155,7 +156,7 @@ const CACHE_KIND: &str = "appearance";
 /// version, the image (size, channels, every value's bits) and every field
 /// of the spec.
 pub fn cache_key(image: &Image, spec: &AppearanceSpec) -> [u8; 32] {
-    let mut h = crate::cache::key_hasher(&CACHE_MAGIC, CACHE_VERSION, image);
+    let mut h = crate::cache_format::key_hasher(&CACHE_MAGIC, CACHE_VERSION, image);
     h.update(&spec.window.to_le_bytes());
     h.update(&spec.spacing.to_bits().to_le_bytes());
     h.update(&(spec.dims as u64).to_le_bytes());
@@ -176,7 +177,7 @@ impl AppearanceLevel {
         let mut b = Vec::with_capacity(
             64 + self.vectors.len() * APPEARANCE_DIMS * 4 + self.similar.len() * 4 + 32,
         );
-        b.extend_from_slice(&crate::cache::entry_header(
+        b.extend_from_slice(&crate::cache_format::entry_header(
             &CACHE_MAGIC,
             CACHE_VERSION,
             key,
@@ -190,14 +191,14 @@ impl AppearanceLevel {
         for s in &self.similar {
             b.extend_from_slice(&s.to_le_bytes());
         }
-        crate::cache::seal(b)
+        crate::cache_format::seal(b)
     }
 
     /// The level of a cache entry written by [`Self::to_bytes`] with `key`;
     /// `None` for any other bytes (wrong magic, version or key, truncated,
     /// checksum mismatch, sizes that do not add up).
     pub fn from_bytes(bytes: &[u8], key: &[u8; 32]) -> Option<Self> {
-        let body = crate::cache::payload(bytes, &CACHE_MAGIC, CACHE_VERSION, key)?;
+        let body = crate::cache_format::payload(bytes, &CACHE_MAGIC, CACHE_VERSION, key)?;
         const HEAD: usize = 12;
         let u32_at = |i: usize| -> Option<u32> {
             Some(u32::from_le_bytes(body.get(i..i + 4)?.try_into().ok()?))
@@ -234,27 +235,28 @@ impl AppearanceLevel {
     }
 }
 
-/// [`appearance_level`] through the on-disk analysis cache in `dir`
-/// (`crate::cache`; `None`: no cache): a valid entry for the same image and
-/// spec is read instead of analysing (the same values, bit for bit); a
-/// missing, stale or corrupt one is rebuilt and written. Returns the level
-/// and whether it came from the cache.
+/// [`appearance_level`] through an analysis `store` (the on-disk cache;
+/// `None`: none): a valid entry for the same image and spec is read instead
+/// of analysing (the same values, bit for bit); a missing, stale or corrupt
+/// one is rebuilt and written. Returns the level and whether it came from
+/// the store.
 pub fn appearance_level_cached(
     image: &Image,
     spec: &AppearanceSpec,
-    dir: Option<&std::path::Path>,
+    store: Option<&dyn AnalysisStore>,
 ) -> (AppearanceLevel, bool) {
-    let Some(dir) = dir else {
+    let Some(store) = store else {
         return (appearance_level(image, spec), false);
     };
     let key = cache_key(image, spec);
-    if let Some(level) = crate::cache::read(dir, CACHE_KIND, &key)
+    if let Some(level) = store
+        .read(CACHE_KIND, &key)
         .and_then(|bytes| AppearanceLevel::from_bytes(&bytes, &key))
     {
         return (level, true);
     }
     let level = appearance_level(image, spec);
-    crate::cache::write(dir, CACHE_KIND, &key, &level.to_bytes(&key));
+    store.write(CACHE_KIND, &key, &level.to_bytes(&key));
     (level, false)
 }
 
@@ -360,8 +362,9 @@ mod tests {
         assert!(AppearanceLevel::from_bytes(&bytes[..bytes.len() - 5], &key).is_none());
         // Through a cache folder: written on the first call, read on the second.
         let dir = tempfile::tempdir().expect("temp dir");
-        let (a, hit_a) = appearance_level_cached(&img, &spec, Some(dir.path()));
-        let (b, hit_b) = appearance_level_cached(&img, &spec, Some(dir.path()));
+        let store = crate::cache::DiskCache(dir.path().to_path_buf());
+        let (a, hit_a) = appearance_level_cached(&img, &spec, Some(&store));
+        let (b, hit_b) = appearance_level_cached(&img, &spec, Some(&store));
         assert!(!hit_a && hit_b);
         assert_eq!(a.vectors, b.vectors);
         assert_eq!(a.similar, b.similar);

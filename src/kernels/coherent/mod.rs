@@ -58,6 +58,7 @@ use super::occupancy::Occupancy;
 use super::wl_match::parents::TriangleBvh;
 use super::wl_match::schedule::{dependency_batches_of, random_order};
 use super::wl_match::{SynthesisLevel, WlError, validate_levels};
+use crate::cache_format::AnalysisStore;
 use crate::image::{Image, pyramid::gaussian_stack, sample::Wrap};
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
@@ -99,10 +100,6 @@ pub struct CoherentSettings {
     pub seed: u64,
     /// Exemplar addressing.
     pub wrap: Wrap,
-    /// Read and write each level's appearance analysis (exemplar only) in
-    /// the on-disk analysis cache (`crate::cache::default_dir`, as the jump
-    /// maps'); results are the same bits either way.
-    pub cache: bool,
 }
 
 impl CoherentSettings {
@@ -119,7 +116,6 @@ impl CoherentSettings {
         scale: 0.0,
         seed: 0,
         wrap: Wrap::Repeat,
-        cache: false,
     };
 }
 
@@ -550,9 +546,12 @@ pub fn coherent_synthesis(
     exemplar: &Image,
     settings: &CoherentSettings,
     start: Option<&[Vec2]>,
+    store: Option<&dyn AnalysisStore>,
     progress: &Progress,
 ) -> Result<Vec<CoherentLevel>, WlError> {
-    synthesis(levels, exemplar, settings, start, None, None, progress)
+    synthesis(
+        levels, exemplar, settings, start, None, None, store, progress,
+    )
 }
 
 /// Refines another method's coordinates `start` on one level (as
@@ -572,6 +571,7 @@ pub fn coherent_refine(
     settings: &CoherentSettings,
     start: &[Vec2],
     mask: &[bool],
+    store: Option<&dyn AnalysisStore>,
     progress: &Progress,
 ) -> Result<CoherentLevel, WlError> {
     if mask.len() != level.mesh.vertex_count() {
@@ -591,6 +591,7 @@ pub fn coherent_refine(
         Some(start),
         Some(mask),
         topology,
+        store,
         progress,
     )?;
     Ok(out.swap_remove(0))
@@ -603,6 +604,7 @@ fn synthesis(
     start: Option<&[Vec2]>,
     mask: Option<&[bool]>,
     finest_topology: Option<&Topology>,
+    store: Option<&dyn AnalysisStore>,
     progress: &Progress,
 ) -> Result<Vec<CoherentLevel>, WlError> {
     if levels.is_empty() {
@@ -680,9 +682,7 @@ fn synthesis(
             seed: settings.seed ^ l as u64,
             wrap: settings.wrap,
         };
-        let cache_dir = settings.cache.then(crate::cache::default_dir).flatten();
-        let (app, analysis_cached) =
-            appearance_level_cached(&stack[stack_level], &spec, cache_dir.as_deref());
+        let (app, analysis_cached) = appearance_level_cached(&stack[stack_level], &spec, store);
         drop(app_span);
         let analysis_seconds = started.elapsed().as_secs_f64();
         let built;

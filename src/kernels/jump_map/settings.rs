@@ -179,7 +179,8 @@ impl JumpMapSettings {
     /// blake3 over the algorithm version, the exemplar's size, channel count
     /// and pixel bits, and every parameter. Equal keys mean an equal map.
     pub fn cache_key(&self, exemplar: &Image) -> [u8; 32] {
-        let mut h = crate::cache::key_hasher(b"surfsynth jump map", ANALYSIS_VERSION, exemplar);
+        let mut h =
+            crate::cache_format::key_hasher(b"surfsynth jump map", ANALYSIS_VERSION, exemplar);
         h.update(&(self.neighbourhood_widths.len() as u32).to_le_bytes());
         for w in &self.neighbourhood_widths {
             h.update(&w.to_le_bytes());

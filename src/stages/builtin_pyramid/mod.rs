@@ -9,9 +9,9 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::flatten::{mean_fan_triangle_area, template_spacing};
 use crate::mesh::PolyMesh;
 use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
-use crate::pipeline::memory_budget::{BYTES_PER_MESH_VERTEX, InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
-use crate::stages::world::*;
+use crate::stage::memory::{BYTES_PER_MESH_VERTEX, InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -204,8 +204,8 @@ impl Stage for BuiltinPyramid {
             |a, b| (a * b).saturating_mul(BYTES_PER_MESH_VERTEX),
         )]
     }
-    fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
-        crate::pipeline::PlaneRole::ReplacesMesh {
+    fn plane_role(settings: &Self::Settings) -> crate::stage::PlaneRole {
+        crate::stage::PlaneRole::ReplacesMesh {
             planar: settings.mesh == "plane",
             what: format!("the builtin_pyramid mesh `{}`", settings.mesh),
         }
@@ -218,7 +218,7 @@ impl Stage for BuiltinPyramid {
             let meshes = match builtin_pyramid(&settings) {
                 Ok(m) => m,
                 Err(message) => {
-                    failure.0 = Some(PipelineError::Stage {
+                    failure.0 = Some(StageError {
                         index: ctx.index + 1,
                         kind: Self::KIND.into(),
                         message,

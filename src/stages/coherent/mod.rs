@@ -12,10 +12,10 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::coherent::{CoherentSettings, coherent_synthesis, pixel_centres};
 use crate::kernels::wl_match::SynthesisLevel;
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
+use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::wl_match::{DataQuery, LevelQuery, PyramidInput, frames_missing, pyramid_input};
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -193,7 +193,7 @@ impl Stage for Coherent {
                mut failure: ResMut<StageFailure>,
                levels: LevelQuery,
                data: DataQuery| {
-            let fail = |message: String| PipelineError::Stage {
+            let fail = |message: String| StageError {
                 index: ctx.index + 1,
                 kind: Self::KIND.into(),
                 message,
@@ -233,8 +233,8 @@ impl Stage for Coherent {
                 },
                 seed: seed.derive(ctx.index, 0),
                 wrap: exemplar.wrap,
-                cache: settings.cache,
             };
+            let store = crate::cache::DiskCache::if_enabled(settings.cache);
             // The kernel sets the length: vertices times passes.
             let progress = Progress::new(0, Self::KIND);
             let _finish = progress.finish_on_drop();
@@ -256,7 +256,14 @@ impl Stage for Coherent {
                     st
                 }
             };
-            let results = match coherent_synthesis(&inputs, &exemplar.image, &kernel, start, &progress) {
+            let results = match coherent_synthesis(
+                &inputs,
+                &exemplar.image,
+                &kernel,
+                start,
+                store.as_ref().map(|s| s as _),
+                &progress,
+            ) {
                 Ok(r) => r,
                 Err(e) => {
                     failure.0 = Some(fail(e.to_string()));

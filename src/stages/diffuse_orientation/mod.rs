@@ -28,11 +28,11 @@ use crate::kernels::frames::TangentFrame;
 use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::sweep::{relax_sweep, sweep_field};
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::{Progress, level_label};
+use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::position;
 use crate::stages::subdivide_sqrt2::carry_attribute;
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -252,7 +252,7 @@ impl Stage for DiffuseOrientation {
                mut failure: ResMut<StageFailure>,
                meshes: Query<(&Geometry, Option<&LevelParents>)>| {
             let fail = |failure: &mut StageFailure, message: String| {
-                failure.0 = Some(PipelineError::Stage {
+                failure.0 = Some(StageError {
                     index: ctx.index + 1,
                     kind: Self::KIND.into(),
                     message,

@@ -21,9 +21,9 @@ use crate::kernels::channels::{
     displace_along_normals, heights_at_corner_uvs, heights_at_texels, mean_height,
     smooth_vertex_heights_with_progress,
 };
-use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -147,8 +147,8 @@ impl Stage for Displace {
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         Vec::new()
     }
-    fn plane_role(_: &Self::Settings) -> crate::pipeline::PlaneRole {
-        crate::pipeline::PlaneRole::DeformsMesh
+    fn plane_role(_: &Self::Settings) -> crate::stage::PlaneRole {
+        crate::stage::PlaneRole::DeformsMesh
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         (move |mut commands: Commands,

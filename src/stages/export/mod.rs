@@ -5,10 +5,10 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::jump_surface::Blend;
 use crate::output::render::{Layer, RenderOptions, Shading, render_views};
-use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stage::memory::{InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::lapped_paste::components::*;
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -276,14 +276,14 @@ impl Stage for Export {
         }
         out
     }
-    fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
+    fn plane_role(settings: &Self::Settings) -> crate::stage::PlaneRole {
         if settings.formats.iter().any(|f| f == "plane") {
-            crate::pipeline::PlaneRole::Request {
+            crate::stage::PlaneRole::Request {
                 width: settings.plane_size[0],
                 height: settings.plane_size[1],
             }
         } else {
-            crate::pipeline::PlaneRole::Keeps
+            crate::stage::PlaneRole::Keeps
         }
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
@@ -638,7 +638,7 @@ pub enum Transfer {
 /// When a stage after `export` changed the exported mesh, colours or
 /// coordinates (the previews show the state at export time, the files would
 /// not): put `export` last.
-pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), PipelineError> {
+pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), StageError> {
     if world.resource::<ExportJob>().take_baked_asset {
         if transfer == Transfer::Copy {
             // The world stays whole for its readers: its asset gets the
@@ -659,9 +659,13 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
     };
     let e = source.entity;
     let now = world.read_change_tick();
-    let entity = world
-        .get_entity(e)
-        .map_err(|_| PipelineError::Internal("the exported mesh entity is gone".into()))?;
+    let entity = world.get_entity(e).map_err(|_| StageError {
+        index: source.stage,
+        kind: Export::KIND.into(),
+        message:
+            "the exported mesh entity is gone: a stage after `export` removed it; put `export` last"
+                .into(),
+    })?;
     let changed = |t: Option<bevy_ecs::change_detection::Tick>| {
         t.is_some_and(|t| t.is_newer_than(source.tick, now))
     };
@@ -670,7 +674,7 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
         || changed(entity.get_ref::<CornerUvs>().map(|r| r.last_changed()))
         || changed(entity.get_ref::<AtlasTexture>().map(|r| r.last_changed()))
     {
-        return Err(PipelineError::Stage {
+        return Err(StageError {
             index: source.stage,
             kind: Export::KIND.into(),
             message: "a stage after `export` changed the mesh it exports; put `export` last".into(),
@@ -687,7 +691,7 @@ pub fn finish_export_job(world: &mut World, transfer: Transfer) -> Result<(), Pi
         if q.iter(world).any(|(of, faces, uvs)| {
             of.0 == e && (changed(Some(faces.last_changed())) || changed(Some(uvs.last_changed())))
         }) {
-            return Err(PipelineError::Stage {
+            return Err(StageError {
                 index: source.stage,
                 kind: Export::KIND.into(),
                 message: "a stage after `export` changed the pastes it exports; put `export` last"

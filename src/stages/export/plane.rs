@@ -13,7 +13,7 @@ use crate::kernels::plane_raster::{
     PixelHit, PlaneGrid, check_planar_xy, dominant_corner, rasterise_xy, snap_source,
 };
 use crate::mesh::PolyMesh;
-use crate::stages::world::{PlaneImage, SynthesisedImage};
+use crate::world::{PlaneImage, SynthesisedImage};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 

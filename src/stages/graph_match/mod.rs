@@ -50,9 +50,9 @@ use crate::kernels::graph_match::{
 };
 use crate::kernels::sweep::{sweep_field, sweep_order};
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::{Progress, level_label};
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -364,7 +364,7 @@ impl Stage for GraphMatch {
                mut failure: ResMut<StageFailure>,
                meshes: LevelQuery| {
             let fail = |failure: &mut StageFailure, message: String| {
-                failure.0 = Some(PipelineError::Stage {
+                failure.0 = Some(StageError {
                     index: ctx.index + 1,
                     kind: Self::KIND.into(),
                     message,

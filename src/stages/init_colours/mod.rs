@@ -5,8 +5,8 @@
 //! which equalises the colour histograms level by level.
 
 use crate::config::params::{ParamDoc, StageSettings};
-use crate::pipeline::{Datum, Stage, StageCtx};
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;

@@ -19,10 +19,10 @@ use crate::kernels::jump_map::{
     PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
     synthesize_patches_with_progress, synthesize_pixels_with_progress,
 };
-use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -237,8 +237,8 @@ impl Stage for JumpImage {
             |w, h| (w * h).saturating_mul(BYTES_PER_PIXEL),
         )]
     }
-    fn plane_role(settings: &Self::Settings) -> crate::pipeline::PlaneRole {
-        crate::pipeline::PlaneRole::Image {
+    fn plane_role(settings: &Self::Settings) -> crate::stage::PlaneRole {
+        crate::stage::PlaneRole::Image {
             width: settings.width,
             height: settings.height,
         }

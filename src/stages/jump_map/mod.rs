@@ -9,10 +9,10 @@ use crate::kernels::jump_map::analysis::analysis_bytes;
 use crate::kernels::jump_map::{
     Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress,
 };
-use crate::pipeline::memory_budget::{Fit, InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;

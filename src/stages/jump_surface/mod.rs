@@ -14,8 +14,8 @@ use crate::kernels::jump_surface::{
 use crate::kernels::vertex_order::VertexOrder;
 use crate::kernels::wl_match::SynthesisLevel;
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, Stage, StageCtx};
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -337,9 +337,9 @@ impl Stage for JumpSurface {
                     scale: scales[0],
                     seed: seed.derive(ctx.index, 1),
                     wrap: exemplar.wrap,
-                    cache: settings.cache,
                     ..REFINE_SETTINGS
                 };
+                let store = crate::cache::DiskCache::if_enabled(settings.cache);
                 let start: Vec<Vec2> = out.texel.iter().map(|&t| t + Vec2::splat(0.5)).collect();
                 // Its own bar: on a large fine mesh the refinement can take
                 // longer than the synthesis.
@@ -356,6 +356,7 @@ impl Stage for JumpSurface {
                     &kernel,
                     &start,
                     &band,
+                    store.as_ref().map(|s| s as _),
                     &refine_progress,
                 ) {
                     Ok(refined) => {

@@ -39,11 +39,11 @@ use crate::kernels::lapped::paste::{
     LappedTexture, PASTING_PROGRESS_STEPS, PasteSettings, paste_until_covered,
 };
 use crate::mesh::PolyMesh;
-use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::tangent_field::FaceField;
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -475,7 +475,7 @@ fn patch_cache_key(
     settings: &LappedPasteSettings,
     seed: u64,
 ) -> [u8; 32] {
-    let mut h = crate::cache::key_hasher(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, exemplar);
+    let mut h = crate::cache_format::key_hasher(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, exemplar);
     h.update(&[
         match wrap {
             Wrap::Repeat => 0u8,
@@ -502,7 +502,7 @@ fn patch_cache_key(
 /// A cache entry of `patches`: what cutting computes (alpha, centre, hull,
 /// origin); the colours are copied from the exemplar again when read.
 fn patches_to_bytes(patches: &[TexturePatch], key: &[u8; 32]) -> Vec<u8> {
-    let mut b = crate::cache::entry_header(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key);
+    let mut b = crate::cache_format::entry_header(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key);
     b.extend_from_slice(&(patches.len() as u32).to_le_bytes());
     let f32s = |b: &mut Vec<u8>, v: &[f32]| {
         for x in v {
@@ -523,7 +523,7 @@ fn patches_to_bytes(patches: &[TexturePatch], key: &[u8; 32]) -> Vec<u8> {
             b.extend_from_slice(&o.to_le_bytes());
         }
     }
-    crate::cache::seal(b)
+    crate::cache_format::seal(b)
 }
 
 /// The patches of an entry written by [`patches_to_bytes`] with `key`, their
@@ -534,7 +534,7 @@ fn patches_from_bytes(
     exemplar: &Image,
     wrap: Wrap,
 ) -> Option<Vec<TexturePatch>> {
-    let body = crate::cache::payload(bytes, &PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key)?;
+    let body = crate::cache_format::payload(bytes, &PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key)?;
     let mut at = 0usize;
     let mut take = |n: usize| -> Option<&[u8]> {
         let s = body.get(at..at.checked_add(n)?)?;
@@ -951,7 +951,7 @@ impl Stage for LappedPaste {
                mut failure: ResMut<StageFailure>,
                mut meshes: Query<(&mut Geometry, &FaceField)>,
                old: Query<(Entity, &PasteOf)>| {
-            let fail = |message: String| PipelineError::Stage {
+            let fail = |message: String| StageError {
                 index: ctx.index + 1,
                 kind: Self::KIND.into(),
                 message,

@@ -12,9 +12,9 @@
 
 use crate::config::params::{ParamDoc, StageSettings};
 use crate::kernels::retile::{ResultAttributes, map_back_with_progress};
-use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;

@@ -20,9 +20,9 @@ use crate::kernels::frames::{TangentFrame, frames_from_global_direction, frames_
 use crate::kernels::geodesic::nearest_vertex;
 use crate::kernels::orientation_field::{Anchor, Singularity, up_field};
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::position;
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -368,7 +368,7 @@ impl Stage for Orientation {
                     commands.entity(active.0).insert(Frames(result.frames));
                 }
                 Err(message) => {
-                    failure.0 = Some(PipelineError::Stage {
+                    failure.0 = Some(StageError {
                         index: ctx.index + 1,
                         kind: Self::KIND.into(),
                         message,

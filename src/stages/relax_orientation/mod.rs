@@ -9,9 +9,9 @@ use crate::kernels::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation_with_progress,
 };
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -117,23 +117,13 @@ impl Stage for RelaxOrientation {
         vec![Datum::Frames]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               seed: Res<RunSeed>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               levels: LevelQuery,
-               meshes: Query<&Geometry>| {
-            let entities = match pyramid_entities(levels.iter().map(|(e, l, s)| (e, *l, s))) {
-                Ok(e) => e,
-                Err(message) => {
-                    failure.0 = Some(PipelineError::Stage {
-                        index: ctx.index + 1,
-                        kind: Self::KIND.into(),
-                        message,
-                    });
-                    return;
-                }
-            };
+        let relax = move |mut commands: Commands,
+                          seed: Res<RunSeed>,
+                          mut metrics: ResMut<Metrics>,
+                          levels: LevelQuery,
+                          meshes: Query<&Geometry>|
+              -> SystemResult {
+            let entities = pyramid_entities(levels.iter().map(|(e, l, s)| (e, *l, s)))?;
             let geometry: Vec<&crate::mesh::PolyMesh> = entities
                 .iter()
                 .filter_map(|&e| meshes.get(e).ok().map(|g| &g.0))
@@ -179,7 +169,8 @@ impl Stage for RelaxOrientation {
             for (e, frames) in entities.iter().zip(result.frames) {
                 commands.entity(*e).insert(Frames(frames));
             }
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, relax)
     }
 }

@@ -27,7 +27,7 @@ use crate::progress::Progress;
 use crate::stages::lapped_paste::components::{
     PasteOf, PasteOrder, PatchFaces, PatchUvs, TexturePatchIndex, TexturePatches,
 };
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;

@@ -7,10 +7,10 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::retile::{RetileSettings, RetileTarget, retile_with_progress};
 use crate::mesh::{PolyMesh, Topology};
-use crate::pipeline::memory_budget::{Fit, InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;

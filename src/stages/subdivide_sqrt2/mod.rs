@@ -18,10 +18,10 @@ use crate::kernels::sqrt2::{
     AreaStats, MAX_HIERARCHY_LEVELS, MAX_HIERARCHY_VERTICES, Parents, Sqrt2Settings,
     adaptive_sqrt2, sqrt2_subdivide_with,
 };
-use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
-use crate::pipeline::{Datum, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -458,7 +458,7 @@ impl Stage for SubdivideSqrt2 {
             };
             let input = &geometry.0;
             if input.face_count() == 0 {
-                failure.0 = Some(crate::pipeline::PipelineError::Stage {
+                failure.0 = Some(crate::stage::StageError {
                     index: ctx.index + 1,
                     kind: Self::KIND.into(),
                     message: "the mesh has no faces to subdivide".into(),
@@ -527,7 +527,7 @@ impl Stage for SubdivideSqrt2 {
                             n
                         }
                         Err(message) => {
-                            failure.0 = Some(crate::pipeline::PipelineError::Stage {
+                            failure.0 = Some(crate::stage::StageError {
                                 index: ctx.index + 1,
                                 kind: Self::KIND.into(),
                                 message,

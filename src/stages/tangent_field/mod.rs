@@ -25,9 +25,9 @@ use crate::kernels::lapped::tangent_field::{
     FieldConstraint, field_from_vertex_frames, global_up_field, nearest_face, rbf_field,
 };
 use crate::mesh::Topology;
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::position;
-use crate::stages::world::*;
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -390,7 +390,7 @@ impl Stage for TangentField {
             let Ok((geometry, frames)) = meshes.get(active.0) else {
                 return;
             };
-            let fail = |message: String| PipelineError::Stage {
+            let fail = |message: String| StageError {
                 index: ctx.index + 1,
                 kind: Self::KIND.into(),
                 message,

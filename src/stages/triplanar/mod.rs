@@ -10,8 +10,8 @@
 //! resource, `TexelSpacing` (one image pixel), metrics.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::pipeline::{Datum, Stage, StageCtx};
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;

@@ -17,9 +17,9 @@ use crate::kernels::wl_match::{
     wei_levoy_synthesis_with_progress,
 };
 use crate::mesh::{PolyMesh, Topology};
-use crate::pipeline::{Datum, PipelineError, Stage, StageCtx};
 use crate::progress::Progress;
-use crate::stages::world::*;
+use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -217,7 +217,7 @@ impl Stage for Match {
                mut failure: ResMut<StageFailure>,
                levels: LevelQuery,
                data: DataQuery| {
-            let fail = |message: String| PipelineError::Stage {
+            let fail = |message: String| StageError {
                 index: ctx.index + 1,
                 kind: Self::KIND.into(),
                 message,

@@ -1,10 +1,17 @@
-//! The stage registry: every stage kind, its documented settings, what it
-//! needs and makes, and how it adds its systems to the schedule.
+//! The stage contract: what a stage kind declares ([`Stage`]: its typed
+//! settings, the data it needs and makes, its systems, its plane role, its
+//! memory estimates), the type-erased configured stage ([`StagePlan`]), the
+//! registry entry ([`StageInfo`]) and a stage's failure ([`StageError`]).
+//! Every stage implements it; the list of stages is `stages::registry`.
+
+pub mod memory;
 
 use crate::config::params::{ParamDoc, StageSettings, check_range, defaults_table};
-use crate::pipeline::memory_budget::{InputSizes, MemoryEstimate};
+use crate::world::{StageFailure, fail};
+use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
+use memory::{InputSizes, MemoryEstimate};
 
 /// Data a stage reads or writes, for validating the order of stages.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -52,18 +59,6 @@ impl Datum {
             Datum::BakedAtlas => "the `bake` stage's atlas (export formats `glb`, `baked_obj`)",
         }
     }
-
-    /// Which stages produce it (for a mesh: the `[input]` section).
-    pub fn producers(self) -> Vec<&'static str> {
-        if self == Datum::Mesh {
-            return vec!["input.mesh"];
-        }
-        registry()
-            .iter()
-            .filter(|s| (s.produces_any)().contains(&self))
-            .map(|s| s.kind)
-            .collect()
-    }
 }
 
 /// What a stage means for the planar image output (`export` format
@@ -104,6 +99,34 @@ pub struct StageCtx {
     pub index: usize,
 }
 
+/// What a fallible stage system returns: `Err(message)` fails the stage,
+/// the message saying what is wrong and what is allowed.
+pub type SystemResult = Result<(), String>;
+
+impl StageCtx {
+    /// `system` of stage `kind`, whose `Err(message)` is recorded as the
+    /// stage's failure ([`StageError`]; the first one wins). It runs only
+    /// while nothing has failed, so the systems after a failed one, in its
+    /// stage and in later stages, do not run; the pipeline returns the
+    /// error.
+    pub fn fallible<M>(
+        self,
+        kind: &'static str,
+        system: impl IntoSystem<(), SystemResult, M>,
+    ) -> ScheduleConfigs<ScheduleSystem> {
+        let index = self.index;
+        let record = move |In(result): In<SystemResult>, mut failure: ResMut<StageFailure>| {
+            if let Err(message) = result {
+                fail(&mut failure, index, kind, message);
+            }
+        };
+        system
+            .pipe(record)
+            .run_if(|failure: Res<StageFailure>| failure.0.is_none())
+            .into_configs()
+    }
+}
+
 /// A stage kind: its settings and its systems.
 pub trait Stage: 'static {
     /// The `kind` in `[[stage]]`.
@@ -127,7 +150,7 @@ pub trait Stage: 'static {
     /// Its large allocations, estimated from its settings and the input's
     /// sizes before any work (default: none). Each estimate names the
     /// parameter it grows with; the run is refused when one is over the
-    /// memory limit ([`crate::pipeline::memory_budget`]).
+    /// memory limit (`pipeline::memory_budget`).
     fn memory_estimate(_settings: &Self::Settings, _sizes: &InputSizes) -> Vec<MemoryEstimate> {
         Vec::new()
     }
@@ -250,34 +273,26 @@ pub fn entry<S: Stage>() -> StageInfo {
     }
 }
 
-/// Every stage, in the order `surfsynth stages` lists them.
-pub fn registry() -> Vec<StageInfo> {
-    use crate::stages::*;
-    vec![
-        entry::<orientation::Orientation>(),
-        entry::<init_colours::InitColours>(),
-        entry::<retile::Retile>(),
-        entry::<jump_map::JumpMapStage>(),
-        entry::<jump_surface::JumpSurface>(),
-        entry::<jump_image::JumpImage>(),
-        entry::<builtin_pyramid::BuiltinPyramid>(),
-        entry::<relax_orientation::RelaxOrientation>(),
-        entry::<wl_match::Match>(),
-        entry::<coherent::Coherent>(),
-        entry::<tangent_field::TangentField>(),
-        entry::<lapped_paste::LappedPaste>(),
-        entry::<subdivide_sqrt2::SubdivideSqrt2>(),
-        entry::<diffuse_orientation::DiffuseOrientation>(),
-        entry::<graph_match::GraphMatch>(),
-        entry::<map_back::MapBack>(),
-        entry::<export::Export>(),
-        entry::<displace::Displace>(),
-        entry::<bake::Bake>(),
-        entry::<triplanar::Triplanar>(),
-    ]
+/// A stage refused its input or failed: which stage and why. The pipeline
+/// reports it as exit 2 (`PipelineError::Stage`).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("stage {index} ({kind}): {message}")]
+pub struct StageError {
+    /// 1-based position in the pipeline.
+    pub index: usize,
+    /// Stage kind.
+    pub kind: String,
+    /// What is wrong, and what is allowed.
+    pub message: String,
 }
 
-/// Looks a stage kind up.
-pub fn find(kind: &str) -> Option<StageInfo> {
-    registry().into_iter().find(|s| s.kind == kind)
+impl StageError {
+    /// The failure of the stage at 0-based position `index`.
+    pub fn new(index: usize, kind: &str, message: impl Into<String>) -> Self {
+        Self {
+            index: index + 1,
+            kind: kind.to_string(),
+            message: message.into(),
+        }
+    }
 }

@@ -1,0 +1,130 @@
+//! Mesh levels: the components of a mesh entity (geometry, frames, scales,
+//! colours, texture coordinates, the 3-way blend layers), the pyramids the
+//! multiresolution stages build (retile levels, the √2 hierarchy), and which
+//! mesh the later stages work on ([`ActiveMesh`]). Everything is
+//! structure-of-arrays: a vertex is a row (`u32` id) in each per-vertex array.
+
+use crate::kernels::frames::TangentFrame;
+use crate::mesh::PolyMesh;
+use bevy_ecs::prelude::*;
+use glam::Vec2;
+
+/// Marks the mesh as loaded from `[input]`; it is never modified, so results
+/// can be mapped back onto it.
+#[derive(Component, Debug, Default)]
+pub struct SourceMesh;
+
+/// Pyramid level of a mesh entity: 0 is the finest.
+#[derive(Component, Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct MeshLevel(pub u8);
+
+/// Connectivity and positions of a mesh level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct Geometry(pub PolyMesh);
+
+/// Per-vertex tangent frames (s, t, n).
+#[derive(Component, Clone, Debug, Default)]
+pub struct Frames(pub Vec<TangentFrame>);
+
+/// Per-vertex texture scale: exemplar texels per world unit.
+#[derive(Component, Clone, Debug, Default)]
+pub struct VertexScale(pub Vec<f32>);
+
+/// Per-vertex colours, `channels` values per vertex, nominally in `[0, 1]`.
+#[derive(Component, Clone, Debug, Default)]
+pub struct VertexColours {
+    /// Values per vertex (the exemplar's channel count).
+    pub channels: usize,
+    /// `values[v * channels + c]`.
+    pub values: Vec<f32>,
+}
+
+/// Per-vertex source coordinate in the exemplar, in pixels (continuous, pixel
+/// centres at `i + 0.5`): which exemplar texel each vertex colour came from, so
+/// other exemplar channels can follow the same synthesis.
+#[derive(Component, Clone, Debug, Default)]
+pub struct SourceTexels(pub Vec<Vec2>);
+
+/// Per-corner texture coordinates in `[0, 1]` units of the exemplar (v = 0 at
+/// the exemplar's top row; values outside wrap when the exemplar tiles).
+#[derive(Component, Clone, Debug, Default)]
+pub struct CornerUvs(pub Vec<Vec2>);
+
+/// Per fan triangle of the active mesh (see `PolyMesh::triangulate_corners`),
+/// the texture coordinates of its three corners for each of the three choices
+/// of base vertex: the 3-way blend of Zelinka & Garland §6.5, stored
+/// compactly (per-vertex texels and per-corner side offsets; read through
+/// [`BlendUvs::of`]).
+#[derive(Component, Clone, Debug, Default)]
+pub struct BlendUvs(pub crate::kernels::jump_surface::BlendLayers);
+
+impl BlendUvs {
+    /// The layers for `mesh`, or `None` when they were made for another mesh.
+    pub fn of<'a>(
+        &'a self,
+        mesh: &'a crate::mesh::PolyMesh,
+    ) -> Option<crate::kernels::jump_surface::Blend<'a>> {
+        self.0
+            .fits(mesh)
+            .then_some(crate::kernels::jump_surface::Blend::Compact {
+                layers: &self.0,
+                mesh,
+            })
+    }
+}
+
+/// The mesh entity later stages work on and export: the source mesh until a
+/// stage (retile, subdivide) makes a new finest level.
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct ActiveMesh(pub Entity);
+
+/// The entities of the mesh pyramid, finest level first: every entity with a
+/// [`MeshLevel`] except the source mesh, or the source mesh alone (a one-level
+/// pyramid) when there is no other. `levels` lists `(entity, level, is the
+/// source mesh)`.
+///
+/// # Errors
+/// A message naming the problem when the levels are not `0, 1, 2, …` each
+/// exactly once.
+pub fn pyramid_entities(
+    levels: impl IntoIterator<Item = (Entity, MeshLevel, bool)>,
+) -> Result<Vec<Entity>, String> {
+    let all: Vec<(Entity, MeshLevel, bool)> = levels.into_iter().collect();
+    let has_pyramid = all.iter().any(|(_, _, source)| !source);
+    let mut chosen: Vec<(MeshLevel, Entity)> = all
+        .into_iter()
+        .filter(|(_, _, source)| *source != has_pyramid)
+        .map(|(e, l, _)| (l, e))
+        .collect();
+    chosen.sort();
+    for (i, (level, _)) in chosen.iter().enumerate() {
+        if level.0 as usize != i {
+            return Err(format!(
+                "the mesh pyramid's levels are {:?}; expected 0, 1, 2, … each once",
+                chosen.iter().map(|(l, _)| l.0).collect::<Vec<_>>()
+            ));
+        }
+    }
+    if chosen.is_empty() {
+        return Err("there is no mesh".into());
+    }
+    Ok(chosen.into_iter().map(|(_, e)| e).collect())
+}
+
+/// Per-vertex sweep value (Turk 2001; Bangay & Morkel 2006 §3.1.1): grows
+/// along the orientation field from an anchor; sorting by it gives the
+/// synthesis order of the coarsest level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct SweepField(pub Vec<f32>);
+
+/// On a √2 hierarchy level: the parents of each of its vertices in the next
+/// coarser level (`MeshLevel(l + 1)`), so attributes travel down the
+/// hierarchy. Absent on the coarsest level.
+#[derive(Component, Clone, Debug, Default)]
+pub struct LevelParents(pub crate::kernels::sqrt2::Parents);
+
+/// The √2 mesh hierarchy made by `subdivide_sqrt2`: its level entities,
+/// finest first (index `l` holds `MeshLevel(l)`). Vertex ids are shared:
+/// vertex `v` of a coarser level is vertex `v` of every finer one.
+#[derive(Resource, Clone, Debug, Default)]
+pub struct Sqrt2Pyramid(pub Vec<Entity>);
