@@ -20,7 +20,7 @@ use surfsynth::kernels::atlas::bake::{
     AtlasFrames, BakeTarget, BlendUvSource, VertexColourSource, bake_channels,
 };
 use surfsynth::kernels::atlas::{AtlasSettings, build_uv_atlas, rasterise_faces};
-use surfsynth::kernels::retile::SurfaceProjector;
+use surfsynth::kernels::wei_levoy::retile::SurfaceProjector;
 use surfsynth::mesh::PolyMesh;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 

@@ -21,11 +21,11 @@ use rand::{SeedableRng, seq::SliceRandom};
 use std::hint::black_box;
 use std::time::Duration;
 use surfsynth::image::{Image, sample::Wrap};
-use surfsynth::kernels::frames::TangentFrame;
-use surfsynth::kernels::graph_match::{
+use surfsynth::kernels::bangay_morkel::graph_match::{
     BatchRule, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, SynthesisState, match_pass,
     mean_edge_lengths,
 };
+use surfsynth::kernels::surface::frames::TangentFrame;
 use surfsynth::mesh::{PolyMesh, Topology};
 
 /// A flat `n × n` quad grid with edge length `edge`: `(n + 1)²` vertices.

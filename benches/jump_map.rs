@@ -7,13 +7,13 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use std::path::Path;
 use surfsynth::image::load_image;
-use surfsynth::kernels::frames::frames_from_global_direction;
-use surfsynth::kernels::jump_map::{
+use surfsynth::kernels::jump_maps::jump_map::{
     Boundary, JumpMapSettings, PixelOrder, PixelSynthesisSettings, analyse, synthesize_sources,
 };
-use surfsynth::kernels::jump_surface::{
+use surfsynth::kernels::jump_maps::jump_surface::{
     SurfaceSynthSettings, corner_side_offsets, corner_uvs, edge_offsets, synthesize_surface,
 };
+use surfsynth::kernels::surface::frames::frames_from_global_direction;
 use surfsynth::mesh::Topology;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 

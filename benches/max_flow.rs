@@ -37,7 +37,7 @@ use criterion::{BatchSize, BenchmarkId, Criterion, criterion_group, criterion_ma
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use std::hint::black_box;
-use surfsynth::kernels::max_flow::FlowGraph;
+use surfsynth::kernels::bangay_morkel::max_flow::FlowGraph;
 
 /// The seam graph of a `width × height` grid (node `y * width + x`),
 /// seeded; the terminals are tied to columns 0 and `width - 1`.

@@ -1,5 +1,5 @@
 //! Benchmarks of the Wei–Levoy retiling kernel
-//! ([`surfsynth::kernels::retile::retile`]): a four-level pyramid over the
+//! ([`surfsynth::kernels::wei_levoy::retile::retile`]): a four-level pyramid over the
 //! builtin icosphere (642 vertices) and the shared Stanford bunny (1,839
 //! vertices), at about 6k and 24k vertices on level 0.
 //!
@@ -12,7 +12,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
 use std::time::Duration;
-use surfsynth::kernels::retile::{RetileSettings, retile};
+use surfsynth::kernels::wei_levoy::retile::{RetileSettings, retile};
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{LoadOptions, PolyMesh, load_mesh};
 

@@ -8,7 +8,7 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use glam::Vec3;
 use std::hint::black_box;
-use surfsynth::kernels::sqrt2::{adaptive_sqrt2, sqrt2_subdivide};
+use surfsynth::kernels::bangay_morkel::sqrt2::{adaptive_sqrt2, sqrt2_subdivide};
 use surfsynth::mesh::PolyMesh;
 
 /// A flat `n × n` quad grid: `(n + 1)²` vertices.

@@ -35,14 +35,14 @@ use std::hint::black_box;
 use surfsynth::image::pyramid::gaussian_pyramid;
 use surfsynth::image::sample::Wrap;
 use surfsynth::image::{ExemplarOptions, Image, builtin_exemplar, load_image};
-use surfsynth::kernels::flatten::TriangleAdjacency;
-use surfsynth::kernels::relax_orientation::{
+use surfsynth::kernels::surface::flatten::TriangleAdjacency;
+use surfsynth::kernels::wei_levoy::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
 };
-use surfsynth::kernels::retile::{RetileSettings, retile};
-use surfsynth::kernels::wl_match::features::exemplar_features;
-use surfsynth::kernels::wl_match::search::{Match, build_search};
-use surfsynth::kernels::wl_match::{
+use surfsynth::kernels::wei_levoy::retile::{RetileSettings, retile};
+use surfsynth::kernels::wei_levoy::wl_match::features::exemplar_features;
+use surfsynth::kernels::wei_levoy::wl_match::search::{Match, build_search};
+use surfsynth::kernels::wei_levoy::wl_match::{
     PAPER_NEIGHBOURHOODS, SearchKind, SynthesisLevel, WlSettings, neighbourhood_parts,
     wei_levoy_synthesis,
 };

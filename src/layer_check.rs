@@ -132,7 +132,10 @@ fn no_module_imports_from_a_layer_above_it() {
 
 #[test]
 fn the_check_sees_an_upward_import() {
-    assert_eq!(module_of(Path::new("kernels/jump_map/ann.rs")), "kernels");
+    assert_eq!(
+        module_of(Path::new("kernels/jump_maps/jump_map/ann.rs")),
+        "kernels"
+    );
     assert_eq!(module_of(Path::new("world/mesh.rs")), "world");
     assert_eq!(target_of("world::Geometry"), "world");
     assert_eq!(target_of("pipeline::PipelineError"), "pipeline");

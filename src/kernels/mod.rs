@@ -1,34 +1,20 @@
-//! Pure algorithms over slices and `u32` indices. Nothing here imports `bevy_ecs`.
+//! Pure algorithms over slices and `u32` indices. Nothing here imports
+//! `bevy_ecs`, touches disk or reads the environment.
+//!
+//! One wing per method — [`jump_maps`] (Zelinka & Garland), [`wei_levoy`],
+//! [`bangay_morkel`], [`lapped`] (Praun et al.), [`coherent`] — and the
+//! shared wings: [`surface`] (frames, flattening, resampling), [`atlas`]
+//! (charts, baking, rasterising, material channels) and [`metrics`].
 
 pub mod atlas;
-pub mod bake_triangles;
-pub mod channels;
+pub mod bangay_morkel;
 pub mod coherent;
-pub mod component_fallback;
-pub mod diffuse_orientation;
-pub mod flatten;
-pub mod frames;
-pub mod geodesic;
-pub mod graph_cut_transfer;
-pub mod graph_match;
-pub mod jump_map;
-pub mod jump_surface;
+pub mod jump_maps;
 pub mod lapped;
-pub mod max_flow;
 pub mod metrics;
-mod occupancy;
-pub mod orientation_field;
-pub mod plane_raster;
-pub mod relax_orientation;
-pub mod retile;
 pub mod simd_state;
-pub mod sqrt2;
-pub mod surface_sample;
-pub mod sweep;
-pub mod triplanar;
-pub mod vertex_colours_from_uvs;
-pub mod vertex_order;
-pub mod wl_match;
+pub mod surface;
+pub mod wei_levoy;
 
 /// SplitMix64-style mixing of three words into one seed: every random
 /// stream (per stage, level, vertex, pass) derives its seed with it, so

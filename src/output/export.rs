@@ -155,12 +155,12 @@ fn write_baked_triangles(
 
 /// The mesh of format `baked`: `mesh` fan-triangulated, with the atlas
 /// coordinates of every triangle's cell in a `size`² atlas
-/// ([`atlas_corner_uvs`](crate::kernels::bake_triangles::atlas_corner_uvs)).
+/// ([`atlas_corner_uvs`](crate::kernels::atlas::bake_triangles::atlas_corner_uvs)).
 pub fn baked_mesh(mesh: &PolyMesh, size: u32) -> (PolyMesh, Vec<glam::Vec2>) {
     let triangles = mesh.triangulated();
     let n = triangles.face_count();
     let uvs = (0..n)
-        .flat_map(|t| crate::kernels::bake_triangles::atlas_corner_uvs(t, n, size))
+        .flat_map(|t| crate::kernels::atlas::bake_triangles::atlas_corner_uvs(t, n, size))
         .collect();
     (triangles, uvs)
 }

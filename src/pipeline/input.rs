@@ -215,7 +215,7 @@ fn load_channels(
     exemplar_name: &str,
     opts: &crate::image::ExemplarOptions,
 ) -> Result<crate::world::ExemplarChannels, PipelineError> {
-    use crate::kernels::channels as ch;
+    use crate::kernels::atlas::channels as ch;
     let file = source.file.as_str();
     let value_err = |key: &str, message: String| -> PipelineError {
         ConfigError::Value {

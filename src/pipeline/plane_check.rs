@@ -4,7 +4,7 @@
 //! a `jump_image` result must have the requested size.
 
 use super::{Pipeline, PipelineError};
-use crate::kernels::plane_raster::check_planar_xy;
+use crate::kernels::atlas::plane_raster::check_planar_xy;
 use crate::mesh::PolyMesh;
 use crate::stage::{Datum, PlaneRole, StageError};
 use crate::stages::export::plane::{planar_message, size_message};

@@ -3,7 +3,7 @@
 
 use super::{LoadedInput, Pipeline, PipelineError, load_input_from};
 use crate::stage::{StageCtx, StageError};
-use crate::stages::tangent_field::FaceField;
+use crate::world::FaceField;
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::SingleThreadedExecutor;

@@ -107,7 +107,7 @@ pub struct ExportJob {
 /// - Pixel `(i, j)` (column `i`, row `j`, row 0 at the top) samples the xy
 ///   point `(min.x + i / (width − 1) · Δx, max.y − j / (height − 1) · Δy)`
 ///   of the mesh's xy bounding box (pixel centres span the box edge to
-///   edge): image-up is `+y` (`kernels::plane_raster`). On the configs'
+///   edge): image-up is `+y` (`kernels::atlas::plane_raster`). On the configs'
 ///   `N × N`-vertex planes of side `N − 1` every pixel centre is a vertex.
 /// - Vertex colours are interpolated barycentrically on the triangle that
 ///   contains the pixel centre; per-corner UVs are blended 3 ways as the

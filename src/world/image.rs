@@ -44,7 +44,7 @@ pub struct Exemplar {
 /// colours. Always present (all `None` when the config gives no maps).
 #[derive(Resource, Clone, Debug, Default)]
 pub struct ExemplarChannels {
-    /// Tangent-space normal map, RGB (`kernels::channels` convention).
+    /// Tangent-space normal map, RGB (`kernels::atlas::channels` convention).
     pub normal: Option<Image>,
     /// Roughness, one channel in `[0, 1]`.
     pub roughness: Option<Image>,
@@ -56,7 +56,7 @@ pub struct ExemplarChannels {
 
 /// The exemplar's jump map (Zelinka & Garland 2004 §4), made by `jump_map`.
 #[derive(Resource, Clone, Debug)]
-pub struct ExemplarJumpMap(pub std::sync::Arc<crate::kernels::jump_map::JumpMap>);
+pub struct ExemplarJumpMap(pub std::sync::Arc<crate::kernels::jump_maps::jump_map::JumpMap>);
 
 /// A synthesised image (`jump_image`): the image at one exemplar pixel per
 /// pixel and, per pixel, its source in exemplar pixel coordinates (as the
@@ -73,7 +73,7 @@ pub struct SynthesisedImage {
 
 /// A triplanar projection (stage `triplanar`): `image` repeated along the
 /// three world axes at `texels_per_unit`, blended by `|n_axis|^sharpness`
-/// ([`crate::kernels::triplanar`]). `bake` evaluates it per texel.
+/// ([`crate::kernels::atlas::triplanar`]). `bake` evaluates it per texel.
 #[derive(Resource, Clone, Debug)]
 pub struct TriplanarProjection {
     /// The projected image (a tile).

@@ -4,10 +4,10 @@
 //! mesh the later stages work on ([`ActiveMesh`]). Everything is
 //! structure-of-arrays: a vertex is a row (`u32` id) in each per-vertex array.
 
-use crate::kernels::frames::TangentFrame;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::PolyMesh;
 use bevy_ecs::prelude::*;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
 /// Marks the mesh as loaded from `[input]`; it is never modified, so results
 /// can be mapped back onto it.
@@ -56,17 +56,17 @@ pub struct CornerUvs(pub Vec<Vec2>);
 /// compactly (per-vertex texels and per-corner side offsets; read through
 /// [`BlendUvs::of`]).
 #[derive(Component, Clone, Debug, Default)]
-pub struct BlendUvs(pub crate::kernels::jump_surface::BlendLayers);
+pub struct BlendUvs(pub crate::kernels::jump_maps::jump_surface::BlendLayers);
 
 impl BlendUvs {
     /// The layers for `mesh`, or `None` when they were made for another mesh.
     pub fn of<'a>(
         &'a self,
         mesh: &'a crate::mesh::PolyMesh,
-    ) -> Option<crate::kernels::jump_surface::Blend<'a>> {
+    ) -> Option<crate::kernels::jump_maps::jump_surface::Blend<'a>> {
         self.0
             .fits(mesh)
-            .then_some(crate::kernels::jump_surface::Blend::Compact {
+            .then_some(crate::kernels::jump_maps::jump_surface::Blend::Compact {
                 layers: &self.0,
                 mesh,
             })
@@ -121,10 +121,26 @@ pub struct SweepField(pub Vec<f32>);
 /// coarser level (`MeshLevel(l + 1)`), so attributes travel down the
 /// hierarchy. Absent on the coarsest level.
 #[derive(Component, Clone, Debug, Default)]
-pub struct LevelParents(pub crate::kernels::sqrt2::Parents);
+pub struct LevelParents(pub crate::kernels::bangay_morkel::sqrt2::Parents);
 
 /// The √2 mesh hierarchy made by `subdivide_sqrt2`: its level entities,
 /// finest first (index `l` holds `MeshLevel(l)`). Vertex ids are shared:
 /// vertex `v` of a coarser level is vertex `v` of every finer one.
 #[derive(Resource, Clone, Debug, Default)]
 pub struct Sqrt2Pyramid(pub Vec<Entity>);
+
+/// The per-face field `T` on a mesh entity (Praun et al. §3.2): in the face
+/// plane, direction = texture up, length = world units per texture patch
+/// unit (the patch image's larger side).
+#[derive(Component, Clone, Debug, Default)]
+pub struct FaceField {
+    /// One vector per face.
+    pub t: Vec<Vec3>,
+    /// Isotropic texture: only the lengths matter.
+    pub isotropic: bool,
+    /// The lengths are world units per exemplar PIXEL (the field follows
+    /// `[input] texture_scale`; `lapped_paste` multiplies by the patch
+    /// image's side, so the texture shows at that scale whatever the patch
+    /// size), rather than per texture patch (an explicit `patch_size`).
+    pub per_pixel: bool,
+}

@@ -365,7 +365,7 @@ pub fn grid_image(
 }
 
 /// A result on a flat mesh as a `side`² image at one exemplar pixel per
-/// pixel: `signal` resampled (`surfsynth::kernels::surface_sample`, linear
+/// pixel: `signal` resampled (`surfsynth::kernels::surface::surface_sample`, linear
 /// over the faces) at the `side`² template points `spacing` world units
 /// apart around the vertex nearest `centre`, in `frame` (image x along `s`,
 /// image y along `−t`). For meshes whose vertices are not on a pixel
@@ -374,12 +374,12 @@ pub fn grid_image(
 pub fn plane_image(
     mesh: &surfsynth::mesh::PolyMesh,
     signal: &surfsynth::kernels::metrics::SurfaceSignal,
-    frame: &surfsynth::kernels::frames::TangentFrame,
+    frame: &surfsynth::kernels::surface::frames::TangentFrame,
     centre: glam::Vec3,
     spacing: f32,
     side: u32,
 ) -> Image {
-    use surfsynth::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+    use surfsynth::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
     let vertex = (0..mesh.vertex_count())
         .min_by(|&a, &b| {
             let d = |v: usize| (mesh.positions[v] - centre).length();

@@ -18,7 +18,7 @@ use surfsynth::kernels::atlas::bake::{
     bake_channels,
 };
 use surfsynth::kernels::atlas::{AtlasSettings, build_uv_atlas, distortion, rasterise_faces};
-use surfsynth::kernels::retile::SurfaceProjector;
+use surfsynth::kernels::wei_levoy::retile::SurfaceProjector;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::mesh::{LoadOptions, PolyMesh, load_mesh};
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
@@ -785,7 +785,7 @@ size = 256
         .colour
         .data
         .chunks_exact(3)
-        .map(surfsynth::kernels::channels::luminance)
+        .map(surfsynth::kernels::atlas::channels::luminance)
         .collect();
     assert_eq!(lum.len(), height.data.len());
     let n = lum.len() as f32;
@@ -941,7 +941,7 @@ fn atlas_at_plane_pixels(world: &mut World) -> (Image, Image) {
     let asset = world.resource::<BakedAsset>();
     let mesh = asset.mesh_or(&source);
     let tris = triangles(mesh);
-    let grid = surfsynth::kernels::plane_raster::PlaneGrid::over(
+    let grid = surfsynth::kernels::atlas::plane_raster::PlaneGrid::over(
         &mesh.positions,
         plane.width,
         plane.height,
@@ -1159,7 +1159,7 @@ fn triplanar_on_a_cube_gives_each_face_its_axis_projection() {
         let axis = n.abs().max_position();
         assert!(n.abs()[axis] > 0.999, "a cube face normal is an axis: {n}");
         per_axis[axis] += 1;
-        let q = surfsynth::kernels::triplanar::projections(*p, 2.0)[axis];
+        let q = surfsynth::kernels::atlas::triplanar::projections(*p, 2.0)[axis];
         let want = tiled(&exemplar, q);
         for c in 0..3 {
             worst = worst.max((got[c] - want[c]).abs());

@@ -13,13 +13,13 @@ use rand::{Rng, SeedableRng, seq::SliceRandom};
 use rand_pcg::Pcg64Mcg;
 use surfsynth::config::ConfigSource;
 use surfsynth::image::{Image, sample::Wrap};
-use surfsynth::kernels::diffuse_orientation::diffuse_orientation;
-use surfsynth::kernels::frames::TangentFrame;
-use surfsynth::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
-use surfsynth::kernels::graph_match::*;
+use surfsynth::kernels::bangay_morkel::diffuse_orientation::diffuse_orientation;
+use surfsynth::kernels::bangay_morkel::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
+use surfsynth::kernels::bangay_morkel::graph_match::*;
+use surfsynth::kernels::bangay_morkel::sqrt2::sqrt2_subdivide;
+use surfsynth::kernels::bangay_morkel::sweep::{sweep_field, sweep_order};
 use surfsynth::kernels::metrics::SurfaceSignal;
-use surfsynth::kernels::sqrt2::sqrt2_subdivide;
-use surfsynth::kernels::sweep::{sweep_field, sweep_order};
+use surfsynth::kernels::surface::frames::TangentFrame;
 use surfsynth::mesh::{PolyMesh, Topology};
 use surfsynth::pipeline::Pipeline;
 use surfsynth::world::*;
@@ -290,8 +290,10 @@ fn synthesise_plane(
     seed: u64,
     r_scale: f32,
 ) -> (PolyMesh, SynthesisState) {
-    let mut levels: Vec<(PolyMesh, Option<surfsynth::kernels::sqrt2::Parents>)> =
-        vec![(quad_grid(8, 1.0 / 8.0), None)];
+    let mut levels: Vec<(
+        PolyMesh,
+        Option<surfsynth::kernels::bangay_morkel::sqrt2::Parents>,
+    )> = vec![(quad_grid(8, 1.0 / 8.0), None)];
     for _ in 0..6 {
         let s = sqrt2_subdivide(&levels.last().unwrap().0);
         levels.push((s.mesh, Some(s.parents)));

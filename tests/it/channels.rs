@@ -7,7 +7,7 @@ use crate::common;
 use crate::common::world_for;
 use bevy_ecs::prelude::*;
 use surfsynth::config::ConfigSource;
-use surfsynth::kernels::channels::{decode_normal, luminance_image};
+use surfsynth::kernels::atlas::channels::{decode_normal, luminance_image};
 use surfsynth::pipeline::{Pipeline, load_input};
 use surfsynth::world::*;
 
@@ -284,7 +284,7 @@ fn displace_after_jump_surface_averages_corner_heights() {
     );
     let w = world_for(&text).expect("runs");
     let h = w.resource::<ExemplarChannels>().height.clone().unwrap();
-    let mean = surfsynth::kernels::channels::mean_height(&h);
+    let mean = surfsynth::kernels::atlas::channels::mean_height(&h);
     let active = w.resource::<ActiveMesh>().0;
     let mesh = &w.get::<Geometry>(active).unwrap().0;
     let uvs = &w.get::<CornerUvs>(active).expect("uvs kept").0;
@@ -540,12 +540,9 @@ patches = 3
 "#;
     let w = world_for(text).expect("runs");
     let ex = w.resource::<Exemplar>().image.clone();
-    let patches = w
-        .resource::<surfsynth::stages::lapped_paste::components::TexturePatches>()
-        .0
-        .clone();
+    let patches = w.resource::<surfsynth::world::TexturePatches>().0.clone();
     let origins = w
-        .resource::<surfsynth::stages::lapped_paste::components::TexturePatchOrigins>()
+        .resource::<surfsynth::world::TexturePatchOrigins>()
         .0
         .clone();
     assert_eq!(patches.len(), origins.len());

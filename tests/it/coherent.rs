@@ -12,8 +12,8 @@ use surfsynth::image::{Image, load_image};
 use surfsynth::kernels::coherent::{
     CoherentLevel, CoherentSettings, coherent_refine, coherent_synthesis, pixel_centres,
 };
-use surfsynth::kernels::frames::TangentFrame;
-use surfsynth::kernels::wl_match::SynthesisLevel;
+use surfsynth::kernels::surface::frames::TangentFrame;
+use surfsynth::kernels::wei_levoy::wl_match::SynthesisLevel;
 use surfsynth::mesh::PolyMesh;
 use surfsynth::progress::Progress;
 use surfsynth::stages::builtin_pyramid::{BuiltinPyramidSettings, builtin_pyramid};
@@ -264,7 +264,7 @@ fn correction_passes_lower_the_energy() {
 /// offsets) on both components.
 #[test]
 fn works_on_several_components_and_on_sqrt2_levels() {
-    use surfsynth::kernels::sqrt2::sqrt2_subdivide;
+    use surfsynth::kernels::bangay_morkel::sqrt2::sqrt2_subdivide;
     let exemplar = texture("stones");
     // Two 24² planes, the second shifted by 40 units in x.
     let base = plane_pyramid(24);

@@ -9,12 +9,12 @@ use rand::seq::SliceRandom;
 use rand_pcg::Pcg64Mcg;
 use surfsynth::image::sample::Wrap;
 use surfsynth::image::{ExemplarOptions, Image, exemplar_from_spec, load_image};
-use surfsynth::kernels::frames::TangentFrame;
 use surfsynth::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, histogram_wasserstein_mean,
     image_texture_energy, surface_texture_energy,
 };
-use surfsynth::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+use surfsynth::kernels::surface::frames::TangentFrame;
+use surfsynth::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use surfsynth::mesh::{PolyMesh, Topology};
 
 const TEXTURES: [&str; 5] = ["stones", "brick", "water", "planks", "grass"];

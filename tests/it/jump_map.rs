@@ -8,11 +8,11 @@ use std::path::{Path, PathBuf};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use surfsynth::image::Image;
-use surfsynth::kernels::jump_map::analysis::analyse_with_stats;
-use surfsynth::kernels::jump_map::ann::{AnnSearch, all_knn};
-use surfsynth::kernels::jump_map::poisson::pixel_dist2;
-use surfsynth::kernels::jump_map::synth_patch::synthesize_patch_sources;
-use surfsynth::kernels::jump_map::*;
+use surfsynth::kernels::jump_maps::jump_map::analysis::analyse_with_stats;
+use surfsynth::kernels::jump_maps::jump_map::ann::{AnnSearch, all_knn};
+use surfsynth::kernels::jump_maps::jump_map::poisson::pixel_dist2;
+use surfsynth::kernels::jump_maps::jump_map::synth_patch::synthesize_patch_sources;
+use surfsynth::kernels::jump_maps::jump_map::*;
 
 use crate::common;
 
@@ -170,7 +170,7 @@ fn jump_maps_respect_poisson_discs_and_section_4_5_weights() {
 
 #[test]
 fn normalisation_is_linear_as_in_section_4_5() {
-    use surfsynth::kernels::jump_map::normalise::normalise_weights;
+    use surfsynth::kernels::jump_maps::jump_map::normalise::normalise_weights;
     // Pixel 0: differences 1, 2, 3 (sum 6, the best); pixel 1: 3, 3, 3 (sum
     // 9); pixel 2: one jump at 4 (counts as 3 · 4 = 12, the worst); pixel 3:
     // no jumps.
@@ -1178,7 +1178,7 @@ fn matched_pixel_choice_lowers_the_coherence_error() {
 }
 
 /// The pixel method's seam refinement (`jump_image.refine = "seams"`, also
-/// the middle of the default `aligned_seams`; `kernels::jump_map::refine`) lowers the coherence error, mean
+/// the middle of the default `aligned_seams`; `kernels::jump_maps::jump_map::refine`) lowers the coherence error, mean
 /// and p90, and the completeness of the paper's random choice on every
 /// shared texture at the planar benchmark's size, and adds no large
 /// verbatim copies (`large_region_repeats` at most the paper's, or 2).
@@ -1188,7 +1188,7 @@ fn matched_pixel_choice_lowers_the_coherence_error() {
 /// and 1.00–1.68 ×); issue 13's gate is still unmet on brick and planks.
 #[test]
 fn seam_refinement_lowers_the_pixel_methods_errors() {
-    use surfsynth::kernels::jump_map::refine::{
+    use surfsynth::kernels::jump_maps::jump_map::refine::{
         SEAM_REFINE_LEVELS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, refine_seams_pyramid,
     };
     for name in ["brick", "grass", "planks", "stones", "water"] {
@@ -1260,7 +1260,7 @@ fn seam_refinement_lowers_the_pixel_methods_errors() {
 /// 2 of the planar config reached 3.
 #[test]
 fn alignment_and_seam_passes_add_no_large_verbatim_repeats() {
-    use surfsynth::kernels::jump_map::refine::{
+    use surfsynth::kernels::jump_maps::jump_map::refine::{
         ALIGN_SWEEPS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, align_regions, refine_seams,
     };
     use surfsynth::kernels::metrics::quality::verbatim_copying;
@@ -1323,13 +1323,13 @@ fn alignment_and_seam_passes_add_no_large_verbatim_repeats() {
 /// filtered. The streamed analysis must give the same map, bit for bit.
 fn whole_buffer_analysis(exemplar: &Image, settings: &JumpMapSettings) -> JumpMap {
     use surfsynth::image::pyramid::gaussian_pyramid;
-    use surfsynth::kernels::jump_map::map::JumpMapParts;
-    use surfsynth::kernels::jump_map::neighbourhoods::{
+    use surfsynth::kernels::jump_maps::jump_map::map::JumpMapParts;
+    use surfsynth::kernels::jump_maps::jump_map::neighbourhoods::{
         neighbourhood_vectors, source_region, vector_len, wrap_for,
     };
-    use surfsynth::kernels::jump_map::normalise::normalise_weights;
-    use surfsynth::kernels::jump_map::pca;
-    use surfsynth::kernels::jump_map::poisson::PoissonDisc;
+    use surfsynth::kernels::jump_maps::jump_map::normalise::normalise_weights;
+    use surfsynth::kernels::jump_maps::jump_map::pca;
+    use surfsynth::kernels::jump_maps::jump_map::poisson::PoissonDisc;
     let (w, h) = (exemplar.width, exemplar.height);
     let widths = &settings.neighbourhood_widths;
     let boundary = settings.boundary;

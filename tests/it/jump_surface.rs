@@ -6,7 +6,7 @@
 use crate::common::*;
 use glam::Vec2;
 use surfsynth::config::ConfigSource;
-use surfsynth::kernels::jump_map::JumpMap;
+use surfsynth::kernels::jump_maps::jump_map::JumpMap;
 use surfsynth::pipeline::Pipeline;
 use surfsynth::world::*;
 
@@ -103,8 +103,8 @@ fn tileable_exemplar_wraps_and_no_vertex_needs_random_placement_but_the_start() 
 /// per unit).
 #[test]
 fn planar_surface_result_looks_like_the_peers() {
-    use surfsynth::kernels::frames::TangentFrame;
     use surfsynth::kernels::metrics::SurfaceSignal;
+    use surfsynth::kernels::surface::frames::TangentFrame;
     let stones = data_file("textures/stones.png");
     let text = config(
         "builtin:plane",

@@ -26,7 +26,6 @@ use surfsynth::kernels::lapped::{FaceField, TriMesh};
 use surfsynth::mesh::{LoadOptions, PolyMesh, Topology, load_mesh};
 use surfsynth::pipeline::{Pipeline, load_input, run_in_world};
 use surfsynth::progress::Progress;
-use surfsynth::stages::lapped_paste::components::*;
 use surfsynth::world::*;
 
 const SHARED_CLOSED: [&str; 5] = [
@@ -560,9 +559,7 @@ kind = "lapped_paste"
         2 * 6 * 64,
         "6 sides of 8 × 8 quads, split"
     );
-    let field = world
-        .get::<surfsynth::stages::tangent_field::FaceField>(active)
-        .unwrap();
+    let field = world.get::<surfsynth::world::FaceField>(active).unwrap();
     // On the cube's sides the frames' up is +Y, projected (vertex frames
     // at the cube's edges lean a little: their normals are averaged).
     let normals = mesh.face_normals();
@@ -651,7 +648,7 @@ use surfsynth::kernels::lapped::composite::{LappedComposite, PasteRecord};
 use surfsynth::kernels::lapped::coverage::drawn_faces;
 use surfsynth::kernels::lapped::paste::face_difficulty;
 use surfsynth::kernels::metrics::{EnergySettings, SurfaceSignal, surface_texture_energy};
-use surfsynth::kernels::surface_sample::CornerFn;
+use surfsynth::kernels::surface::surface_sample::CornerFn;
 
 /// A texture patch with random colours, so composites differ by paste.
 fn noisy_texture(seed: u64) -> TexturePatch {
@@ -842,7 +839,7 @@ kind = "lapped_paste"
         eval: CornerFn(&eval),
     };
     // The field's frame on the plane: normal +z, texture up +y.
-    let frame = surfsynth::kernels::frames::TangentFrame::from_up(Vec3::Z, Vec3::Y);
+    let frame = surfsynth::kernels::surface::frames::TangentFrame::from_up(Vec3::Z, Vec3::Y);
     let img = gates::plane_image(&mesh, &signal, &frame, Vec3::ZERO, spacing, 127);
     (img, exemplar)
 }

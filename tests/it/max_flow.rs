@@ -1,4 +1,4 @@
-//! Boykov–Kolmogorov max-flow kernel (`surfsynth::kernels::max_flow`)
+//! Boykov–Kolmogorov max-flow kernel (`surfsynth::kernels::bangay_morkel::max_flow`)
 //! against `petgraph::algo::dinics` as an oracle, plus hand-made cases.
 //!
 //! Every solved graph is checked three ways: the flow equals the oracle's,
@@ -9,7 +9,7 @@ use petgraph::Graph;
 use petgraph::algo::dinics;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
-use surfsynth::kernels::max_flow::FlowGraph;
+use surfsynth::kernels::bangay_morkel::max_flow::FlowGraph;
 
 /// A flow problem as plain lists, so it can be fed to both solvers.
 #[derive(Clone, Debug, Default)]

@@ -753,7 +753,7 @@ fn bangay_morkel_defaults_are_no_worse_than_wei_levoy_on_every_measure() {
 /// vertex colours resamples it through the mesh and loses that detail.
 #[test]
 fn coordinates_continued_through_frames_give_the_exemplar_at_its_resolution_on_a_coarse_mesh() {
-    use surfsynth::kernels::frames::TangentFrame;
+    use surfsynth::kernels::surface::frames::TangentFrame;
     // A jittered plane of side 63 (one world unit per output pixel at
     // 64 × 64) with 17 × 17 vertices: about 4 pixels per edge.
     let opts = BuiltinOptions {

@@ -13,7 +13,7 @@ use surfsynth::mesh::PolyMesh;
 use surfsynth::mesh::Topology;
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use surfsynth::pipeline::PipelineError;
-use surfsynth::stages::tangent_field::FaceField;
+use surfsynth::world::FaceField;
 use surfsynth::world::*;
 
 /// Runs `config` on its input mesh, after `edit` changed that mesh.
@@ -25,7 +25,7 @@ fn world_for(config: &str) -> World {
     common::world_for(config).expect("runs")
 }
 
-fn frames(w: &World) -> Vec<surfsynth::kernels::frames::TangentFrame> {
+fn frames(w: &World) -> Vec<surfsynth::kernels::surface::frames::TangentFrame> {
     let e = w.resource::<ActiveMesh>().0;
     w.get::<Frames>(e).expect("frames").0.clone()
 }
@@ -65,8 +65,8 @@ fn scale_and_move(mesh: &mut PolyMesh) {
 }
 
 fn assert_same_frames(
-    a: &[surfsynth::kernels::frames::TangentFrame],
-    b: &[surfsynth::kernels::frames::TangentFrame],
+    a: &[surfsynth::kernels::surface::frames::TangentFrame],
+    b: &[surfsynth::kernels::surface::frames::TangentFrame],
     tol: f32,
     what: &str,
 ) {

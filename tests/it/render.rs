@@ -823,10 +823,11 @@ fn coordinate_shading_continues_vertex_coordinates_through_their_frames() {
     // Image x = world x, image y = −world y (image rows grow downwards).
     let coordinate = |p: Vec3| origin + Vec2::new(p.x, -p.y) * scale;
     let sources: Vec<Vec2> = mesh.positions.iter().map(|&p| coordinate(p)).collect();
-    let frames = vec![
-        surfsynth::kernels::frames::TangentFrame::from_direction(Vec3::Z, Vec3::X);
-        mesh.vertex_count()
-    ];
+    let frames =
+        vec![
+            surfsynth::kernels::surface::frames::TangentFrame::from_direction(Vec3::Z, Vec3::X);
+            mesh.vertex_count()
+        ];
     let uvs: Vec<Vec2> = mesh
         .corner_vertex
         .iter()

@@ -5,7 +5,7 @@
 use crate::common;
 
 use glam::Vec3;
-use surfsynth::kernels::retile::{
+use surfsynth::kernels::wei_levoy::retile::{
     RetileError, RetileSettings, RetileTarget, RetiledPyramid, SurfaceProjector, retile,
 };
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};

@@ -7,8 +7,8 @@
 use crate::common;
 
 use glam::{Vec2, Vec3};
-use surfsynth::kernels::frames::TangentFrame;
-use surfsynth::kernels::retile::{
+use surfsynth::kernels::surface::frames::TangentFrame;
+use surfsynth::kernels::wei_levoy::retile::{
     MapBackError, ResultAttributes, RetileSettings, map_back, retile,
 };
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};

@@ -6,7 +6,7 @@ use crate::common;
 
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
-use surfsynth::kernels::sqrt2::{
+use surfsynth::kernels::bangay_morkel::sqrt2::{
     MAX_HIERARCHY_LEVELS, Sqrt2Settings, Subdivided, adaptive_sqrt2, interpolate_attribute,
     sqrt2_subdivide, sqrt2_subdivide_with, subdivide_to,
 };

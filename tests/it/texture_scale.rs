@@ -6,8 +6,8 @@
 use crate::common;
 
 use glam::Vec3;
-use surfsynth::stages::lapped_paste::components::{PasteOrder, PatchFaces, PatchUvs};
 use surfsynth::world::*;
+use surfsynth::world::{PasteOrder, PatchFaces, PatchUvs};
 
 use crate::common::methods::{HEADER, METHODS};
 

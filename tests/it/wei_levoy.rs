@@ -10,18 +10,18 @@ use glam::Vec3;
 use surfsynth::config::ConfigSource;
 use surfsynth::image::sample::Wrap;
 use surfsynth::image::{Image, load_image};
-use surfsynth::kernels::flatten::{
-    FlattenScratch, PatchSeed, StencilPoint, Template, TriangleAdjacency, flatten_stencil,
-    resample_stencil, template_spacing,
-};
-use surfsynth::kernels::frames::TangentFrame;
 use surfsynth::kernels::metrics::{
     EnergySettings, SourceMap, SurfaceSignal, surface_texture_energy,
 };
-use surfsynth::kernels::relax_orientation::{
+use surfsynth::kernels::surface::flatten::{
+    FlattenScratch, PatchSeed, StencilPoint, Template, TriangleAdjacency, flatten_stencil,
+    resample_stencil, template_spacing,
+};
+use surfsynth::kernels::surface::frames::TangentFrame;
+use surfsynth::kernels::wei_levoy::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation,
 };
-use surfsynth::kernels::wl_match::{
+use surfsynth::kernels::wei_levoy::wl_match::{
     LevelResult, SearchKind, SynthesisLevel, WlSettings, wei_levoy_synthesis,
 };
 use surfsynth::mesh::builtin::{BuiltinOptions, builtin_mesh};
@@ -647,7 +647,7 @@ kind = "init_colours"
 /// not compare like with like.
 #[test]
 fn match_on_retiled_output_covers_the_sphere() {
-    use surfsynth::kernels::retile::{RetileSettings, retile};
+    use surfsynth::kernels::wei_levoy::retile::{RetileSettings, retile};
     let input = builtin_mesh("icosphere", &BuiltinOptions::default()).expect("icosphere");
     let pyramid = retile(
         &input,

@@ -26,9 +26,9 @@
 use super::autocorrelation::Autocorrelation;
 use super::raster::barycentric;
 use crate::image::{Image, pixel_rgb, sample::Wrap};
-use crate::kernels::channels::{decode_normal, encode_normal, reorient_normal};
-use crate::kernels::jump_surface::Blend;
-use crate::kernels::retile::SurfaceProjector;
+use crate::kernels::atlas::channels::{decode_normal, encode_normal, reorient_normal};
+use crate::kernels::jump_maps::jump_surface::Blend;
+use crate::kernels::wei_levoy::retile::SurfaceProjector;
 use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -147,7 +147,7 @@ impl AtlasFrames {
 pub enum ChannelKind {
     /// Colour (RGB): a weighted sum.
     Colour,
-    /// A tangent-space normal map (`kernels::channels` convention): look-ups
+    /// A tangent-space normal map (`kernels::atlas::channels` convention): look-ups
     /// are decoded, re-oriented from their synthesis frame into the atlas
     /// frame (`reorient_normal`), summed, renormalised and encoded.
     Normal,
@@ -603,7 +603,7 @@ pub struct CoordinateSource<'a> {
     /// (`SourceTexels`).
     pub sources: &'a [Vec2],
     /// Per result vertex, its synthesis frame.
-    pub synthesis_frames: &'a [crate::kernels::frames::TangentFrame],
+    pub synthesis_frames: &'a [crate::kernels::surface::frames::TangentFrame],
     /// Exemplar texels per world unit: one per result vertex, or one for
     /// all.
     pub texels_per_unit: &'a [f32],
@@ -624,7 +624,7 @@ impl ContributionSource for CoordinateSource<'_> {
         for (k, &v) in rt.iter().enumerate() {
             let v = v as usize;
             let frame = &self.synthesis_frames[v];
-            let q = crate::kernels::frames::continued_source(
+            let q = crate::kernels::surface::frames::continued_source(
                 self.sources,
                 self.synthesis_frames,
                 self.texels_per_unit,

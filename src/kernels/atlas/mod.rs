@@ -38,11 +38,16 @@
 
 pub mod autocorrelation;
 pub mod bake;
+pub mod bake_triangles;
+pub mod channels;
 pub mod lscm;
 pub mod merge;
 pub mod pack;
+pub mod plane_raster;
 pub mod raster;
 pub mod segment;
+pub mod triplanar;
+pub mod vertex_colours_from_uvs;
 
 pub use pack::{pack_charts, skyline_pack};
 pub use raster::{dilate, rasterise_faces};

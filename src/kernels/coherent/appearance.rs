@@ -12,8 +12,8 @@ use std::num::NonZeroUsize;
 
 use crate::cache_format::AnalysisStore;
 use crate::image::{Image, sample::Wrap};
-use crate::kernels::wl_match::features::FeatureMatrix;
-use crate::kernels::wl_match::search::pca_kdtree::{TREE_DIMS, fit, project};
+use crate::kernels::wei_levoy::wl_match::features::FeatureMatrix;
+use crate::kernels::wei_levoy::wl_match::search::pca_kdtree::{TREE_DIMS, fit, project};
 
 /// Values of an appearance vector (zero padded beyond the kept components).
 pub const APPEARANCE_DIMS: usize = TREE_DIMS;

@@ -37,7 +37,7 @@
 //!    exemplar pixels most similar to `u(w)` (k-coherent). It keeps the
 //!    cheapest, so its own term never grows. A pass visits the vertices in a
 //!    seeded random order, run as batches of non-conflicting vertices
-//!    ([`crate::kernels::wl_match::schedule`]): exactly the sequential
+//!    ([`crate::kernels::wei_levoy::wl_match::schedule`]): exactly the sequential
 //!    result, for any thread count.
 //!
 //! Coordinates of a clamped (non-tileable) exemplar stay inside it:
@@ -52,14 +52,16 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
 use self::appearance::{APPEARANCE_DIMS, AppearanceLevel, AppearanceSpec, appearance_level_cached};
-use super::flatten::{TriangleAdjacency, mean_fan_triangle_area, template_spacing};
-use super::frames::TangentFrame;
-use super::occupancy::Occupancy;
-use super::wl_match::parents::TriangleBvh;
-use super::wl_match::schedule::{dependency_batches_of, random_order};
-use super::wl_match::{SynthesisLevel, WlError, validate_levels};
 use crate::cache_format::AnalysisStore;
 use crate::image::{Image, pyramid::gaussian_stack, sample::Wrap};
+use crate::kernels::surface::flatten::{
+    TriangleAdjacency, mean_fan_triangle_area, template_spacing,
+};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::surface::occupancy::Occupancy;
+use crate::kernels::wei_levoy::wl_match::parents::TriangleBvh;
+use crate::kernels::wei_levoy::wl_match::schedule::{dependency_batches_of, random_order};
+use crate::kernels::wei_levoy::wl_match::{SynthesisLevel, WlError, validate_levels};
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
 
@@ -399,7 +401,7 @@ fn cost(
     e
 }
 
-/// The level's uses of the exemplar's cells (`kernels::occupancy`): every
+/// The level's uses of the exemplar's cells (`kernels::surface::occupancy`): every
 /// coordinate once; an even share is the mean count per cell.
 fn occupancy(coords: &[Vec2], domain: &Domain, cell: f32) -> Occupancy {
     let mut occ = Occupancy::new(domain.width, domain.height, cell);
@@ -564,6 +566,7 @@ pub fn coherent_synthesis(
 /// # Errors
 /// As [`coherent_synthesis`]; a mask of the wrong length is
 /// [`WlError::StartCount`].
+#[allow(clippy::too_many_arguments)] // the refinement's inputs and its two services (store, progress)
 pub fn coherent_refine(
     level: &SynthesisLevel,
     topology: Option<&Topology>,
@@ -597,6 +600,7 @@ pub fn coherent_refine(
     Ok(out.swap_remove(0))
 }
 
+#[allow(clippy::too_many_arguments)] // both entry points' inputs, each optional
 fn synthesis(
     levels: &[SynthesisLevel],
     exemplar: &Image,

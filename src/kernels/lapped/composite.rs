@@ -5,12 +5,12 @@
 //! the tangent frames the texture follows and colour samples for histograms.
 //!
 //! [`LappedComposite::eval_corners`] plugs into
-//! [`crate::kernels::surface_sample::SurfaceSignal::Corners`], so the texture
+//! [`crate::kernels::surface::surface_sample::SurfaceSignal::Corners`], so the texture
 //! energy of `kernels::metrics` measures a lapped result like any other.
 
 use crate::image::Image;
 use crate::image::sample::Wrap;
-use crate::kernels::frames::TangentFrame;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::PolyMesh;
 use glam::{Vec2, Vec3};
 

@@ -16,8 +16,8 @@
 //! propagated during patch growth ([`super::grow`]).
 
 use super::{LappedError, NO_FACE, TriMesh};
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::geodesic::dijkstra;
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::surface::geodesic::dijkstra;
 use crate::mesh::Topology;
 use glam::Vec3;
 

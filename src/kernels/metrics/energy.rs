@@ -9,8 +9,8 @@ use rayon::prelude::*;
 use super::nearest::{ExemplarNeighbourhoods, QueryScratch};
 use super::{EnergySettings, EnergyStats, SurfaceSignal};
 use crate::image::{Image, sample::Wrap};
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
 
 /// Picks `samples` of `count` locations: all of them in order when

@@ -17,7 +17,7 @@ mod nearest;
 pub mod quality;
 pub mod surface_quality;
 
-pub use super::surface_sample::SurfaceSignal;
+pub use crate::kernels::surface::surface_sample::SurfaceSignal;
 pub use energy::{image_texture_energy, surface_texture_energy};
 pub use histogram::{histogram_wasserstein, histogram_wasserstein_mean};
 pub use nearest::{ExemplarNeighbourhoods, QueryScratch};

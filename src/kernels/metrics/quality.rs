@@ -174,7 +174,7 @@ pub fn completeness(output: &Image, exemplar: &Image, n: u32) -> f32 {
 
 /// Luma of every pixel: Rec. 601 weights of RGB for 3 or 4 channels, the
 /// first channel otherwise (the quality measures' grey; the material
-/// channels' [`crate::kernels::channels::luminance`] is Rec. 709's of one
+/// channels' [`crate::kernels::atlas::channels::luminance`] is Rec. 709's of one
 /// pixel).
 pub fn luma(img: &Image) -> Vec<f32> {
     let ch = img.channels as usize;

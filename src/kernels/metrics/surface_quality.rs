@@ -19,8 +19,8 @@ use super::quality::{
 };
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::surface_sample::{ResampleScratch, resample_neighbourhood};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
 
 /// Side of the structure templates (points one exemplar pixel apart), or the

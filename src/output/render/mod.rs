@@ -115,7 +115,7 @@ pub enum Shading<'a> {
     /// are blended with linear alpha ramps (the barycentric coordinate of each
     /// base vertex).
     BlendedUvs {
-        layers: crate::kernels::jump_surface::Blend<'a>,
+        layers: crate::kernels::jump_maps::jump_surface::Blend<'a>,
         texture: &'a Image,
         wrap: Wrap,
     },
@@ -127,7 +127,7 @@ pub enum Shading<'a> {
     /// what `bake` does with `colours = "coordinates"`.
     Coordinates {
         sources: &'a [Vec2],
-        frames: &'a [crate::kernels::frames::TangentFrame],
+        frames: &'a [crate::kernels::surface::frames::TangentFrame],
         texels_per_unit: &'a [f32],
         texture: &'a Image,
         wrap: Wrap,

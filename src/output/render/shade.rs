@@ -341,7 +341,7 @@ impl<'a> Scene<'a> {
                 let size = Vec2::new(texture.width as f32, texture.height as f32);
                 let mut rgba = [0.0f32; 4];
                 for i in 0..3 {
-                    let q = crate::kernels::frames::continued_source(
+                    let q = crate::kernels::surface::frames::continued_source(
                         sources,
                         frames,
                         texels_per_unit,

@@ -23,17 +23,16 @@ use crate::kernels::atlas::bake::{
     ContributionSource, CoordinateSource, LappedSource, PatchPlacement, VertexColourSource,
     bake_channels_with_progress,
 };
+use crate::kernels::atlas::triplanar::TriplanarSource;
 use crate::kernels::atlas::{
     AtlasSettings, build_uv_atlas_with_progress, distortion, rasterise_faces,
 };
-use crate::kernels::jump_surface::Blend;
-use crate::kernels::retile::SurfaceProjector;
-use crate::kernels::triplanar::TriplanarSource;
+use crate::kernels::jump_maps::jump_surface::Blend;
+use crate::kernels::wei_levoy::retile::SurfaceProjector;
 use crate::mesh::PolyMesh;
 use crate::progress::Progress;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx};
-use crate::stages::lapped_paste::components::*;
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -493,7 +492,8 @@ fn bake_world(
     let (colour, baked_maps) = if let Some(tp) = inputs.triplanar {
         method = "triplanar";
         let frames = frames();
-        let normals = crate::kernels::triplanar::crease_corner_normals(&mesh.positions, &tris);
+        let normals =
+            crate::kernels::atlas::triplanar::crease_corner_normals(&mesh.positions, &tris);
         let src = TriplanarSource {
             positions: &mesh.positions,
             normals: &normals,

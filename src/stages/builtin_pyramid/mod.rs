@@ -6,7 +6,7 @@
 //! benches. The input mesh is left as it is; level 0 becomes the active mesh.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::flatten::{mean_fan_triangle_area, template_spacing};
+use crate::kernels::surface::flatten::{mean_fan_triangle_area, template_spacing};
 use crate::mesh::PolyMesh;
 use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use crate::stage::memory::{BYTES_PER_MESH_VERTEX, InputSizes, MemoryEstimate};

@@ -11,7 +11,7 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::coherent::{CoherentSettings, coherent_synthesis, pixel_centres};
-use crate::kernels::wl_match::SynthesisLevel;
+use crate::kernels::wei_levoy::wl_match::SynthesisLevel;
 use crate::progress::Progress;
 use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::wl_match::{DataQuery, LevelQuery, PyramidInput, frames_missing, pyramid_input};

@@ -9,7 +9,7 @@
 //! made the same way and orders the vertices of the first synthesis pass.
 //!
 //! A connected component that no key is on gets one automatic key
-//! (`kernels::component_fallback::fallback_keys`: its vertex nearest its
+//! (`kernels::surface::component_fallback::fallback_keys`: its vertex nearest its
 //! centroid, `fallback_up` projected there) and is diffused from it like
 //! any other; its sweep starts at its first key and continues after the
 //! values of the components before it. Metric `fallback_components`.
@@ -20,13 +20,13 @@
 //! `SweepField` on every level (or on the active mesh without a hierarchy).
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::component_fallback::{
+use crate::kernels::bangay_morkel::diffuse_orientation::diffuse_orientation;
+use crate::kernels::bangay_morkel::sweep::{relax_sweep, sweep_field};
+use crate::kernels::surface::component_fallback::{
     Components, chain_components, fallback_keys, one_per_component,
 };
-use crate::kernels::diffuse_orientation::diffuse_orientation;
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::geodesic::nearest_vertex;
-use crate::kernels::sweep::{relax_sweep, sweep_field};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::surface::geodesic::nearest_vertex;
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
 use crate::stage::{Datum, Stage, StageCtx, StageError};

@@ -17,7 +17,7 @@
 //! the stage displaces a copy, which becomes the active mesh.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::channels::{
+use crate::kernels::atlas::channels::{
     displace_along_normals, heights_at_corner_uvs, heights_at_texels, mean_height,
     smooth_vertex_heights_with_progress,
 };

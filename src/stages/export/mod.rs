@@ -3,11 +3,10 @@
 //! systems never touch the file system.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::jump_surface::Blend;
+use crate::kernels::jump_maps::jump_surface::Blend;
 use crate::output::render::{Layer, RenderOptions, Shading, render_views};
 use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, StageError};
-use crate::stages::lapped_paste::components::*;
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -159,7 +158,7 @@ fn bake(
     exemplar: &Exemplar,
     size: u32,
 ) -> Option<crate::image::Image> {
-    use crate::kernels::bake_triangles::bake_blended;
+    use crate::kernels::atlas::bake_triangles::bake_blended;
     // The compact blend layers are read in place, not expanded.
     let single: Vec<[[glam::Vec2; 3]; 3]>;
     let layers = match (blend.and_then(|b| b.of(mesh)), uvs) {
@@ -557,7 +556,7 @@ impl Stage for Export {
                 };
                 source.map(|(uvs, blend, texture, wrap)| {
                     let (values, channels) =
-                        crate::kernels::vertex_colours_from_uvs::vertex_colours_from_corner_uvs(
+                        crate::kernels::atlas::vertex_colours_from_uvs::vertex_colours_from_corner_uvs(
                             mesh, uvs, blend, texture, wrap,
                         );
                     VertexColours { channels, values }

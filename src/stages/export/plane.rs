@@ -1,17 +1,17 @@
 //! The `plane` format of `export`: the active result sampled into an image
 //! at one pixel per pixel over the xy bounding box of a flat mesh
-//! ([`PlaneImage`]). Thin over `kernels::plane_raster` (which triangle holds
+//! ([`PlaneImage`]). Thin over `kernels::atlas::plane_raster` (which triangle holds
 //! each pixel centre) and the signals' own evaluation: vertex colours
 //! interpolated, corner UVs blended as the preview renderer does, lapped
 //! pastes composited in paste order (`kernels::lapped::composite`).
 
 use crate::image::sample::Wrap;
 use crate::image::{Image, pixel_rgb};
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::lapped::composite::LappedComposite;
-use crate::kernels::plane_raster::{
+use crate::kernels::atlas::plane_raster::{
     PixelHit, PlaneGrid, check_planar_xy, dominant_corner, rasterise_xy, snap_source,
 };
+use crate::kernels::lapped::composite::LappedComposite;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::PolyMesh;
 use crate::world::{PlaneImage, SynthesisedImage};
 use glam::{Vec2, Vec3};
@@ -56,7 +56,7 @@ pub enum PlaneSignal<'a> {
         /// Per mesh corner.
         uvs: &'a [Vec2],
         /// Per fan triangle, per base corner, the three corners' UVs.
-        blend: Option<crate::kernels::jump_surface::Blend<'a>>,
+        blend: Option<crate::kernels::jump_maps::jump_surface::Blend<'a>>,
         /// The exemplar.
         texture: &'a Image,
         /// Its wrap.
@@ -158,7 +158,7 @@ pub fn plane_from_surface_at(
                 let mut near_src = Vec2::ZERO;
                 for (k, &v) in tri.iter().enumerate() {
                     let v = v as usize;
-                    let q = crate::kernels::frames::continued_source(
+                    let q = crate::kernels::surface::frames::continued_source(
                         sources,
                         frames,
                         scale,

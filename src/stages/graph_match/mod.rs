@@ -30,25 +30,25 @@
 //! follow the texture rather than the tessellation on meshes denser than
 //! the texture: vertices within half a texel of a matched vertex take the
 //! texel under them instead of being matched again, and cut edges are
-//! weighted by their length in texels (`kernels::graph_match::FOOTPRINT`).
+//! weighted by their length in texels (`kernels::bangay_morkel::graph_match::FOOTPRINT`).
 //! On meshes with edges of about a texel (the planar benchmark, the √2
 //! hierarchies `subdivide_sqrt2` builds) neither changes much.
 //!
 //! `candidates = "coherent"` (an extension; the paper's exhaustive search
 //! is the default and the reference reproduction) scores k-coherent
-//! candidates instead of every texel (`kernels::graph_match`,
+//! candidates instead of every texel (`kernels::bangay_morkel::graph_match`,
 //! `Candidates::Coherent`): 2–4× faster, and with `graph_cut` it gives the
 //! cut its point — larger copied pieces, fewer seams
 //! (`configs/plane/bangay_morkel_coherent.toml`; measured in README,
 //! "Bangay–Morkel with coherent candidates").
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::graph_match::{
+use crate::kernels::bangay_morkel::graph_match::{
     BatchRule, Candidates, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats,
     SynthesisState, match_pass_with_progress, mean_edge_lengths, pass_work_per_vertex,
 };
-use crate::kernels::sweep::{sweep_field, sweep_order};
+use crate::kernels::bangay_morkel::sweep::{sweep_field, sweep_order};
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
 use crate::stage::{Datum, Stage, StageCtx, StageError};
@@ -283,7 +283,14 @@ pub fn default_region(width: u32, height: u32) -> f32 {
 /// and at most [`DERIVED_K_MAX_CAP`] (or `k_min` when that is larger).
 pub fn default_k_max(region: f32, r_scale: f32, finest_edge: f32, k_min: u32) -> u32 {
     let cap = DERIVED_K_MAX_CAP.max(k_min);
-    crate::kernels::graph_match::region_k(region, 1.0, r_scale, finest_edge, k_min, cap)
+    crate::kernels::bangay_morkel::graph_match::region_k(
+        region,
+        1.0,
+        r_scale,
+        finest_edge,
+        k_min,
+        cap,
+    )
 }
 
 impl GraphMatchStageSettings {

@@ -9,12 +9,12 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
-use crate::kernels::jump_map::Boundary;
-use crate::kernels::jump_map::refine::{
+use crate::kernels::jump_maps::jump_map::Boundary;
+use crate::kernels::jump_maps::jump_map::refine::{
     ALIGN_SWEEPS, SEAM_REFINE_LEVELS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, align_regions,
     refine_seams_pyramid,
 };
-use crate::kernels::jump_map::{
+use crate::kernels::jump_maps::jump_map::{
     ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelChoice,
     PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
     synthesize_patches_with_progress, synthesize_pixels_with_progress,
@@ -331,19 +331,20 @@ impl Stage for JumpImage {
                 .map(|mut o| {
                     let align = settings.refine == "aligned_seams";
                     let toroidal = map.boundary() == Boundary::Toroidal;
-                    let mut align_now = |sources: &mut crate::kernels::jump_map::SourceMap| {
-                        if align {
-                            let _s = tracing::info_span!("align_regions").entered();
-                            progress.start_part("align", 0);
-                            aligned.push(align_regions(
-                                sources,
-                                ex,
-                                toroidal,
-                                ALIGN_SWEEPS,
-                                &progress,
-                            ));
-                        }
-                    };
+                    let mut align_now =
+                        |sources: &mut crate::kernels::jump_maps::jump_map::SourceMap| {
+                            if align {
+                                let _s = tracing::info_span!("align_regions").entered();
+                                progress.start_part("align", 0);
+                                aligned.push(align_regions(
+                                    sources,
+                                    ex,
+                                    toroidal,
+                                    ALIGN_SWEEPS,
+                                    &progress,
+                                ));
+                            }
+                        };
                     if settings.refine == "seams" || align {
                         align_now(&mut o.sources);
                         progress.start_part("seams", 0);

@@ -5,8 +5,8 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::sample::Wrap;
-use crate::kernels::jump_map::analysis::analysis_bytes;
-use crate::kernels::jump_map::{
+use crate::kernels::jump_maps::jump_map::analysis::analysis_bytes;
+use crate::kernels::jump_maps::jump_map::{
     Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress,
 };
 use crate::progress::Progress;
@@ -154,9 +154,9 @@ impl JumpMapStageSettings {
             max_components: self.max_components,
             ann_epsilon: self.ann_epsilon,
             ann_search: match self.ann_search.as_str() {
-                "kd_tree" => crate::kernels::jump_map::AnnSearch::KdTree,
-                "exhaustive" => crate::kernels::jump_map::AnnSearch::Exhaustive,
-                _ => crate::kernels::jump_map::AnnSearch::Auto,
+                "kd_tree" => crate::kernels::jump_maps::jump_map::AnnSearch::KdTree,
+                "exhaustive" => crate::kernels::jump_maps::jump_map::AnnSearch::Exhaustive,
+                _ => crate::kernels::jump_maps::jump_map::AnnSearch::Auto,
             },
             jumps_per_pixel: self.jumps,
             candidate_factor: self.candidates,
@@ -177,7 +177,7 @@ pub fn load_or_analyse(
     (
         JumpMap,
         bool,
-        Option<crate::kernels::jump_map::analysis::AnalysisStats>,
+        Option<crate::kernels::jump_maps::jump_map::analysis::AnalysisStats>,
     ),
     String,
 > {

@@ -6,13 +6,13 @@
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::coherent::{CoherentSettings, coherent_refine};
-use crate::kernels::jump_map::Boundary;
-use crate::kernels::jump_surface::{
+use crate::kernels::jump_maps::jump_map::Boundary;
+use crate::kernels::jump_maps::jump_surface::{
     Matcher, SurfaceSynthSettings, corner_side_offsets, corner_uvs, edge_offsets, seam_band,
     synthesize_surface_matched,
 };
-use crate::kernels::vertex_order::VertexOrder;
-use crate::kernels::wl_match::SynthesisLevel;
+use crate::kernels::jump_maps::vertex_order::VertexOrder;
+use crate::kernels::wei_levoy::wl_match::SynthesisLevel;
 use crate::mesh::Topology;
 use crate::stage::{Datum, Stage, StageCtx};
 use crate::world::*;

@@ -19,8 +19,6 @@
 //! Writes: paste entities, the `TexturePatches` resource, an
 //! `AtlasTexture` on the mesh (with `atlas_size > 0`), `TexelSpacing`.
 
-pub mod components;
-
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::Image;
 use crate::image::sample::Wrap;
@@ -42,12 +40,11 @@ use crate::mesh::PolyMesh;
 use crate::progress::Progress;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, StageError};
-use crate::stages::tangent_field::FaceField;
+use crate::world::FaceField;
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
-use components::*;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};

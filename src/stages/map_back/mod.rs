@@ -11,7 +11,7 @@
 //! `original_preview_*.png` (format `preview`).
 
 use crate::config::params::{ParamDoc, StageSettings};
-use crate::kernels::retile::{ResultAttributes, map_back_with_progress};
+use crate::kernels::wei_levoy::retile::{ResultAttributes, map_back_with_progress};
 use crate::progress::Progress;
 use crate::stage::{Datum, Stage, StageCtx};
 use crate::world::*;

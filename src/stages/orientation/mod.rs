@@ -8,17 +8,21 @@
 //! Anchor and singularity positions are world points (`at`) or fractions of
 //! the active mesh's bounding box (`at_bbox`, [`crate::stages::position`]).
 //! In field mode, a connected component that no anchor is on gets one
-//! automatic anchor (`kernels::component_fallback::fallback_keys`: at its
+//! automatic anchor (`kernels::surface::component_fallback::fallback_keys`: at its
 //! vertex nearest its centroid, `up` projected there), since the anchors
 //! blend by edge-path distance and never reach it; metric
 //! `fallback_components`. Singularities act through space and reach every
 //! component.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::component_fallback::{Components, fallback_keys, spread_over_components};
-use crate::kernels::frames::{TangentFrame, frames_from_global_direction, frames_with_angles};
-use crate::kernels::geodesic::nearest_vertex;
-use crate::kernels::orientation_field::{Anchor, Singularity, up_field};
+use crate::kernels::surface::component_fallback::{
+    Components, fallback_keys, spread_over_components,
+};
+use crate::kernels::surface::frames::{
+    TangentFrame, frames_from_global_direction, frames_with_angles,
+};
+use crate::kernels::surface::geodesic::nearest_vertex;
+use crate::kernels::surface::orientation_field::{Anchor, Singularity, up_field};
 use crate::mesh::Topology;
 use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::position;

@@ -4,8 +4,8 @@
 //! after every iteration.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::flatten::TriangleAdjacency;
-use crate::kernels::relax_orientation::{
+use crate::kernels::surface::flatten::TriangleAdjacency;
+use crate::kernels::wei_levoy::relax_orientation::{
     OrientationLevel, OrientationMode, RelaxSettings, relax_orientation_with_progress,
 };
 use crate::mesh::Topology;

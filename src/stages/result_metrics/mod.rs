@@ -12,7 +12,6 @@
 
 use crate::config::params::to_json;
 use crate::image::Image;
-use crate::kernels::frames::frames_from_global_direction;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
 use crate::kernels::lapped::coverage::{lattice_level, lattice_samples_into};
 use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality, surface_verbatim};
@@ -20,14 +19,13 @@ use crate::kernels::metrics::{
     EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
 };
 use crate::kernels::metrics::{SourceMap, image_quality};
-use crate::kernels::retile::{ResultAttributes, map_back};
-use crate::kernels::surface_sample::CornerFn;
+use crate::kernels::surface::frames::frames_from_global_direction;
+use crate::kernels::surface::surface_sample::CornerFn;
+use crate::kernels::wei_levoy::retile::{ResultAttributes, map_back};
 use crate::mesh::Topology;
 use crate::progress::Progress;
-use crate::stages::lapped_paste::components::{
-    PasteOf, PasteOrder, PatchFaces, PatchUvs, TexturePatchIndex, TexturePatches,
-};
 use crate::world::*;
+use crate::world::{PasteOf, PasteOrder, PatchFaces, PatchUvs, TexturePatchIndex, TexturePatches};
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
@@ -271,7 +269,7 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
 fn baked_quality(
     asset: &BakedAsset,
     source: &crate::mesh::PolyMesh,
-    source_frames: Option<&[crate::kernels::frames::TangentFrame]>,
+    source_frames: Option<&[crate::kernels::surface::frames::TangentFrame]>,
     exemplar: &Image,
     spacing: f32,
     settings: &EnergySettings,
@@ -340,9 +338,9 @@ fn baked_quality(
 /// turned into its tangent plane: [`map_back`]); `None` when that fails.
 fn frames_carried_onto(
     result: &crate::mesh::PolyMesh,
-    frames: &[crate::kernels::frames::TangentFrame],
+    frames: &[crate::kernels::surface::frames::TangentFrame],
     source: &crate::mesh::PolyMesh,
-) -> Option<Vec<crate::kernels::frames::TangentFrame>> {
+) -> Option<Vec<crate::kernels::surface::frames::TangentFrame>> {
     let attributes = ResultAttributes {
         colours: &[],
         channels: 0,

@@ -5,7 +5,7 @@
 //! onto the input; the finest level becomes the active mesh.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::retile::{RetileSettings, RetileTarget, retile_with_progress};
+use crate::kernels::wei_levoy::retile::{RetileSettings, RetileTarget, retile_with_progress};
 use crate::mesh::{PolyMesh, Topology};
 use crate::progress::Progress;
 use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};

@@ -13,11 +13,11 @@
 //! face's average. Per-corner data (UVs) does not carry over.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::sqrt2::{
+use crate::kernels::bangay_morkel::sqrt2::{
     AreaStats, MAX_HIERARCHY_LEVELS, MAX_HIERARCHY_VERTICES, Parents, Sqrt2Settings,
     adaptive_sqrt2, sqrt2_subdivide_with,
 };
+use crate::kernels::surface::frames::TangentFrame;
 use crate::progress::Progress;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx};
@@ -33,7 +33,7 @@ use std::ops::{Add, Mul};
 /// on a triangle facing the same way as the vertex normal (so a point near
 /// a thin wall is not snapped onto its far side). Parallel, deterministic.
 fn onto_surface(
-    projector: &crate::kernels::retile::SurfaceProjector,
+    projector: &crate::kernels::wei_levoy::retile::SurfaceProjector,
     mesh: &mut crate::mesh::PolyMesh,
 ) {
     use rayon::prelude::*;
@@ -220,7 +220,7 @@ fn coarsened(
     target: usize,
     seed: u64,
 ) -> Option<(crate::mesh::PolyMesh, u32)> {
-    use crate::kernels::retile::{RetileError, RetileSettings, retile_with_progress};
+    use crate::kernels::wei_levoy::retile::{RetileError, RetileSettings, retile_with_progress};
     let progress = Progress::new(0, "subdivide_sqrt2 (remeshing the dense input)");
     let _finish = progress.finish_on_drop();
     let mut at_least = RetileSettings::MIN_LEVEL_VERTICES as usize;
@@ -480,7 +480,7 @@ impl Stage for SubdivideSqrt2 {
             // The input surface every level is put back on.
             let projector = settings
                 .on_input_surface
-                .then(|| crate::kernels::retile::SurfaceProjector::new(input));
+                .then(|| crate::kernels::wei_levoy::retile::SurfaceProjector::new(input));
             // Its corners, which every level keeps where it has them.
             let corners = if settings.on_input_surface {
                 corner_keys(input)

@@ -19,11 +19,11 @@
 //! into a new active mesh level first.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
-use crate::kernels::component_fallback::{Components, unseeded_components};
 use crate::kernels::lapped::TriMesh;
 use crate::kernels::lapped::tangent_field::{
     FieldConstraint, field_from_vertex_frames, global_up_field, nearest_face, rbf_field,
 };
+use crate::kernels::surface::component_fallback::{Components, unseeded_components};
 use crate::mesh::Topology;
 use crate::stage::{Datum, Stage, StageCtx, StageError};
 use crate::stages::position;
@@ -33,22 +33,6 @@ use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-
-/// The per-face field `T` on a mesh entity (Praun et al. §3.2): in the face
-/// plane, direction = texture up, length = world units per texture patch
-/// unit (the patch image's larger side).
-#[derive(Component, Clone, Debug, Default)]
-pub struct FaceField {
-    /// One vector per face.
-    pub t: Vec<Vec3>,
-    /// Isotropic texture: only the lengths matter.
-    pub isotropic: bool,
-    /// The lengths are world units per exemplar PIXEL (the field follows
-    /// `[input] texture_scale`; `lapped_paste` multiplies by the patch
-    /// image's side, so the texture shows at that scale whatever the patch
-    /// size), rather than per texture patch (an explicit `patch_size`).
-    pub per_pixel: bool,
-}
 
 /// Where the field comes from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -244,7 +228,7 @@ pub fn face_field(
     mesh: &crate::mesh::PolyMesh,
     tri: &TriMesh,
     settings: &TangentFieldSettings,
-    frames: Option<&[crate::kernels::frames::TangentFrame]>,
+    frames: Option<&[crate::kernels::surface::frames::TangentFrame]>,
     texels_per_unit: f32,
 ) -> Result<(FaceField, serde_json::Map<String, serde_json::Value>), String> {
     let mut metrics = serde_json::Map::new();

@@ -1,7 +1,7 @@
 //! Stage `triplanar`: the artist's alternative to synthesis — an image
 //! (default the exemplar; typically a tileable texture) projected along the
 //! three world axes with normal-based blend weights (box mapping with
-//! blended seams, [`crate::kernels::triplanar`]), at the run's
+//! blended seams, [`crate::kernels::atlas::triplanar`]), at the run's
 //! `texture_scale`. The projection is evaluated per texel by `bake`, like any
 //! other result, so it is the peer of the surface benchmark at the same
 //! texel density as every method.

@@ -9,10 +9,10 @@
 //! one-level pyramid.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::flatten::TriangleAdjacency;
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::relax_orientation::{OrientationLevel, transfer_frames};
-use crate::kernels::wl_match::{
+use crate::kernels::surface::flatten::TriangleAdjacency;
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::wei_levoy::relax_orientation::{OrientationLevel, transfer_frames};
+use crate::kernels::wei_levoy::wl_match::{
     InitialColours, NeighbourhoodSpec, SearchKind, SynthesisLevel, WlSettings,
     wei_levoy_synthesis_with_progress,
 };

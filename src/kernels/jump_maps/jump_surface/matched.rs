@@ -5,7 +5,7 @@
 use super::*;
 use crate::image::Image;
 use crate::image::sample::Wrap;
-use crate::kernels::vertex_order::vertex_order;
+use crate::kernels::jump_maps::vertex_order::vertex_order;
 use crate::mesh::Topology;
 use glam::Vec2;
 use rand::{Rng, SeedableRng};

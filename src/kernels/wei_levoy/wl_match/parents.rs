@@ -5,7 +5,7 @@
 
 use glam::Vec3;
 
-use crate::kernels::flatten::TriangleAdjacency;
+use crate::kernels::surface::flatten::TriangleAdjacency;
 
 /// A point on a triangle of the coarser level.
 #[derive(Clone, Copy, Debug, PartialEq)]

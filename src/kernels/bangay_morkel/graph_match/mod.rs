@@ -18,7 +18,7 @@
 //! 4. `P` takes the colour of `Q` on its own level and remembers `Q`
 //!    (`SourceTexels`); with graph cut on, the region around `P` takes the
 //!    exemplar imprint where a minimum cut says so (§3.4,
-//!    [`crate::kernels::graph_cut_transfer`]).
+//!    [`crate::kernels::bangay_morkel::graph_cut_transfer`]).
 //!
 //! With [`Candidates::Coherent`] (an extension beyond the paper) step 3
 //! scores only k-coherent candidates instead of every texel: the sources of
@@ -46,10 +46,10 @@ pub use search::{BestMatch, MatchGroups, Sample, best_candidate, best_candidate_
 pub use stack::{ImageLevels, MatchImages};
 
 use crate::image::sample::Wrap;
-use crate::kernels::frames::TangentFrame;
-use crate::kernels::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
+use crate::kernels::bangay_morkel::graph_cut_transfer::{TransferRegion, graph_cut_transfer};
+use crate::kernels::bangay_morkel::sqrt2::Parents;
 use crate::kernels::mix;
-use crate::kernels::sqrt2::Parents;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::Topology;
 use crate::progress::Progress;
 use glam::{Vec2, Vec3};
@@ -89,7 +89,7 @@ pub struct GraphMatchSettings {
     /// `1 + jump_cost`); ≥ 0.
     pub jump_cost: f32,
     /// With coherent candidates: weight of the occurrence penalty (counts
-    /// per exemplar cell, `kernels::occupancy`); a candidate in a part of the exemplar used `x > 1`
+    /// per exemplar cell, `kernels::surface::occupancy`); a candidate in a part of the exemplar used `x > 1`
     /// times an even share costs `spread · (x − 1)` times the mean of the
     /// candidates' sums more. 0 = off (the default). ≥ 0.
     pub spread: f32,
@@ -129,7 +129,7 @@ pub enum Candidates {
     Coherent,
 }
 
-/// The vertices' uses of the exemplar's cells (`kernels::occupancy`), for
+/// The vertices' uses of the exemplar's cells (`kernels::surface::occupancy`), for
 /// the occurrence penalty of coherent candidates
 /// ([`GraphMatchSettings::spread`]): without it, continued patches keep
 /// copying the part of the exemplar they started in, and a result can
@@ -137,7 +137,7 @@ pub enum Candidates {
 /// updated after each parallel batch, so a batch reads one state whatever
 /// the thread count. Coordinates are level-0 texels; the penalty counts
 /// only use beyond an even share.
-struct Occupancy(crate::kernels::occupancy::Occupancy);
+struct Occupancy(crate::kernels::surface::occupancy::Occupancy);
 
 impl Occupancy {
     /// Cells of side `cell` level-0 texels. `texels_per_vertex`: about the
@@ -153,8 +153,11 @@ impl Occupancy {
         texels_per_vertex: f32,
     ) -> Self {
         let img = images.image(0);
-        let mut occ =
-            crate::kernels::occupancy::Occupancy::new(img.width as f32, img.height as f32, cell);
+        let mut occ = crate::kernels::surface::occupancy::Occupancy::new(
+            img.width as f32,
+            img.height as f32,
+            cell,
+        );
         let mut n = 0usize;
         for (t, &c) in state.texels.iter().zip(&state.coloured) {
             if c {

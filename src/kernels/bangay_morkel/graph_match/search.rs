@@ -383,7 +383,7 @@ fn score_tile_generic(
 mod tests {
     use super::*;
     use crate::image::{Image, sample::Wrap};
-    use crate::kernels::graph_match::stack::ImageLevels;
+    use crate::kernels::bangay_morkel::graph_match::stack::ImageLevels;
 
     fn noise(w: u32, h: u32, c: u32, seed: u32) -> Image {
         let mut s = seed;

@@ -11,7 +11,7 @@
 use faer::{Accum, MatMut, MatRef, Par};
 
 use super::{Match, NeighbourhoodSearch, better, rerank};
-use crate::kernels::wl_match::features::FeatureMatrix;
+use crate::kernels::wei_levoy::wl_match::features::FeatureMatrix;
 
 /// Exemplar vectors per matrix-product tile.
 const TILE: usize = 1024;

@@ -28,9 +28,9 @@ use crate::kernels::mix;
 use glam::Vec3;
 use rayon::prelude::*;
 
-use super::flatten::{TriangleAdjacency, template_spacing};
-use super::frames::TangentFrame;
-use super::wl_match::parents::{SurfacePoint, TriangleBvh};
+use crate::kernels::surface::flatten::{TriangleAdjacency, template_spacing};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::wei_levoy::wl_match::parents::{SurfacePoint, TriangleBvh};
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
 
@@ -219,7 +219,7 @@ fn parent_points(fine: &OrientationLevel, coarse: &OrientationLevel) -> Vec<Surf
 
 /// Random frames for one level; vertex `v` draws from its own stream.
 fn random_frames(normals: &[Vec3], seed: u64, level: u64) -> Vec<TangentFrame> {
-    super::frames::frames_with_angles(normals, |v| {
+    crate::kernels::surface::frames::frames_with_angles(normals, |v| {
         let r = mix(seed, level, v as u64);
         (r >> 40) as f32 / (1u64 << 24) as f32 * std::f32::consts::TAU
     })

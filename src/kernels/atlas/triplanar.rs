@@ -16,7 +16,7 @@
 //!   creases ([`crease_corner_normals`]): a cube's face is one projection,
 //!   a scan's curved surface blends smoothly.
 
-use super::atlas::bake::{AtlasFrames, Contribution, ContributionSource, TexelSamples};
+use super::bake::{AtlasFrames, Contribution, ContributionSource, TexelSamples};
 use glam::{Vec2, Vec3};
 
 /// The three projections' image coordinates of `p`, in image pixels (pixel

@@ -20,7 +20,7 @@ use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 
 use super::{Match, NeighbourhoodSearch, rerank};
-use crate::kernels::wl_match::features::FeatureMatrix;
+use crate::kernels::wei_levoy::wl_match::features::FeatureMatrix;
 
 /// Dimensions of the kd-tree (kept components, zero padded).
 pub(crate) const TREE_DIMS: usize = 8;

@@ -10,7 +10,7 @@
 //! Ericson, *Real-Time Collision Detection* (2005), §5.1.5.
 
 use super::trimesh::{NONE, TriMesh, next};
-use crate::kernels::frames::TangentFrame;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::PolyMesh;
 use crate::progress::Progress;
 use glam::{Vec2, Vec3};

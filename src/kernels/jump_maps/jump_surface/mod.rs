@@ -39,8 +39,8 @@ mod uvs;
 pub use matched::*;
 pub use uvs::*;
 
-use super::frames::TangentFrame;
-use super::vertex_order::VertexOrder;
+use crate::kernels::jump_maps::vertex_order::VertexOrder;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::Topology;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -194,7 +194,7 @@ pub fn synthesize_surface<J: JumpLookup>(
     synthesize_surface_matched(topo, offsets, jumps, settings, None, progress)
 }
 
-impl JumpLookup for super::jump_map::JumpMap {
+impl JumpLookup for crate::kernels::jump_maps::jump_map::JumpMap {
     fn dims(&self) -> (u32, u32) {
         (self.width(), self.height())
     }

@@ -39,7 +39,7 @@ pub fn atlas_corner_uvs(t: usize, count: usize, size: u32) -> [Vec2; 3] {
 /// for each base vertex) into a `size`² atlas. The colour at a point is
 /// Σ_b λ_b · texture(Σ_k λ_k · uv[b][k]), λ the barycentric coordinates.
 pub fn bake_blended(
-    layers: crate::kernels::jump_surface::Blend<'_>,
+    layers: crate::kernels::jump_maps::jump_surface::Blend<'_>,
     texture: &Image,
     wrap: Wrap,
     size: u32,

@@ -31,7 +31,7 @@ use glam::Vec2;
 pub fn vertex_colours_from_corner_uvs(
     mesh: &PolyMesh,
     uvs: &[Vec2],
-    blend: Option<crate::kernels::jump_surface::Blend<'_>>,
+    blend: Option<crate::kernels::jump_maps::jump_surface::Blend<'_>>,
     texture: &Image,
     wrap: Wrap,
 ) -> (Vec<f32>, usize) {

@@ -3,7 +3,7 @@
 //! maps of Kaspar et al. 2015). A candidate in an over-used cell costs
 //! more, so a result spreads over all of the exemplar's content instead of
 //! settling on its easiest-to-match parts. `kernels::coherent` and
-//! `kernels::graph_match` (coherent candidates) read it, each with its own
+//! `kernels::bangay_morkel::graph_match` (coherent candidates) read it, each with its own
 //! share and penalty.
 
 use glam::Vec2;

@@ -1,7 +1,7 @@
 //! k-regions and their texture-space coordinates (Bangay & Morkel 2006
 //! §3.3.1, Fig. 7) and the region size `k` from a size in texels (§3.3.2).
 
-use crate::kernels::frames::TangentFrame;
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::Topology;
 use glam::{DVec2, Vec2, Vec3};
 use rayon::prelude::*;

@@ -11,7 +11,7 @@ use std::collections::BinaryHeap;
 
 use super::{Match, NeighbourhoodSearch, better};
 use crate::kernels::dist2;
-use crate::kernels::wl_match::features::FeatureMatrix;
+use crate::kernels::wei_levoy::wl_match::features::FeatureMatrix;
 
 /// Lloyd iterations per split.
 const LLOYD_ITERATIONS: usize = 8;

@@ -17,7 +17,7 @@
 //! the vertex's normal line meets level `L + j` (the parent face; no hit
 //! within `parent_reach · d_{L+j}` means default colours, footnote 2). All
 //! templates lie in the vertex's tangent frame; each is filled by
-//! flattening and resampling ([`crate::kernels::flatten`]); uncovered points
+//! flattening and resampling ([`crate::kernels::surface::flatten`]); uncovered points
 //! take the mean colour of the exemplar level.
 //!
 //! Levels are synthesised from the coarsest. On each level:
@@ -49,12 +49,12 @@ use self::features::{Part, exemplar_features};
 use self::parents::TriangleBvh;
 pub use self::search::SearchKind;
 use self::search::{Match, build_search};
-use super::flatten::{
+use crate::image::{Image, pyramid::gaussian_pyramid, sample::Wrap};
+use crate::kernels::surface::flatten::{
     FlattenScratch, PatchSeed, ScratchPool, StencilPoint, Template, TriangleAdjacency,
     flatten_stencil, resample_stencil, template_spacing,
 };
-use super::frames::TangentFrame;
-use crate::image::{Image, pyramid::gaussian_pyramid, sample::Wrap};
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::PolyMesh;
 use crate::progress::{Progress, level_label};
 

@@ -2,8 +2,8 @@
 //! al. 2000 §3.2): interpolation of a few anchor "up" vectors, and sources and
 //! sinks (singular points the field flows out of or into).
 
-use super::frames::TangentFrame;
-use super::geodesic::{dijkstra, nearest_vertex};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::surface::geodesic::{dijkstra, nearest_vertex};
 use crate::mesh::Topology;
 use glam::Vec3;
 

@@ -1,8 +1,8 @@
 //! Graph-cut texture transfer onto a surface region (Bangay & Morkel 2006
 //! §3.4, Fig. 9, eq. 1; after Kwatra et al. 2003), solved with the
-//! Boykov–Kolmogorov max-flow of [`crate::kernels::max_flow`].
+//! Boykov–Kolmogorov max-flow of [`crate::kernels::bangay_morkel::max_flow`].
 
-use super::max_flow::FlowGraph;
+use crate::kernels::bangay_morkel::max_flow::FlowGraph;
 
 /// A surface region whose vertices could take colours from the matched
 /// exemplar neighbourhood. Vertices are numbered `0..n` locally; colours

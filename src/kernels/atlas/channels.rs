@@ -9,7 +9,7 @@
 //! displayed** and +Z out of the surface (the OpenGL / glTF convention). The
 //! project's images store rows top-down (pixel y grows downwards) and its
 //! tangent frames have `s` = texture right and `t` = texture up
-//! ([`crate::kernels::frames::TangentFrame`]), so a decoded texel normal
+//! ([`crate::kernels::surface::frames::TangentFrame`]), so a decoded texel normal
 //! `(x, y, z)` copied from the exemplar at a vertex means the world direction
 //! `x·s + y·t + z·n` of that vertex's synthesis frame. Moving one pixel down the
 //! image (+y in pixels) is moving along −t.

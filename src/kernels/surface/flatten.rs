@@ -4,7 +4,7 @@
 //! vertex-placement heuristic of Praun et al. 2000 §3.3 after Maillot et al.
 //! 1993 §3.1.4.
 //!
-//! The template follows the convention of [`crate::kernels::surface_sample`]:
+//! The template follows the convention of [`crate::kernels::surface::surface_sample`]:
 //! point `(i, j)` (column `i`, row `j`, both in `0..size`) lies at the offset
 //! `(i − size/2) · spacing` along `+s` and `(j − size/2) · spacing` along `−t`
 //! from the patch origin, so `i` runs like image x and `j` like image y
@@ -21,8 +21,8 @@ use std::collections::BinaryHeap;
 
 use glam::{Vec2, Vec3};
 
-use super::frames::TangentFrame;
-use super::{ceil_i, floor_i};
+use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::{ceil_i, floor_i};
 use crate::mesh::PolyMesh;
 
 /// "No triangle" in adjacency arrays, and "no vertex" in stencils.

@@ -11,7 +11,7 @@
 //! of the frame's `(s, −t)` axes, with `size/2` rounded down (the centre
 //! point for odd sizes). So `i` runs along `+s` (image x, to the right) and
 //! `j` along `−t` (image y, downwards: `t` is the texture's up direction, see
-//! [`crate::kernels::frames`]). `out` receives the points row-major, `j` then `i`, with the
+//! [`crate::kernels::surface::frames`]). `out` receives the points row-major, `j` then `i`, with the
 //! signal's channels interleaved: value `c` of point `(i, j)` is at
 //! `(j · size + i) · channels + c`, the layout of an [`Image`] of the template.
 //! Texture coordinates follow the same convention (`v = 0` at the top row).
@@ -22,8 +22,8 @@
 
 use glam::{Vec2, Vec3};
 
-use super::frames::TangentFrame;
 use crate::image::{Image, sample::Wrap};
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::{PolyMesh, Topology};
 
 /// A signal over the surface to resample.
