@@ -3,8 +3,8 @@
 
 Runs every numbered config in configs/, every configs/surface/*.toml, and every
 configs/plane/*.toml on each photo in data/textures/, each into its own folder
-under a scratch directory, from an empty analysis cache, and prints one line per
-output file: `run file sha256`. metrics.json is hashed without the figures that
+under a scratch directory, each from an empty analysis cache of its own (so a
+subset hashes as the whole does), and prints one line per output file: `run file sha256`. metrics.json is hashed without the figures that
 measure the machine rather than the result (seconds, rates, peak memory, the
 memory limit, the thread count, cache hits).
 
@@ -29,14 +29,21 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
 
-# Keys of metrics.json that measure the machine or the run's timing.
+# Keys of metrics.json that measure the machine or the run's timing, or say
+# whether an analysis came from the cache (the jump-map analysis reports its
+# statistics only when it runs).
 MACHINE_KEYS = {
     "peak_rss_bytes",
     "limit_bytes",
     "limit_source",
     "threads",
-    "cache_hit",
     "config",
+    "cache_hit",
+    "refine_analysis_cached",
+    "explained_variance",
+    "pca_components",
+    "full_fraction",
+    "mean_jumps",
 }
 
 
@@ -90,13 +97,15 @@ def main():
     args = parser.parse_args()
 
     scratch = Path(tempfile.mkdtemp(prefix="surfsynth_hashes_"))
-    env = dict(os.environ, SURFSYNTH_CACHE=str(scratch / "cache"))
     failed = 0
     try:
         for name, cfg, extra in runs():
             if args.only not in name:
                 continue
             out = scratch / name
+            cache = scratch / "cache"
+            shutil.rmtree(cache, ignore_errors=True)
+            env = dict(os.environ, SURFSYNTH_CACHE=str(cache))
             cmd = [args.bin, "run", str(cfg), "--out", str(out), "-q", "--threads", args.threads]
             result = subprocess.run(cmd + extra, cwd=ROOT, env=env, capture_output=True, text=True)
             if result.returncode != 0:
