@@ -90,6 +90,168 @@ fn resolve_stage_paths(
     Ok(())
 }
 
+/// The config's single values: the output folder, the metric settings, the
+/// texture scale and the stage count.
+fn check_scalars(raw: &crate::config::RawConfig, file: &str) -> Result<(), ConfigError> {
+    let value_err = |key: &str, message: String| ConfigError::Value {
+        file: file.to_string(),
+        key: key.to_string(),
+        message,
+    };
+    if raw.output.dir.trim().is_empty() {
+        return Err(value_err("output.dir", "must name a folder".into()));
+    }
+    let n = raw.output.metric_neighbourhood;
+    if !(3..=15).contains(&n) || n.is_multiple_of(2) {
+        return Err(value_err(
+            "output.metric_neighbourhood",
+            format!("{n} is not allowed; allowed: odd, 3..=15"),
+        ));
+    }
+    if !(10..=100_000).contains(&raw.output.metric_samples) {
+        return Err(value_err(
+            "output.metric_samples",
+            format!(
+                "{} is out of range; allowed: 10..=100000",
+                raw.output.metric_samples
+            ),
+        ));
+    }
+    let scale = raw.input.texture_scale;
+    let limit = crate::config::TEXTURE_SCALE_LIMIT;
+    if !(scale.is_finite() && (1.0 / limit..=limit).contains(&scale)) {
+        return Err(value_err(
+            "input.texture_scale",
+            format!(
+                "{scale} is out of range; allowed: {}..={limit:e} (in texture_scale_unit = {:?}: {})",
+                1.0 / limit,
+                raw.input.texture_scale_unit,
+                crate::config::TextureScaleUnit::ALLOWED
+            ),
+        ));
+    }
+    if raw.stage.len() > MAX_STAGES {
+        return Err(value_err(
+            "stage",
+            format!(
+                "{} stages; allowed: at most {MAX_STAGES} (a pipeline's world holds every stage's systems, and its memory grows faster than the stage count)",
+                raw.stage.len()
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The `index`-th (1-based) `[[stage]]` table parsed into its plan: its
+/// kind looked up in `all`, its paths resolved, its settings typed and
+/// checked. Returns the plan and the line of its `kind`.
+fn parse_stage_table(
+    source: &ConfigSource,
+    all: &[crate::stage::StageInfo],
+    index: usize,
+    spanned: &toml::Spanned<std::collections::BTreeMap<toml::Spanned<String>, toml::Value>>,
+) -> Result<(Box<dyn StagePlan>, usize), ConfigError> {
+    let file = &source.file;
+    let allowed_kinds = || all.iter().map(|s| s.kind).collect::<Vec<_>>().join(", ");
+    let table_line = source.line_of(spanned.span().start);
+    let entries = spanned.get_ref();
+    let kind_value = entries.iter().find(|(k, _)| k.get_ref() == "kind");
+    let Some((kind_key, kind_value)) = kind_value else {
+        return Err(ConfigError::UnknownStage {
+            file: file.clone(),
+            line: table_line,
+            index,
+            kind: String::new(),
+            allowed: format!("a `kind = \"...\"` line with one of: {}", allowed_kinds()),
+        });
+    };
+    let kind_line = source.line_of(kind_key.span().start);
+    let kind = kind_value.as_str().unwrap_or_default().to_string();
+    let Some(info) = all.iter().find(|s| s.kind == kind) else {
+        return Err(ConfigError::UnknownStage {
+            file: file.clone(),
+            line: kind_line,
+            index,
+            kind,
+            allowed: allowed_kinds(),
+        });
+    };
+    let mut table = toml::Table::new();
+    for (k, v) in entries {
+        if k.get_ref() != "kind" {
+            table.insert(k.get_ref().clone(), v.clone());
+        }
+    }
+    resolve_stage_paths(source, &kind, index, &mut table)?;
+    let plan = (info.parse)(table).map_err(|(param, message)| {
+        let line = entries
+            .iter()
+            .find(|(k, _)| k.get_ref() == &param)
+            .map(|(k, _)| source.line_of(k.span().start))
+            .unwrap_or(table_line);
+        ConfigError::Param {
+            file: file.clone(),
+            line,
+            index,
+            kind: kind.clone(),
+            param,
+            message,
+        }
+    })?;
+    Ok((plan, kind_line))
+}
+
+/// Checks that what `plan` needs is `available` from `[input]` and the
+/// stages before it, and that a `plane` request has a result to draw.
+fn check_order(
+    plan: &dyn StagePlan,
+    available: &HashSet<Datum>,
+    file: &str,
+    kind_line: usize,
+    index: usize,
+) -> Result<(), ConfigError> {
+    let kind = plan.kind().to_string();
+    for need in plan.requires() {
+        if !available.contains(&need) {
+            let producers = crate::stages::producers(need);
+            return Err(ConfigError::MissingInput {
+                file: file.to_string(),
+                line: kind_line,
+                index,
+                kind,
+                needs: need.describe().to_string(),
+                hint: if need == Datum::Mesh {
+                    "set `mesh` in [input]".to_string()
+                } else {
+                    format!(
+                        "add {} before it",
+                        producers
+                            .iter()
+                            .map(|p| format!("`{p}`"))
+                            .collect::<Vec<_>>()
+                            .join(" or ")
+                    )
+                },
+            });
+        }
+    }
+    if matches!(plan.plane_role(), PlaneRole::Request { .. })
+        && !plane_check::PLANE_RESULTS
+            .iter()
+            .any(|d| available.contains(d))
+    {
+        return Err(ConfigError::MissingInput {
+            file: file.to_string(),
+            line: kind_line,
+            index,
+            kind,
+            needs: "a result to draw for format `plane` (vertex colours, per-corner texture coordinates, lapped pastes or a synthesised image)".into(),
+            hint: "add a synthesis stage (`init_colours`, `match`, `graph_match`, `jump_surface`, `lapped_paste` or `jump_image`) before it".into(),
+        });
+    }
+    Ok(())
+}
+
 impl Pipeline {
     /// Parses and validates a config: unknown stages, keys, types and ranges,
     /// and stages whose inputs no earlier stage produces, are errors naming
@@ -97,144 +259,16 @@ impl Pipeline {
     pub fn from_source(source: ConfigSource) -> Result<Self, ConfigError> {
         let raw = source.parse()?;
         let file = source.file.clone();
-        let value_err = |key: &str, message: String| ConfigError::Value {
-            file: file.clone(),
-            key: key.to_string(),
-            message,
-        };
-        if raw.output.dir.trim().is_empty() {
-            return Err(value_err("output.dir", "must name a folder".into()));
-        }
-        let n = raw.output.metric_neighbourhood;
-        if !(3..=15).contains(&n) || n % 2 == 0 {
-            return Err(value_err(
-                "output.metric_neighbourhood",
-                format!("{n} is not allowed; allowed: odd, 3..=15"),
-            ));
-        }
-        if !(10..=100_000).contains(&raw.output.metric_samples) {
-            return Err(value_err(
-                "output.metric_samples",
-                format!(
-                    "{} is out of range; allowed: 10..=100000",
-                    raw.output.metric_samples
-                ),
-            ));
-        }
-        let scale = raw.input.texture_scale;
-        let limit = crate::config::TEXTURE_SCALE_LIMIT;
-        if !(scale.is_finite() && (1.0 / limit..=limit).contains(&scale)) {
-            return Err(value_err(
-                "input.texture_scale",
-                format!(
-                    "{scale} is out of range; allowed: {}..={limit:e} (in texture_scale_unit = {:?}: {})",
-                    1.0 / limit,
-                    raw.input.texture_scale_unit,
-                    crate::config::TextureScaleUnit::ALLOWED
-                ),
-            ));
-        }
-        if raw.stage.len() > MAX_STAGES {
-            return Err(value_err(
-                "stage",
-                format!(
-                    "{} stages; allowed: at most {MAX_STAGES} (a pipeline's world holds every stage's systems, and its memory grows faster than the stage count)",
-                    raw.stage.len()
-                ),
-            ));
-        }
+        check_scalars(&raw, &file)?;
         let all = registry();
-        let allowed_kinds = all.iter().map(|s| s.kind).collect::<Vec<_>>().join(", ");
         let mut stages = Vec::with_capacity(raw.stage.len());
         let mut available: HashSet<Datum> = HashSet::new();
         if raw.input.mesh.is_some() {
             available.insert(Datum::Mesh);
         }
         for (i, spanned) in raw.stage.iter().enumerate() {
-            let index = i + 1;
-            let table_line = source.line_of(spanned.span().start);
-            let entries = spanned.get_ref();
-            let kind_value = entries.iter().find(|(k, _)| k.get_ref() == "kind");
-            let Some((kind_key, kind_value)) = kind_value else {
-                return Err(ConfigError::UnknownStage {
-                    file: file.clone(),
-                    line: table_line,
-                    index,
-                    kind: String::new(),
-                    allowed: format!("a `kind = \"...\"` line with one of: {allowed_kinds}"),
-                });
-            };
-            let kind_line = source.line_of(kind_key.span().start);
-            let kind = kind_value.as_str().unwrap_or_default().to_string();
-            let Some(info) = all.iter().find(|s| s.kind == kind) else {
-                return Err(ConfigError::UnknownStage {
-                    file: file.clone(),
-                    line: kind_line,
-                    index,
-                    kind,
-                    allowed: allowed_kinds,
-                });
-            };
-            let mut table = toml::Table::new();
-            for (k, v) in entries {
-                if k.get_ref() != "kind" {
-                    table.insert(k.get_ref().clone(), v.clone());
-                }
-            }
-            resolve_stage_paths(&source, &kind, index, &mut table)?;
-            let plan = (info.parse)(table).map_err(|(param, message)| {
-                let line = entries
-                    .iter()
-                    .find(|(k, _)| k.get_ref() == &param)
-                    .map(|(k, _)| source.line_of(k.span().start))
-                    .unwrap_or(table_line);
-                ConfigError::Param {
-                    file: file.clone(),
-                    line,
-                    index,
-                    kind: kind.clone(),
-                    param,
-                    message,
-                }
-            })?;
-            for need in plan.requires() {
-                if !available.contains(&need) {
-                    let producers = crate::stages::producers(need);
-                    return Err(ConfigError::MissingInput {
-                        file: file.clone(),
-                        line: kind_line,
-                        index,
-                        kind,
-                        needs: need.describe().to_string(),
-                        hint: if need == Datum::Mesh {
-                            "set `mesh` in [input]".to_string()
-                        } else {
-                            format!(
-                                "add {} before it",
-                                producers
-                                    .iter()
-                                    .map(|p| format!("`{p}`"))
-                                    .collect::<Vec<_>>()
-                                    .join(" or ")
-                            )
-                        },
-                    });
-                }
-            }
-            if matches!(plan.plane_role(), PlaneRole::Request { .. })
-                && !plane_check::PLANE_RESULTS
-                    .iter()
-                    .any(|d| available.contains(d))
-            {
-                return Err(ConfigError::MissingInput {
-                    file: file.clone(),
-                    line: kind_line,
-                    index,
-                    kind,
-                    needs: "a result to draw for format `plane` (vertex colours, per-corner texture coordinates, lapped pastes or a synthesised image)".into(),
-                    hint: "add a synthesis stage (`init_colours`, `match`, `graph_match`, `jump_surface`, `lapped_paste` or `jump_image`) before it".into(),
-                });
-            }
+            let (plan, kind_line) = parse_stage_table(&source, &all, i + 1, spanned)?;
+            check_order(&*plan, &available, &file, kind_line, i + 1)?;
             available.extend(plan.produces());
             stages.push(plan);
         }
@@ -247,10 +281,11 @@ impl Pipeline {
         memory_budget::check_input(&raw.input, &memory_limit, &file)?;
         // Before loading: what the settings alone decide.
         memory_budget::check_stages(&stages, &Default::default(), &memory_limit).map_err(|r| {
-            value_err(
-                &format!("stage {} ({}) {}", r.index, r.kind, r.param),
-                r.message,
-            )
+            ConfigError::Value {
+                file: file.clone(),
+                key: format!("stage {} ({}) {}", r.index, r.kind, r.param),
+                message: r.message,
+            }
         })?;
         Ok(Self {
             seed: raw.seed,

@@ -219,11 +219,9 @@ pub struct SweepReport {
     pub files: Vec<PathBuf>,
 }
 
-/// Validates every combination, then runs this shard's runs and writes the
-/// summary. Returns [`SweepError::RunsFailed`] (after writing the summary)
-/// when any run failed.
-pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
-    let started = Instant::now();
+/// The sweep's own options (`--jobs`, `--threads`, `--out`, `--timeout`,
+/// `--shard`), checked before any config is read.
+fn check_options(opts: &SweepOptions) -> Result<(Option<Duration>, Shard), SweepError> {
     if opts.jobs == 0 {
         return Err(SweepError::Option {
             flag: "--jobs".into(),
@@ -260,14 +258,22 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         Some(s) => Shard::parse(s)?,
         None => Shard { index: 1, count: 1 },
     };
-    let axes = opts
-        .grid
-        .iter()
-        .map(|g| parse_grid(g))
-        .collect::<Result<Vec<_>, _>>()?;
-    let planned = plan::plan(&axes, &opts.fixed)?;
+    Ok((timeout, shard))
+}
 
-    // Validate every combination before anything runs.
+/// Every planned run's config, validated as `run` would (settings, order,
+/// input files), with its resolved config's hash; and the distinct
+/// exemplars of the grid (key, report file name, options) with an input
+/// that names each.
+struct Validated {
+    runs: Vec<ValidRun>,
+    exemplars: Vec<(String, String, String)>,
+    exemplar_inputs: Vec<crate::config::RawInput>,
+    fixed_source: ConfigSource,
+}
+
+/// [`Validated`] for the `planned` runs of `opts`.
+fn validate(opts: &SweepOptions, planned: Vec<plan::PlannedRun>) -> Result<Validated, SweepError> {
     let base = ConfigSource::from_file(&opts.config)?;
     let mut fixed_source = base.clone();
     fixed_source.apply_overrides(&opts.fixed)?;
@@ -307,6 +313,73 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         }
         runs.push(ValidRun { run, config_hash });
     }
+    Ok(Validated {
+        runs,
+        exemplars,
+        exemplar_inputs,
+        fixed_source,
+    })
+}
+
+/// The timing of this invocation's runs, for `sweep.json` and the report.
+fn invocation_stats(
+    outcomes: &[Outcome],
+    shard: &Shard,
+    jobs: usize,
+    threads: usize,
+    wall_seconds: f64,
+    validate_seconds: f64,
+) -> InvocationStats {
+    let ran: Vec<&Outcome> = outcomes
+        .iter()
+        .filter(|o| o.status != RunStatus::Skipped)
+        .collect();
+    let failed = outcomes.iter().filter(|o| o.status.is_failure()).count();
+    // A failed run has no metrics.json: its child wall time counts as its own.
+    let sum_run_seconds: f64 = ran
+        .iter()
+        .map(|o| o.run_seconds.unwrap_or(o.wall_seconds))
+        .sum();
+    let sum_child_seconds: f64 = ran.iter().map(|o| o.wall_seconds).sum();
+    let n = ran.len();
+    InvocationStats {
+        shard: format!("{}/{}", shard.index, shard.count),
+        ran: n,
+        skipped: outcomes.len() - n,
+        failed,
+        jobs,
+        threads,
+        wall_seconds,
+        validate_seconds,
+        sum_run_seconds,
+        sum_child_seconds,
+        overhead_per_run_seconds: (n > 0)
+            .then(|| (wall_seconds * jobs.min(n) as f64 - sum_run_seconds) / n as f64),
+        process_overhead_per_run_seconds: (n > 0)
+            .then(|| (sum_child_seconds - sum_run_seconds) / n as f64),
+    }
+}
+
+/// Validates every combination, then runs this shard's runs and writes the
+/// summary. Returns [`SweepError::RunsFailed`] (after writing the summary)
+/// when any run failed.
+pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
+    let started = Instant::now();
+    let (timeout, shard) = check_options(opts)?;
+    let axes = opts
+        .grid
+        .iter()
+        .map(|g| parse_grid(g))
+        .collect::<Result<Vec<_>, _>>()?;
+    let planned = plan::plan(&axes, &opts.fixed)?;
+
+    // Validate every combination before anything runs.
+    let Validated {
+        runs,
+        exemplars,
+        exemplar_inputs,
+        fixed_source,
+    } = validate(opts, planned)?;
     let validate_seconds = started.elapsed().as_secs_f64();
     let selected: Vec<usize> = (0..runs.len()).filter(|&i| shard.contains(i)).collect();
     if opts.dry_run {
@@ -361,37 +434,21 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
     let jobs: Vec<ValidRun> = selected.iter().map(|&i| runs[i].clone()).collect();
     let outcomes = execute::execute(&spec, &jobs, opts.jobs);
 
-    let ran: Vec<&Outcome> = outcomes
+    let n = outcomes
         .iter()
         .filter(|o| o.status != RunStatus::Skipped)
-        .collect();
+        .count();
     let failed = outcomes.iter().filter(|o| o.status.is_failure()).count();
-    // A failed run has no metrics.json: its child wall time counts as its own.
-    let sum_run_seconds: f64 = ran
-        .iter()
-        .map(|o| o.run_seconds.unwrap_or(o.wall_seconds))
-        .sum();
-    let sum_child_seconds: f64 = ran.iter().map(|o| o.wall_seconds).sum();
     let summary_rows = summary::collect(&opts.out)?;
     let mut files = summary::write_all(&opts.out, &summary_rows, Some(&record))?;
-    let wall_seconds = started.elapsed().as_secs_f64();
-    let n = ran.len();
-    let stats = InvocationStats {
-        shard: format!("{}/{}", shard.index, shard.count),
-        ran: n,
-        skipped: outcomes.len() - n,
-        failed,
-        jobs: opts.jobs,
+    let stats = invocation_stats(
+        &outcomes,
+        &shard,
+        opts.jobs,
         threads,
-        wall_seconds,
+        started.elapsed().as_secs_f64(),
         validate_seconds,
-        sum_run_seconds,
-        sum_child_seconds,
-        overhead_per_run_seconds: (n > 0)
-            .then(|| (wall_seconds * opts.jobs.min(n) as f64 - sum_run_seconds) / n as f64),
-        process_overhead_per_run_seconds: (n > 0)
-            .then(|| (sum_child_seconds - sum_run_seconds) / n as f64),
-    };
+    );
     if n > 0 {
         // Once more with this invocation's timing in sweep.json, summary.json
         // and index.html (the first write is part of the time measured).
