@@ -116,10 +116,12 @@ fn estimates(config: &str) -> Vec<u64> {
         .unwrap_or_else(|e| panic!("{e}"));
     let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
     let sizes = InputSizes::of(&input, &p.input);
+    let seen = surfsynth::pipeline::memory_budget::stage_sizes(&p.stages, &sizes);
     p.stages
         .iter()
-        .map(|s| {
-            s.memory_estimate(&sizes)
+        .zip(&seen)
+        .map(|(s, sizes)| {
+            s.memory_estimate(sizes)
                 .iter()
                 .map(|e| e.bytes)
                 .max()

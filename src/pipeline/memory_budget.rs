@@ -134,8 +134,8 @@ pub fn check_stages(
 ) -> Result<Vec<StageEstimate>, Refusal> {
     let resident = sizes.resident_bytes();
     let mut all = Vec::new();
-    for (i, stage) in stages.iter().enumerate() {
-        for e in stage.memory_estimate(sizes) {
+    for (i, (stage, sizes)) in stages.iter().zip(stage_sizes(stages, sizes)).enumerate() {
+        for e in stage.memory_estimate(&sizes) {
             if e.bytes.saturating_add(resident) > limit.bytes {
                 return Err(Refusal {
                     index: i + 1,
@@ -153,6 +153,20 @@ pub fn check_stages(
         }
     }
     Ok(all)
+}
+
+/// The sizes each stage sees: the input's, then what each stage before it
+/// leaves ([`StagePlan::sizes_after`]: a retiled or subdivided mesh).
+pub fn stage_sizes(stages: &[Box<dyn StagePlan>], input: &InputSizes) -> Vec<InputSizes> {
+    let mut current = *input;
+    stages
+        .iter()
+        .map(|s| {
+            let seen = current;
+            current = s.sizes_after(&seen);
+            seen
+        })
+        .collect()
 }
 
 /// An integer setting as a count: at least 1 (absent or not an integer: 1).

@@ -154,6 +154,13 @@ pub trait Stage: 'static {
     fn memory_estimate(_settings: &Self::Settings, _sizes: &InputSizes) -> Vec<MemoryEstimate> {
         Vec::new()
     }
+    /// The sizes the stages after it see: a stage that makes a new active
+    /// mesh (retiling, subdivision, a builtin pyramid) gives its vertex,
+    /// face and triangle counts, so the later stages' estimates scale with
+    /// the mesh they will work on (default: unchanged).
+    fn sizes_after(_settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
+        *sizes
+    }
 }
 
 /// A configured stage, type-erased.
@@ -172,6 +179,8 @@ pub trait StagePlan: Send + Sync {
     fn plane_role(&self) -> PlaneRole;
     /// Its memory estimates for an input of `sizes`.
     fn memory_estimate(&self, sizes: &InputSizes) -> Vec<MemoryEstimate>;
+    /// The sizes the stages after it see.
+    fn sizes_after(&self, sizes: &InputSizes) -> InputSizes;
 }
 
 struct Plan<S: Stage>(S::Settings);
@@ -197,6 +206,9 @@ impl<S: Stage> StagePlan for Plan<S> {
     }
     fn memory_estimate(&self, sizes: &InputSizes) -> Vec<MemoryEstimate> {
         S::memory_estimate(&self.0, sizes)
+    }
+    fn sizes_after(&self, sizes: &InputSizes) -> InputSizes {
+        S::sizes_after(&self.0, sizes)
     }
 }
 
