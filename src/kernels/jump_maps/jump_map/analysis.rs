@@ -10,7 +10,7 @@ use super::neighbourhoods::{Neighbourhoods, source_region, vector_len, wrap_for}
 use super::normalise::normalise_weights;
 use super::pca;
 use super::poisson::PoissonDisc;
-use super::{Boundary, Jump, JumpMap, JumpMapError, JumpMapSettings, TexelCoord};
+use super::{Boundary, Jump, JumpMap, JumpMapError, JumpMapSettings, TexelCoord, TexelRect};
 use crate::image::{Image, pyramid::gaussian_pyramid};
 use crate::progress::Progress;
 
@@ -178,6 +178,196 @@ pub fn analyse_with_stats(
     analyse_with_progress(exemplar, settings, &Progress::hidden())
 }
 
+/// The neighbourhood vectors of the source `region`, projected on the PCA
+/// fitted to a sample of them: `components` values per source pixel, row
+/// by row over the region.
+///
+/// The vectors are never all held (issue 43: 4 · dim bytes a pixel, 23 GB
+/// at 4096²): the PCA sample's are computed for the sample, then the rest a
+/// block at a time, projected and dropped. The blocks start at multiples of
+/// the projection's chunk, so the result is the same as projecting one
+/// buffer of all of them.
+fn projected_neighbourhoods(
+    exemplar: &Image,
+    settings: &JumpMapSettings,
+    region: TexelRect,
+    progress: &Progress,
+) -> Result<(Vec<f32>, pca::Pca), JumpMapError> {
+    let widths = &settings.neighbourhood_widths;
+    let boundary = settings.boundary;
+    let dim = vector_len(widths, exemplar.channels);
+    let n_src = region.width() as usize * region.height() as usize;
+    let pyramid = {
+        let _s = tracing::info_span!("pyramid").entered();
+        gaussian_pyramid(exemplar, widths.len(), wrap_for(boundary))
+    };
+    let hoods = Neighbourhoods::new(&pyramid, widths, wrap_for(boundary));
+    progress.set_part("pca");
+    let pca = {
+        let _s = tracing::info_span!("pca").entered();
+        let rows = pca::sample_rows(n_src, settings.pca_sample_fraction, settings.seed);
+        let sample = hoods.pixels(region, &rows);
+        drop(rows);
+        pca::fit_sample(
+            &sample,
+            dim,
+            settings.pca_variance,
+            settings.max_components as usize,
+        )?
+    };
+    progress.set_part("projection");
+    let _s = tracing::info_span!("neighbourhoods").entered();
+    let block = projection_block(dim);
+    let mut projected = Vec::with_capacity(n_src * pca.components);
+    for first in (0..n_src).step_by(block) {
+        let vectors = hoods.rows(region, first, block.min(n_src - first));
+        projected.extend_from_slice(&pca.project(&vectors));
+    }
+    Ok((projected, pca))
+}
+
+/// Per source pixel (row by row over the region): its jump count, its
+/// final disc diameter, and `k` differences and destinations.
+struct RegionJumps {
+    counts: Vec<u8>,
+    discs: Vec<f32>,
+    diffs: Vec<f32>,
+    dests: Vec<TexelCoord>,
+}
+
+/// Each source pixel's `k·s + 1` approximate nearest neighbours in PCA
+/// space (itself among them), those outside `destinations` dropped,
+/// Poisson-disc filtered to at most `k`. Each block of queries' neighbours
+/// is filtered as soon as it is found, in parallel.
+fn nearest_and_filtered(
+    projected: &[f32],
+    components: usize,
+    settings: &JumpMapSettings,
+    disc: &PoissonDisc,
+    region: TexelRect,
+    destinations: TexelRect,
+    progress: &Progress,
+) -> RegionJumps {
+    let k = disc.k;
+    let n_src = region.width() as usize * region.height() as usize;
+    let m = k * settings.candidate_factor as usize + 1;
+    let rw = region.width();
+    let coord = |i: usize| TexelCoord::new(region.x0 + i as u32 % rw, region.y0 + i as u32 / rw);
+    let mut r_counts = vec![0u8; n_src];
+    let mut r_discs = vec![0.0f32; n_src];
+    let mut r_diffs = vec![0.0f32; n_src * k];
+    let mut r_dests = vec![TexelCoord::default(); n_src * k];
+    let _s = tracing::info_span!("nearest_neighbours").entered();
+    progress.set_part("nearest neighbours and filtering");
+    let knn = KnnSearch::new(
+        projected,
+        components,
+        m,
+        settings.ann_epsilon,
+        settings.ann_search,
+    );
+    let m = knn.m();
+    let b = KnnSearch::BLOCK;
+    r_counts
+        .par_chunks_mut(b)
+        .zip(r_discs.par_chunks_mut(b))
+        .zip(r_diffs.par_chunks_mut(b * k))
+        .zip(r_dests.par_chunks_mut(b * k))
+        .enumerate()
+        .for_each_init(
+            || {
+                (
+                    Vec::<Neighbour>::new(),
+                    Vec::<(TexelCoord, f32)>::new(),
+                    Vec::<usize>::new(),
+                )
+            },
+            |(nbrs, cands, acc), (block, (((counts, discs), diffs), dests))| {
+                let qn = counts.len();
+                nbrs.clear();
+                nbrs.resize(
+                    qn * m,
+                    Neighbour {
+                        index: 0,
+                        dist2: 0.0,
+                    },
+                );
+                knn.block(block, nbrs);
+                progress.inc(qn as u64);
+                for q in 0..qn {
+                    let row = &nbrs[q * m..][..m];
+                    cands.clear();
+                    cands.extend(
+                        row.iter()
+                            .map(|n| (coord(n.index as usize), n.dist2.max(0.0).sqrt()))
+                            .filter(|(c, _)| destinations.contains(c.x, c.y)),
+                    );
+                    let source = coord(block * b + q);
+                    discs[q] = disc.filter(source, cands, acc);
+                    counts[q] = acc.len() as u8;
+                    for (j, &a) in acc.iter().enumerate() {
+                        dests[q * k + j] = cands[a].0;
+                        diffs[q * k + j] = cands[a].1;
+                    }
+                }
+                progress.inc(qn as u64);
+            },
+        );
+    RegionJumps {
+        counts: r_counts,
+        discs: r_discs,
+        diffs: r_diffs,
+        dests: r_dests,
+    }
+}
+
+/// The region's jump lists placed at their pixels of the `w × h` exemplar,
+/// with normalised weights (`alpha`): per pixel its count and disc, and `k`
+/// jump slots. Also returns the jumps in all, the pixels with a full list
+/// and those whose disc was halved.
+#[allow(clippy::type_complexity)] // the map's parts, as `JumpMapParts` takes them
+fn scatter_to_exemplar(
+    found: RegionJumps,
+    disc: &PoissonDisc,
+    region: TexelRect,
+    w: u32,
+    h: u32,
+    alpha: f32,
+) -> (Vec<u8>, Vec<f32>, Vec<Jump>, (usize, usize, usize)) {
+    let k = disc.k;
+    let rw = region.width();
+    let n_src = region.width() as usize * region.height() as usize;
+    let coord = |i: usize| TexelCoord::new(region.x0 + i as u32 % rw, region.y0 + i as u32 / rw);
+    let n = w as usize * h as usize;
+    let mut counts = vec![0u8; n];
+    let mut discs = vec![0.0f32; n];
+    let mut diffs = vec![0.0f32; n * k];
+    let mut dests = vec![TexelCoord::default(); n * k];
+    let initial = disc.diameter.max(disc.min_diameter);
+    let (mut total, mut full, mut halved) = (0usize, 0usize, 0usize);
+    for i in 0..n_src {
+        let c = coord(i);
+        let p = (c.y * w + c.x) as usize;
+        counts[p] = found.counts[i];
+        discs[p] = found.discs[i];
+        let nj = found.counts[i] as usize;
+        diffs[p * k..][..nj].copy_from_slice(&found.diffs[i * k..][..nj]);
+        dests[p * k..][..nj].copy_from_slice(&found.dests[i * k..][..nj]);
+        total += nj;
+        full += usize::from(nj == k);
+        halved += usize::from(found.discs[i] < initial);
+    }
+    drop(found);
+    let weights = normalise_weights(&diffs, &counts, k, alpha);
+    drop(diffs);
+    let slots = dests
+        .iter()
+        .zip(&weights)
+        .map(|(&to, &weight)| Jump { to, weight })
+        .collect();
+    (counts, discs, slots, (total, full, halved))
+}
+
 /// [`analyse_with_stats`], reporting to `progress`: two steps per source
 /// pixel in the part "nearest neighbours and filtering" (a block's
 /// neighbours, then their filtering), the PCA fit of the sample and the
@@ -206,47 +396,8 @@ pub fn analyse_with_progress(
     let pixels = region.width() as u64 * region.height() as u64;
     progress.set_length(2 * pixels);
 
-    // Neighbourhood vectors are never all held (issue 43: 4 · dim bytes a
-    // pixel, 23 GB at 4096²): the PCA sample's are computed for the sample,
-    // then the rest a block at a time, projected and dropped. The blocks
-    // start at multiples of the projection's chunk, so the result is the
-    // same as projecting one buffer of all of them.
-    let pyramid = {
-        let _s = tracing::info_span!("pyramid").entered();
-        gaussian_pyramid(exemplar, widths.len(), wrap_for(boundary))
-    };
-    let hoods = Neighbourhoods::new(&pyramid, widths, wrap_for(boundary));
-    let n_src = pixels as usize;
-    progress.set_part("pca");
-    let pca = {
-        let _s = tracing::info_span!("pca").entered();
-        let rows = pca::sample_rows(n_src, settings.pca_sample_fraction, settings.seed);
-        let sample = hoods.pixels(region, &rows);
-        drop(rows);
-        pca::fit_sample(
-            &sample,
-            dim,
-            settings.pca_variance,
-            settings.max_components as usize,
-        )?
-    };
-    progress.set_part("projection");
-    let projected = {
-        let _s = tracing::info_span!("neighbourhoods").entered();
-        let block = projection_block(dim);
-        let mut projected = Vec::with_capacity(n_src * pca.components);
-        for first in (0..n_src).step_by(block) {
-            let vectors = hoods.rows(region, first, block.min(n_src - first));
-            projected.extend_from_slice(&pca.project(&vectors));
-        }
-        projected
-    };
-    drop(hoods);
-    drop(pyramid);
-
+    let (projected, pca) = projected_neighbourhoods(exemplar, settings, region, progress)?;
     let k = settings.jumps_per_pixel as usize;
-    let m = k * settings.candidate_factor as usize + 1;
-    let eps = settings.ann_epsilon;
     let disc = PoissonDisc {
         k,
         diameter: settings.effective_disc_diameter(),
@@ -255,107 +406,28 @@ pub fn analyse_with_progress(
         height: h,
         boundary,
     };
-    let rw = region.width();
-    let coord = |i: usize| TexelCoord::new(region.x0 + i as u32 % rw, region.y0 + i as u32 / rw);
-    // Per source pixel (row-major over the region): its jump count, disc,
-    // and k differences and destinations. Each block of queries' nearest
-    // neighbours is filtered as soon as it is found.
-    let mut r_counts = vec![0u8; n_src];
-    let mut r_discs = vec![0.0f32; n_src];
-    let mut r_diffs = vec![0.0f32; n_src * k];
-    let mut r_dests = vec![TexelCoord::default(); n_src * k];
-    {
-        let _s = tracing::info_span!("nearest_neighbours").entered();
-        progress.set_part("nearest neighbours and filtering");
-        let knn = KnnSearch::new(&projected, pca.components, m, eps, settings.ann_search);
-        let m = knn.m();
-        let b = KnnSearch::BLOCK;
-        r_counts
-            .par_chunks_mut(b)
-            .zip(r_discs.par_chunks_mut(b))
-            .zip(r_diffs.par_chunks_mut(b * k))
-            .zip(r_dests.par_chunks_mut(b * k))
-            .enumerate()
-            .for_each_init(
-                || {
-                    (
-                        Vec::<Neighbour>::new(),
-                        Vec::<(TexelCoord, f32)>::new(),
-                        Vec::<usize>::new(),
-                    )
-                },
-                |(nbrs, cands, acc), (block, (((counts, discs), diffs), dests))| {
-                    let qn = counts.len();
-                    nbrs.clear();
-                    nbrs.resize(
-                        qn * m,
-                        Neighbour {
-                            index: 0,
-                            dist2: 0.0,
-                        },
-                    );
-                    knn.block(block, nbrs);
-                    progress.inc(qn as u64);
-                    for q in 0..qn {
-                        let row = &nbrs[q * m..][..m];
-                        cands.clear();
-                        cands.extend(
-                            row.iter()
-                                .map(|n| (coord(n.index as usize), n.dist2.max(0.0).sqrt()))
-                                .filter(|(c, _)| destinations.contains(c.x, c.y)),
-                        );
-                        let source = coord(block * b + q);
-                        discs[q] = disc.filter(source, cands, acc);
-                        counts[q] = acc.len() as u8;
-                        for (j, &a) in acc.iter().enumerate() {
-                            dests[q * k + j] = cands[a].0;
-                            diffs[q * k + j] = cands[a].1;
-                        }
-                    }
-                    progress.inc(qn as u64);
-                },
-            );
-    }
+    let found = nearest_and_filtered(
+        &projected,
+        pca.components,
+        settings,
+        &disc,
+        region,
+        destinations,
+        progress,
+    );
     drop(projected);
-
-    let n = w as usize * h as usize;
-    let mut counts = vec![0u8; n];
-    let mut discs = vec![0.0f32; n];
-    let mut diffs = vec![0.0f32; n * k];
-    let mut dests = vec![TexelCoord::default(); n * k];
-    let initial = disc.diameter.max(disc.min_diameter);
-    let (mut total, mut full, mut halved) = (0usize, 0usize, 0usize);
-    for i in 0..n_src {
-        let c = coord(i);
-        let p = (c.y * w + c.x) as usize;
-        counts[p] = r_counts[i];
-        discs[p] = r_discs[i];
-        let nj = r_counts[i] as usize;
-        diffs[p * k..][..nj].copy_from_slice(&r_diffs[i * k..][..nj]);
-        dests[p * k..][..nj].copy_from_slice(&r_dests[i * k..][..nj]);
-        total += nj;
-        full += usize::from(nj == k);
-        halved += usize::from(r_discs[i] < initial);
-    }
-    drop((r_counts, r_discs, r_diffs, r_dests));
-    let weights = normalise_weights(&diffs, &counts, k, settings.alpha);
-    drop(diffs);
-    let slots = dests
-        .iter()
-        .zip(&weights)
-        .map(|(&to, &weight)| Jump { to, weight })
-        .collect();
-    drop((dests, weights));
-    let src = n_src.max(1) as f64;
+    let (counts, discs, slots, totals) =
+        scatter_to_exemplar(found, &disc, region, w, h, settings.alpha);
+    let src = (pixels as usize).max(1) as f64;
     let stats = AnalysisStats {
         vector_len: dim,
         components: pca.components,
         explained_variance: pca.explained,
         pca_sample_size: pca.sample_size,
-        source_pixels: n_src,
-        mean_jumps: total as f64 / src,
-        full_fraction: full as f64 / src,
-        halved_fraction: halved as f64 / src,
+        source_pixels: pixels as usize,
+        mean_jumps: totals.0 as f64 / src,
+        full_fraction: totals.1 as f64 / src,
+        halved_fraction: totals.2 as f64 / src,
     };
     let map = JumpMap::from_parts(JumpMapParts {
         width: w,
