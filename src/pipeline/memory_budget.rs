@@ -123,7 +123,8 @@ pub struct Refusal {
 }
 
 /// Checks every stage's estimates for `sizes` against `limit`; returns them
-/// all when they fit.
+/// all when they fit. A stage whose analysis is `cached` (one flag per
+/// stage; missing: not cached) is not checked.
 ///
 /// # Errors
 /// The first estimate over the limit (less the input's resident bytes).
@@ -131,10 +132,14 @@ pub fn check_stages(
     stages: &[Box<dyn StagePlan>],
     sizes: &InputSizes,
     limit: &MemoryLimit,
+    cached: &[bool],
 ) -> Result<Vec<StageEstimate>, Refusal> {
     let resident = sizes.resident_bytes();
     let mut all = Vec::new();
     for (i, (stage, sizes)) in stages.iter().zip(stage_sizes(stages, sizes)).enumerate() {
+        if cached.get(i).copied().unwrap_or(false) {
+            continue;
+        }
         for e in stage.memory_estimate(&sizes) {
             if e.bytes.saturating_add(resident) > limit.bytes {
                 return Err(Refusal {

@@ -280,13 +280,13 @@ impl Pipeline {
             })?;
         memory_budget::check_input(&raw.input, &memory_limit, &file)?;
         // Before loading: what the settings alone decide.
-        memory_budget::check_stages(&stages, &Default::default(), &memory_limit).map_err(|r| {
-            ConfigError::Value {
+        memory_budget::check_stages(&stages, &Default::default(), &memory_limit, &[]).map_err(
+            |r| ConfigError::Value {
                 file: file.clone(),
                 key: format!("stage {} ({}) {}", r.index, r.kind, r.param),
                 message: r.message,
-            }
-        })?;
+            },
+        )?;
         Ok(Self {
             seed: raw.seed,
             input: raw.input,

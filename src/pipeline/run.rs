@@ -186,13 +186,30 @@ fn run_schedule(
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
     // Every stage's memory estimate for the loaded input, before any work.
     let sizes = crate::stage::memory::InputSizes::of(&input, &pipeline.input);
-    let estimates =
-        super::memory_budget::check_stages(&pipeline.stages, &sizes, &pipeline.memory_limit)
-            .map_err(|r| StageError {
-                index: r.index,
-                kind: r.kind.into(),
-                message: r.message,
-            })?;
+    let cached: Vec<bool> = pipeline
+        .stages
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            s.analysis_cached(
+                &input.exemplar,
+                pipeline.input.exemplar_wrap,
+                pipeline.seed,
+                StageCtx { index: i },
+            )
+        })
+        .collect();
+    let estimates = super::memory_budget::check_stages(
+        &pipeline.stages,
+        &sizes,
+        &pipeline.memory_limit,
+        &cached,
+    )
+    .map_err(|r| StageError {
+        index: r.index,
+        kind: r.kind.into(),
+        message: r.message,
+    })?;
     setup_world(pipeline, world, input);
     let mut metrics = world.resource_mut::<Metrics>();
     for e in estimates {

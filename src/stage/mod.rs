@@ -7,6 +7,7 @@
 pub mod memory;
 
 use crate::config::params::{ParamDoc, StageSettings, check_range, defaults_table};
+use crate::image::{Image, sample::Wrap};
 use crate::world::{StageFailure, fail};
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -161,6 +162,19 @@ pub trait Stage: 'static {
     fn sizes_after(_settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
         *sizes
     }
+    /// Whether the analysis this stage would make of `exemplar` (addressed
+    /// with `wrap`, in a run of seed `seed`, at position `ctx`) is in the
+    /// analysis cache already: its estimates are then not checked, since
+    /// reading the entry holds only the result (default: no cache).
+    fn analysis_cached(
+        _settings: &Self::Settings,
+        _exemplar: &Image,
+        _wrap: Wrap,
+        _seed: u64,
+        _ctx: StageCtx,
+    ) -> bool {
+        false
+    }
 }
 
 /// A configured stage, type-erased.
@@ -181,6 +195,8 @@ pub trait StagePlan: Send + Sync {
     fn memory_estimate(&self, sizes: &InputSizes) -> Vec<MemoryEstimate>;
     /// The sizes the stages after it see.
     fn sizes_after(&self, sizes: &InputSizes) -> InputSizes;
+    /// Whether its analysis of `exemplar` is cached already.
+    fn analysis_cached(&self, exemplar: &Image, wrap: Wrap, seed: u64, ctx: StageCtx) -> bool;
 }
 
 struct Plan<S: Stage>(S::Settings);
@@ -209,6 +225,9 @@ impl<S: Stage> StagePlan for Plan<S> {
     }
     fn sizes_after(&self, sizes: &InputSizes) -> InputSizes {
         S::sizes_after(&self.0, sizes)
+    }
+    fn analysis_cached(&self, exemplar: &Image, wrap: Wrap, seed: u64, ctx: StageCtx) -> bool {
+        S::analysis_cached(&self.0, exemplar, wrap, seed, ctx)
     }
 }
 

@@ -431,16 +431,16 @@ fn largest_fits(
         (p, sizes)
     };
     let (p, sizes) = sizes_of(config);
-    let refusal = check_stages(&p.stages, &sizes, &limit(bytes)).expect_err("refused");
+    let refusal = check_stages(&p.stages, &sizes, &limit(bytes), &[]).expect_err("refused");
     assert_eq!(refusal.param, param);
     let value = largest(&refusal.message, param);
     let (p, sizes) = sizes_of(&with(&value));
-    check_stages(&p.stages, &sizes, &limit(bytes))
+    check_stages(&p.stages, &sizes, &limit(bytes), &[])
         .unwrap_or_else(|r| panic!("{value} should fit: {}", r.message));
     let bigger = next(&value);
     let (p, sizes) = sizes_of(&with(&bigger));
     assert!(
-        check_stages(&p.stages, &sizes, &limit(bytes)).is_err(),
+        check_stages(&p.stages, &sizes, &limit(bytes), &[]).is_err(),
         "{value} is the largest, {bigger} should not fit"
     );
 }
