@@ -34,11 +34,26 @@ pub fn check_cache_limit() -> Result<u64, String> {
 }
 
 /// A file to be written (`--trace FILE`): not a folder, and its parent folder
-/// exists and lets us create files.
+/// exists and lets us create files. An existing path must be a regular file:
+/// the trace is written beside it and renamed over it, which would replace
+/// a device (`/dev/full`), a pipe or a symlink itself (issue 43).
 pub fn check_file_target(path: &Path) -> Result<(), String> {
     if path.is_dir() {
         return Err(format!(
             "{} is a folder; allowed: a file path in an existing, writable folder",
+            path.display()
+        ));
+    }
+    if let Ok(meta) = std::fs::symlink_metadata(path)
+        && !meta.file_type().is_file()
+    {
+        let what = if meta.file_type().is_symlink() {
+            "a symbolic link"
+        } else {
+            "not a regular file (a device, pipe or socket)"
+        };
+        return Err(format!(
+            "{} is {what}, which the trace would replace; allowed: a new file or a regular file, in an existing, writable folder",
             path.display()
         ));
     }
@@ -301,6 +316,25 @@ mod tests {
         assert!(check_folder_target(&file.join("sub")).is_err());
         assert!(check_folder_target(&dir.join("a/b/c")).is_ok());
         assert!(check_file_target(&dir).unwrap_err().contains("is a folder"));
+        // Issue 43: a device or a symlink would be replaced by the trace.
+        #[cfg(unix)]
+        {
+            let e = check_file_target(Path::new("/dev/null")).unwrap_err();
+            assert!(
+                e.contains("not a regular file") && e.contains("allowed"),
+                "{e}"
+            );
+            let real = dir.join("real.json");
+            std::fs::write(&real, "[]").unwrap();
+            let link = dir.join("link.json");
+            std::os::unix::fs::symlink(&real, &link).unwrap();
+            assert!(
+                check_file_target(&link)
+                    .unwrap_err()
+                    .contains("symbolic link")
+            );
+            assert!(check_file_target(&real).is_ok());
+        }
         assert!(check_file_target(&dir.join("none/t.json")).is_err());
         let _ = std::fs::remove_dir_all(&dir);
     }

@@ -93,9 +93,31 @@ pub struct TraceGuard {
 
 impl TraceGuard {
     /// Flushes and renames the trace file.
+    ///
+    /// # Errors
+    /// When the trace could not be written whole (the writer drops its
+    /// errors, e.g. a full disk: a complete trace ends its JSON array with
+    /// `]`), or renamed; the partial file is removed.
     pub fn finish(mut self) -> std::io::Result<()> {
         if let Some(g) = self.chrome.take() {
             drop(g);
+            let bytes = {
+                use std::io::{Read, Seek, SeekFrom};
+                let mut f = std::fs::File::open(&self.tmp)?;
+                let len = f.metadata()?.len();
+                f.seek(SeekFrom::Start(len.saturating_sub(64)))?;
+                let mut tail = Vec::new();
+                f.read_to_end(&mut tail)?;
+                tail
+            };
+            let end = bytes.iter().rev().find(|b| !b.is_ascii_whitespace());
+            if end != Some(&b']') {
+                let _ = std::fs::remove_file(&self.tmp);
+                return Err(std::io::Error::other(format!(
+                    "the trace could not be written whole to {} (is the disk full?)",
+                    self.tmp.display()
+                )));
+            }
             std::fs::rename(&self.tmp, &self.path)?;
         }
         Ok(())

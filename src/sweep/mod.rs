@@ -219,6 +219,39 @@ pub struct SweepReport {
     pub files: Vec<PathBuf>,
 }
 
+/// Files a sweep writes at the top of its folder (beside `exemplar_*.png`).
+const SUMMARY_FILES: [&str; 4] = ["sweep.json", "summary.csv", "summary.json", "index.html"];
+
+/// A folder without a sweep's record (`sweep.json`) that holds files of
+/// the names a sweep writes at its top is someone else's: refused, since
+/// the sweep would overwrite them (issue 43). Other files beside a sweep
+/// are never touched.
+fn check_not_someone_elses(out: &Path) -> Result<(), String> {
+    if out.join("sweep.json").is_file() {
+        return Ok(());
+    }
+    let Ok(entries) = std::fs::read_dir(out) else {
+        return Ok(());
+    };
+    let mut taken: Vec<String> = entries
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| {
+            SUMMARY_FILES.contains(&n.as_str())
+                || (n.starts_with("exemplar_") && n.ends_with(".png"))
+        })
+        .collect();
+    if taken.is_empty() {
+        return Ok(());
+    }
+    taken.sort();
+    Err(format!(
+        "{} holds {} but no sweep.json, so it is not a sweep's folder, and a sweep would overwrite them; allowed: a new folder, one without those names, or the --out folder of an earlier sweep",
+        out.display(),
+        taken.join(", ")
+    ))
+}
+
 /// The sweep's own options (`--jobs`, `--threads`, `--out`, `--timeout`,
 /// `--shard`), checked before any config is read.
 fn check_options(opts: &SweepOptions) -> Result<(Option<Duration>, Shard), SweepError> {
@@ -235,10 +268,12 @@ fn check_options(opts: &SweepOptions) -> Result<(Option<Duration>, Shard), Sweep
         })?;
     }
     if !opts.dry_run {
-        crate::preflight::check_folder_target(&opts.out).map_err(|message| SweepError::Option {
-            flag: "--out".into(),
-            message,
-        })?;
+        crate::preflight::check_folder_target(&opts.out)
+            .and_then(|()| check_not_someone_elses(&opts.out))
+            .map_err(|message| SweepError::Option {
+                flag: "--out".into(),
+                message,
+            })?;
     }
     let timeout = match opts.timeout {
         None => None,

@@ -521,3 +521,39 @@ fn a_run_over_the_timeout_is_killed_and_reported() {
         );
     }
 }
+
+/// Issue 43 (the hostile catalogue): `--out` naming a folder that holds the
+/// user's own `index.html` and `summary.csv`, and no sweep of ours, is
+/// refused before any run; the files are untouched. It overwrote them,
+/// exit 0.
+#[test]
+fn a_folder_holding_someone_elses_summary_files_is_refused_and_untouched() {
+    let s = Sweep::new();
+    std::fs::create_dir_all(&s.out).unwrap();
+    std::fs::write(s.out.join("index.html"), "mine").unwrap();
+    std::fs::write(s.out.join("summary.csv"), "my,data").unwrap();
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2"]);
+    assert_eq!(code, 2, "{stderr}");
+    for n in ["index.html", "summary.csv", "sweep.json", "allowed"] {
+        assert!(stderr.contains(n), "want {n:?} in {stderr}");
+    }
+    assert_eq!(
+        std::fs::read_to_string(s.out.join("index.html")).unwrap(),
+        "mine"
+    );
+    assert_eq!(
+        std::fs::read_to_string(s.out.join("summary.csv")).unwrap(),
+        "my,data"
+    );
+    assert!(s.run_folders().is_empty());
+    // A folder of the user's other files is fine: the sweep writes beside them.
+    std::fs::remove_file(s.out.join("index.html")).unwrap();
+    std::fs::remove_file(s.out.join("summary.csv")).unwrap();
+    std::fs::write(s.out.join("notes.txt"), "notes").unwrap();
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2"]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(s.out.join("notes.txt")).unwrap(),
+        "notes"
+    );
+}
