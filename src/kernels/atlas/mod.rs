@@ -38,6 +38,7 @@
 
 pub mod autocorrelation;
 pub mod bake;
+pub mod bake_layout;
 pub mod bake_triangles;
 pub mod channels;
 pub mod lscm;
