@@ -45,6 +45,7 @@ pub mod lscm;
 pub mod merge;
 pub mod pack;
 pub mod plane_raster;
+pub mod plane_signal;
 pub mod raster;
 pub mod segment;
 pub mod triplanar;
