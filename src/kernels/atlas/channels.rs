@@ -304,6 +304,97 @@ pub fn smooth_vertex_heights_with_progress(
     }
 }
 
+/// The exemplar coordinates that address a height map, per vertex or per
+/// corner ([`displace_by_height_with_progress`]).
+#[derive(Clone, Copy, Debug)]
+pub enum HeightCoordinates<'a> {
+    /// Per-vertex exemplar pixels ([`heights_at_texels`]).
+    Texels(&'a [Vec2]),
+    /// Per-corner texture coordinates ([`heights_at_corner_uvs`]).
+    CornerUvs(&'a [Vec2]),
+}
+
+/// A mesh's positions displaced along its normals by a height map.
+#[derive(Clone, Debug)]
+pub struct Displaced {
+    /// The new vertex positions.
+    pub positions: Vec<Vec3>,
+    /// Per vertex, whether it was displaced (a vertex without corners is
+    /// not, under [`HeightCoordinates::CornerUvs`]).
+    pub moved: Vec<bool>,
+    /// The height map's mean, about which the heights displace.
+    pub mean: f32,
+    /// The largest distance a vertex moved.
+    pub max_offset: f32,
+}
+
+/// Steps [`displace_by_height_with_progress`] advances its progress by:
+/// sampling, the one-rings and each smoothing pass, normals, displacing.
+pub fn displace_progress_steps(smoothing: u32) -> u64 {
+    let smoothing_steps = if smoothing > 0 {
+        1 + u64::from(smoothing)
+    } else {
+        0
+    };
+    3 + smoothing_steps
+}
+
+/// Moves every vertex of `mesh` along its area-weighted unit normal by
+/// `amplitude · (h − h̄)`: `h` the height map at the vertex's
+/// `coordinates` (bilinear, `wrap`), first averaged over one-rings
+/// `smoothing` times ([`smooth_vertex_heights`]), `h̄` the map's mean.
+/// Advances `progress` by [`displace_progress_steps`].
+///
+/// Preconditions: `coordinates` has one entry per vertex (`Texels`) or
+/// per corner (`CornerUvs`).
+pub fn displace_by_height_with_progress(
+    mesh: &crate::mesh::PolyMesh,
+    height: &Image,
+    wrap: Wrap,
+    coordinates: HeightCoordinates,
+    smoothing: u32,
+    amplitude: f32,
+    progress: &crate::progress::Progress,
+) -> Displaced {
+    let nv = mesh.vertex_count();
+    progress.set_part("heights");
+    let (mut heights, moved) = match coordinates {
+        HeightCoordinates::CornerUvs(uvs) => {
+            heights_at_corner_uvs(height, wrap, nv, &mesh.corner_vertex, uvs)
+        }
+        HeightCoordinates::Texels(texels) => {
+            (heights_at_texels(height, wrap, texels), vec![true; nv])
+        }
+    };
+    progress.inc(1);
+    if smoothing > 0 {
+        progress.set_part("smoothing");
+        let topo = crate::mesh::Topology::build(mesh);
+        progress.inc(1);
+        smooth_vertex_heights_with_progress(&topo, &mut heights, &moved, smoothing, progress);
+    }
+    progress.set_part("normals");
+    let mean = mean_height(height);
+    let normals = mesh.vertex_normals();
+    progress.inc(1);
+    progress.set_part("displacing");
+    let positions =
+        displace_along_normals(&mesh.positions, &normals, &heights, &moved, mean, amplitude);
+    let max_offset = mesh
+        .positions
+        .iter()
+        .zip(&positions)
+        .map(|(a, b)| (*a - *b).length())
+        .fold(0.0f32, f32::max);
+    progress.inc(1);
+    Displaced {
+        positions,
+        moved,
+        mean,
+        max_offset,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -38,12 +38,14 @@
 
 pub mod autocorrelation;
 pub mod bake;
+pub mod bake_layout;
 pub mod bake_triangles;
 pub mod channels;
 pub mod lscm;
 pub mod merge;
 pub mod pack;
 pub mod plane_raster;
+pub mod plane_signal;
 pub mod raster;
 pub mod segment;
 pub mod triplanar;

@@ -1,8 +1,15 @@
 //! Orientation by diffusion from key vertices (Bangay & Morkel 2006
 //! §3.1.1, after Turk 2001): repeated passes set each vertex's orientation
 //! to the average of its neighbours', projected onto its tangent plane and
-//! normalised, until every vertex has one.
+//! normalised, until every vertex has one. On a hierarchy: the keys
+//! completed per connected component ([`complete_keys`]) and each level's
+//! sweep field ([`level_sweep`]).
 
+use crate::kernels::bangay_morkel::sweep::{relax_sweep, sweep_field};
+use crate::kernels::surface::component_fallback::{
+    Components, FallbackKey, chain_components, fallback_keys, one_per_component,
+};
+use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::Topology;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -133,6 +140,107 @@ pub fn diffuse_orientation(
         fill_passes,
         fallback_vertices,
     }
+}
+
+/// The keys of a diffusion over a mesh whose every connected component has
+/// one ([`complete_keys`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompletedKeys {
+    /// The user's keys, then one automatic key per component none of them
+    /// is on.
+    pub keys: Vec<(u32, Vec3)>,
+    /// The automatic keys.
+    pub automatic: Vec<FallbackKey>,
+    /// Where the sweep is 0.
+    pub anchor: u32,
+    /// One sweep start per component: the anchor, else the component's
+    /// first key (user keys before automatic ones).
+    pub sweep_starts: Vec<u32>,
+}
+
+/// Completes the user's `keys` on a mesh (the coarsest level): every
+/// connected component no key is on gets one automatic key
+/// ([`fallback_keys`], direction `fallback` projected there), so the field
+/// is diffused there too; every component gets one sweep start.
+///
+/// Preconditions: `topo` was built for the mesh; `normals` has one entry
+/// per vertex.
+pub fn complete_keys(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    topo: &Topology,
+    mut keys: Vec<(u32, Vec3)>,
+    anchor: u32,
+    fallback: Vec3,
+) -> CompletedKeys {
+    let (count, of_vertex) = topo.components();
+    let components = Components {
+        count,
+        of_vertex: &of_vertex,
+    };
+    let user_keys: Vec<u32> = keys.iter().map(|k| k.0).collect();
+    let automatic = fallback_keys(positions, normals, components, &user_keys, fallback);
+    keys.extend(automatic.iter().map(|k| (k.vertex, k.direction)));
+    let preferred: Vec<u32> = std::iter::once(anchor)
+        .chain(keys.iter().map(|k| k.0))
+        .collect();
+    let sweep_starts = one_per_component(components, &preferred);
+    CompletedKeys {
+        keys,
+        automatic,
+        anchor,
+        sweep_starts,
+    }
+}
+
+/// The sweep field of one level of a hierarchy: grown from the sweep
+/// starts ([`sweep_field`], `iterations` passes) on the coarsest level,
+/// else the values `carried` down from the level above relaxed for
+/// `refine_passes` with the starts held ([`relax_sweep`]); then the
+/// anchor's component first and the others continuing after it
+/// ([`chain_components`], a no-op on a connected mesh).
+pub fn level_sweep(
+    positions: &[Vec3],
+    topo: &Topology,
+    directions: &[Vec3],
+    keys: &CompletedKeys,
+    carried: Option<Vec<f32>>,
+    iterations: u32,
+    refine_passes: u32,
+) -> Vec<f32> {
+    let mut sweep = match carried {
+        None => sweep_field(positions, topo, directions, &keys.sweep_starts, iterations),
+        Some(mut s) => {
+            let mut fixed = vec![false; s.len()];
+            for &a in &keys.sweep_starts {
+                if let Some(f) = fixed.get_mut(a as usize) {
+                    *f = true;
+                }
+            }
+            relax_sweep(positions, topo, directions, &fixed, &mut s, refine_passes);
+            s
+        }
+    };
+    let (count, of_vertex) = topo.components();
+    let first = of_vertex.get(keys.anchor as usize).copied();
+    chain_components(
+        &mut sweep,
+        Components {
+            count,
+            of_vertex: &of_vertex,
+        },
+        first,
+    );
+    sweep
+}
+
+/// Frames whose up axis `t` is each vertex's diffused direction (`s = t × n`).
+pub fn frames_from_directions(normals: &[Vec3], directions: &[Vec3]) -> Vec<TangentFrame> {
+    normals
+        .iter()
+        .zip(directions)
+        .map(|(&n, &d)| TangentFrame::from_up(n, d))
+        .collect()
 }
 
 #[cfg(test)]

@@ -10,11 +10,15 @@
 //! - [`quality`]: completeness (missing content), sharpness (blur), structure
 //!   (orientation/scale energy), verbatim copying (tiling, repeats), and
 //!   [`image_quality`], all of them for one result image.
+//! - [`result`]: a run's result on its surface as the result metrics
+//!   measure it (energy and surface measures in one pass, histogram
+//!   samples).
 
 mod energy;
 mod histogram;
 mod nearest;
 pub mod quality;
+pub mod result;
 pub mod surface_quality;
 
 pub use crate::kernels::surface::surface_sample::SurfaceSignal;

@@ -2,6 +2,9 @@
 //! al. 2000 §3.2): interpolation of a few anchor "up" vectors, and sources and
 //! sinks (singular points the field flows out of or into).
 
+use crate::kernels::surface::component_fallback::{
+    Components, fallback_keys, spread_over_components,
+};
 use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::surface::geodesic::{dijkstra, nearest_vertex};
 use crate::mesh::Topology;
@@ -109,6 +112,54 @@ pub fn up_field(
             }
         })
         .collect()
+}
+
+/// [`up_field`] where every connected component that no anchor is on gets
+/// one automatic anchor ([`fallback_keys`]: at its vertex nearest its
+/// centroid, `up` projected there), since the anchors blend by edge-path
+/// distance and never reach it. The automatic anchor is spread over its
+/// component directly (one anchor alone gives its own vector everywhere;
+/// no search per component, however many there are). Without anchors the
+/// field is the singularities', which reach every component. Returns the
+/// frames and the number of components that got an automatic anchor.
+///
+/// Preconditions: as [`up_field`].
+pub fn up_field_with_fallback(
+    positions: &[Vec3],
+    normals: &[Vec3],
+    topo: &Topology,
+    anchors: &[Anchor],
+    singularities: &[Singularity],
+    up: Vec3,
+) -> (Vec<TangentFrame>, usize) {
+    let mut fallback_components = 0;
+    let mut unreached = None;
+    if !anchors.is_empty() {
+        let anchored: Vec<u32> = anchors
+            .iter()
+            .filter_map(|a| nearest_vertex(positions, a.at))
+            .collect();
+        let (count, of_vertex) = topo.components();
+        let components = Components {
+            count,
+            of_vertex: &of_vertex,
+        };
+        let automatic = fallback_keys(positions, normals, components, &anchored, up);
+        fallback_components = automatic.len();
+        if !automatic.is_empty() {
+            unreached = Some(spread_over_components(components, &automatic));
+        }
+    }
+    let frames = up_field(
+        positions,
+        normals,
+        topo,
+        anchors,
+        unreached.as_deref(),
+        singularities,
+        up,
+    );
+    (frames, fallback_components)
 }
 
 fn bbox_diagonal(positions: &[Vec3]) -> f32 {

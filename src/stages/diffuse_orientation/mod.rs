@@ -16,20 +16,19 @@
 //! Key positions are vertex ids, world points (`at`) or fractions of the
 //! coarsest level's bounding box (`at_bbox`, `stages::position`).
 //!
-//! Writes `Frames` (t = the diffused up direction, s = t × n) and
-//! `SweepField` on every level (or on the active mesh without a hierarchy).
+//! Reads: `Sqrt2Pyramid` (else `ActiveMesh`), each level's `Geometry` and
+//! `LevelParents`. Writes `Frames` (t = the diffused up direction, s = t ×
+//! n) and `SweepField` on every level (or on the active mesh without a
+//! hierarchy), metrics.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::bangay_morkel::diffuse_orientation::diffuse_orientation;
-use crate::kernels::bangay_morkel::sweep::{relax_sweep, sweep_field};
-use crate::kernels::surface::component_fallback::{
-    Components, chain_components, fallback_keys, one_per_component,
+use crate::kernels::bangay_morkel::diffuse_orientation::{
+    CompletedKeys, complete_keys, diffuse_orientation, frames_from_directions, level_sweep,
 };
-use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::surface::geodesic::nearest_vertex;
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
-use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::stages::position;
 use crate::stages::subdivide_sqrt2::carry_attribute;
 use crate::world::*;
@@ -89,7 +88,7 @@ pub struct DiffuseOrientationSettings {
     /// Passes on each finer level after carrying the directions down.
     pub refine_passes: u32,
     /// Direction of the automatic key placed on each connected component
-    /// no key is on (see [`fallback_keys`]).
+    /// no key is on (see [`crate::kernels::surface::component_fallback::fallback_keys`]).
     pub fallback_up: [f32; 3],
     /// Whether to compute the sweep field too.
     pub sweep: bool,
@@ -245,84 +244,35 @@ impl Stage for DiffuseOrientation {
         vec![Datum::Frames]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               active: Res<ActiveMesh>,
-               pyramid: Option<Res<Sqrt2Pyramid>>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: Query<(&Geometry, Option<&LevelParents>)>| {
-            let fail = |failure: &mut StageFailure, message: String| {
-                failure.0 = Some(StageError {
-                    index: ctx.index + 1,
-                    kind: Self::KIND.into(),
-                    message,
-                });
-            };
+        let diffuse = move |mut commands: Commands,
+                            active: Res<ActiveMesh>,
+                            pyramid: Option<Res<Sqrt2Pyramid>>,
+                            mut metrics: ResMut<Metrics>,
+                            meshes: Query<(&Geometry, Option<&LevelParents>)>|
+              -> SystemResult {
             // Coarsest first.
             let levels: Vec<Entity> = match pyramid.as_deref() {
                 Some(p) if !p.0.is_empty() => p.0.iter().rev().copied().collect(),
                 _ => vec![active.0],
             };
             let Ok((coarsest, _)) = meshes.get(levels[0]) else {
-                return;
-            };
-            let positions = &coarsest.0.positions;
-            let bbox = coarsest.0.bounding_box();
-            let mut keys = Vec::with_capacity(settings.keys.len());
-            for (i, k) in settings.keys.iter().enumerate() {
-                match resolve(positions, bbox, k.vertex, k.at, k.at_bbox) {
-                    Ok(v) => keys.push((v, Vec3::from(k.up))),
-                    Err(m) => return fail(&mut failure, format!("keys: key {}: {m}", i + 1)),
-                }
-            }
-            let anchor = match &settings.sweep_anchor {
-                Some(a) => match resolve(positions, bbox, a.vertex, a.at, a.at_bbox) {
-                    Ok(v) => v,
-                    Err(m) => return fail(&mut failure, format!("sweep_anchor: {m}")),
-                },
-                None => keys[0].0,
+                return Ok(());
             };
             let fallback = Vec3::from(settings.fallback_up);
-            // Every connected component no key is on gets one automatic
-            // key, so the field is diffused there too; the keys hold on
-            // every level (√2 keeps the coarsest level's vertex ids).
             let coarsest_topo = Topology::build(&coarsest.0);
             let coarsest_normals = coarsest.0.vertex_normals();
-            let (count, of_vertex) = coarsest_topo.components();
-            let user_keys: Vec<u32> = keys.iter().map(|k| k.0).collect();
-            let automatic = fallback_keys(
-                positions,
-                &coarsest_normals,
-                Components {
-                    count,
-                    of_vertex: &of_vertex,
-                },
-                &user_keys,
-                fallback,
-            );
-            keys.extend(automatic.iter().map(|k| (k.vertex, k.direction)));
-            // One sweep start per component: the anchor, else the
-            // component's first key (user keys before automatic ones).
-            let preferred: Vec<u32> = std::iter::once(anchor)
-                .chain(keys.iter().map(|k| k.0))
-                .collect();
-            let sweep_starts = one_per_component(
-                Components {
-                    count,
-                    of_vertex: &of_vertex,
-                },
-                &preferred,
-            );
+            let (keys, user_count) =
+                keys_on(&settings, &coarsest.0, &coarsest_topo, &coarsest_normals)?;
+            record_keys(&mut metrics, ctx.index, &keys, user_count);
             let mut coarsest_cache = Some((coarsest_topo, coarsest_normals));
-            let mut directions: Vec<Vec3> = Vec::new();
-            let mut sweep: Vec<f32> = Vec::new();
+            let mut previous: Option<LevelValues> = None;
             // Three steps per level: topology, diffusion, sweep (3.5 s a
             // level at a million vertices).
             let progress = Progress::new(3 * levels.len() as u64, Self::KIND);
             let _finish = progress.finish_on_drop();
             for (i, &e) in levels.iter().enumerate() {
                 let Ok((geometry, parents)) = meshes.get(e) else {
-                    return;
+                    return Ok(());
                 };
                 let mesh = &geometry.0;
                 // The pyramid index: the levels run coarsest first.
@@ -336,99 +286,160 @@ impl Stage for DiffuseOrientation {
                     _ => (Topology::build(mesh), mesh.vertex_normals()),
                 };
                 progress.inc(1);
-                let (count, of_vertex) = topo.components();
-                let components = Components {
-                    count,
-                    of_vertex: &of_vertex,
-                };
-                let carried = match (i, parents) {
-                    (0, _) => None,
-                    (_, Some(p)) if p.0.len() == mesh.vertex_count() => Some((
-                        carry_attribute(&p.0, &directions),
-                        carry_attribute(&p.0, &sweep),
-                    )),
-                    _ => {
-                        return fail(
-                            &mut failure,
-                            "a hierarchy level has no parents in the level above".into(),
-                        );
-                    }
-                };
-                let passes = if i == 0 {
-                    settings.smoothing_passes
-                } else {
-                    settings.refine_passes
-                };
-                let result = diffuse_orientation(
-                    &normals,
-                    &topo,
-                    &keys,
-                    carried.as_ref().map(|c| c.0.as_slice()),
-                    passes,
-                    fallback,
-                );
+                let carried = carry_down(previous.as_ref(), parents, mesh.vertex_count())?;
+                let level =
+                    orient_level(&settings, mesh, &topo, &normals, &keys, carried, fallback);
                 if i == 0 {
-                    metrics.record(ctx.index, "fill_passes", result.fill_passes);
-                    metrics.record(ctx.index, "fallback_vertices", result.fallback_vertices);
-                    metrics.record(ctx.index, "key_vertices", user_keys.clone());
-                    metrics.record(ctx.index, "fallback_components", automatic.len());
-                    metrics.record(
-                        ctx.index,
-                        "fallback_keys",
-                        automatic.iter().map(|k| k.vertex).collect::<Vec<_>>(),
-                    );
-                    metrics.record(ctx.index, "sweep_anchor", anchor);
+                    metrics.record(ctx.index, "fill_passes", level.fill_passes);
+                    metrics.record(ctx.index, "fallback_vertices", level.fallback_vertices);
                 }
-                progress.inc(1);
-                directions = result.directions;
-                if settings.sweep {
-                    sweep = match carried {
-                        None => sweep_field(
-                            &mesh.positions,
-                            &topo,
-                            &directions,
-                            &sweep_starts,
-                            settings.sweep_iterations,
-                        ),
-                        Some((_, mut s)) => {
-                            let mut fixed = vec![false; s.len()];
-                            for &a in &sweep_starts {
-                                if let Some(f) = fixed.get_mut(a as usize) {
-                                    *f = true;
-                                }
-                            }
-                            relax_sweep(
-                                &mesh.positions,
-                                &topo,
-                                &directions,
-                                &fixed,
-                                &mut s,
-                                settings.refine_passes,
-                            );
-                            s
-                        }
-                    };
-                    // The anchor's component first, the others continuing
-                    // after it (a no-op on a connected mesh).
-                    let first = of_vertex.get(anchor as usize).copied();
-                    chain_components(&mut sweep, components, first);
-                } else {
-                    sweep = vec![0.0; mesh.vertex_count()];
-                }
-                let frames: Vec<TangentFrame> = normals
-                    .iter()
-                    .zip(&directions)
-                    .map(|(&n, &d)| TangentFrame::from_up(n, d))
-                    .collect();
-                progress.inc(1);
+                progress.inc(2);
                 let mut ec = commands.entity(e);
-                ec.insert(Frames(frames));
+                ec.insert(Frames(frames_from_directions(&normals, &level.directions)));
                 if settings.sweep {
-                    ec.insert(SweepField(sweep.clone()));
+                    ec.insert(SweepField(level.sweep.clone()));
                 }
+                previous = Some((level.directions, level.sweep));
             }
             metrics.record(ctx.index, "levels", levels.len());
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, diffuse)
+    }
+}
+
+/// The user's keys as coarsest-level vertices with their directions, and
+/// the sweep anchor (the first key unless given); errors name the key.
+fn resolve_keys(
+    settings: &DiffuseOrientationSettings,
+    coarsest: &crate::mesh::PolyMesh,
+) -> Result<(Vec<(u32, Vec3)>, u32), String> {
+    let positions = &coarsest.positions;
+    let bbox = coarsest.bounding_box();
+    let mut keys = Vec::with_capacity(settings.keys.len());
+    for (i, k) in settings.keys.iter().enumerate() {
+        let v = resolve(positions, bbox, k.vertex, k.at, k.at_bbox)
+            .map_err(|m| format!("keys: key {}: {m}", i + 1))?;
+        keys.push((v, Vec3::from(k.up)));
+    }
+    let anchor = match &settings.sweep_anchor {
+        Some(a) => resolve(positions, bbox, a.vertex, a.at, a.at_bbox)
+            .map_err(|m| format!("sweep_anchor: {m}"))?,
+        None => keys[0].0,
+    };
+    Ok((keys, anchor))
+}
+
+/// The user's keys on the coarsest level (how many: the second value),
+/// completed: every connected component no key is on gets one automatic
+/// key, so the field is diffused there too; the keys hold on every level
+/// (√2 keeps the coarsest level's vertex ids).
+fn keys_on(
+    settings: &DiffuseOrientationSettings,
+    coarsest: &crate::mesh::PolyMesh,
+    topo: &Topology,
+    normals: &[Vec3],
+) -> Result<(CompletedKeys, usize), String> {
+    let (user_keys, anchor) = resolve_keys(settings, coarsest)?;
+    let user_count = user_keys.len();
+    let fallback = Vec3::from(settings.fallback_up);
+    let keys = complete_keys(
+        &coarsest.positions,
+        normals,
+        topo,
+        user_keys,
+        anchor,
+        fallback,
+    );
+    Ok((keys, user_count))
+}
+
+/// Records the keys: the user's (the first `user_count`), the automatic
+/// ones and the sweep anchor.
+fn record_keys(metrics: &mut Metrics, index: usize, keys: &CompletedKeys, user_count: usize) {
+    let user: Vec<u32> = keys.keys[..user_count].iter().map(|k| k.0).collect();
+    metrics.record(index, "key_vertices", user);
+    metrics.record(index, "fallback_components", keys.automatic.len());
+    let automatic: Vec<u32> = keys.automatic.iter().map(|k| k.vertex).collect();
+    metrics.record(index, "fallback_keys", automatic);
+    metrics.record(index, "sweep_anchor", keys.anchor);
+}
+
+/// A level's directions and sweep values, one per vertex.
+type LevelValues = (Vec<Vec3>, Vec<f32>);
+
+/// The directions and sweep of the level above carried down to a level of
+/// `vertex_count` vertices through its √2 parents; `None` on the coarsest
+/// level (nothing above).
+fn carry_down(
+    previous: Option<&LevelValues>,
+    parents: Option<&LevelParents>,
+    vertex_count: usize,
+) -> Result<Option<LevelValues>, String> {
+    let Some((directions, sweep)) = previous else {
+        return Ok(None);
+    };
+    match parents {
+        Some(p) if p.0.len() == vertex_count => Ok(Some((
+            carry_attribute(&p.0, directions),
+            carry_attribute(&p.0, sweep),
+        ))),
+        _ => Err("a hierarchy level has no parents in the level above".into()),
+    }
+}
+
+/// One level's field: the diffused directions and the sweep field (zeros
+/// without `sweep`).
+struct LevelField {
+    directions: Vec<Vec3>,
+    sweep: Vec<f32>,
+    fill_passes: u32,
+    fallback_vertices: usize,
+}
+
+/// Diffuses the keys over one level (from the values `carried` down, with
+/// `refine_passes`; on the coarsest level with `smoothing_passes`) and
+/// grows its sweep field.
+fn orient_level(
+    settings: &DiffuseOrientationSettings,
+    mesh: &crate::mesh::PolyMesh,
+    topo: &Topology,
+    normals: &[Vec3],
+    keys: &CompletedKeys,
+    carried: Option<LevelValues>,
+    fallback: Vec3,
+) -> LevelField {
+    let passes = if carried.is_none() {
+        settings.smoothing_passes
+    } else {
+        settings.refine_passes
+    };
+    let (directions, sweep) = carried.unzip();
+    let result = diffuse_orientation(
+        normals,
+        topo,
+        &keys.keys,
+        directions.as_deref(),
+        passes,
+        fallback,
+    );
+    let sweep = if settings.sweep {
+        level_sweep(
+            &mesh.positions,
+            topo,
+            &result.directions,
+            keys,
+            sweep,
+            settings.sweep_iterations,
+            settings.refine_passes,
+        )
+    } else {
+        vec![0.0; mesh.vertex_count()]
+    };
+    LevelField {
+        directions: result.directions,
+        sweep,
+        fill_passes: result.fill_passes,
+        fallback_vertices: result.fallback_vertices,
     }
 }

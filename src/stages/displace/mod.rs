@@ -15,14 +15,19 @@
 //! one-rings (texel-scale speckle and seams between matched patches would
 //! otherwise read as spikes). The loaded source mesh is never modified: when it is the active mesh
 //! the stage displaces a copy, which becomes the active mesh.
+//!
+//! Reads: `ExemplarChannels` (the height map), `ActiveMesh` (`Geometry`,
+//! `SourceTexels`, `CornerUvs`), `TexelSpacing`. Writes: `Geometry` of the
+//! active mesh (or of its copy, which becomes `ActiveMesh`), metrics. The
+//! work is [`crate::kernels::atlas::channels::displace_by_height_with_progress`].
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::atlas::channels::{
-    displace_along_normals, heights_at_corner_uvs, heights_at_texels, mean_height,
-    smooth_vertex_heights_with_progress,
+    Displaced, HeightCoordinates as ChannelCoordinates, displace_by_height_with_progress,
+    displace_progress_steps,
 };
 use crate::progress::Progress;
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -151,101 +156,41 @@ impl Stage for Displace {
         crate::stage::PlaneRole::DeformsMesh
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               mut active: ResMut<ActiveMesh>,
-               channels: Res<ExemplarChannels>,
-               spacing: Res<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: ActiveQuery| {
-            let mut fail_with = |message: String| fail(&mut failure, ctx.index, Self::KIND, message);
-            let Some(height) = channels.height.as_ref() else {
-                return fail_with(
-                    "no height map: set input.height_map (a file the exemplar's size, \"derive:luminance\" or \"derive:builtin\")".into(),
-                );
-            };
+        let displace = move |mut commands: Commands,
+                             mut active: ResMut<ActiveMesh>,
+                             channels: Res<ExemplarChannels>,
+                             spacing: Res<TexelSpacing>,
+                             mut metrics: ResMut<Metrics>,
+                             meshes: ActiveQuery|
+              -> SystemResult {
+            let height = channels.height.as_ref().ok_or(
+                "no height map: set input.height_map (a file the exemplar's size, \"derive:luminance\" or \"derive:builtin\")",
+            )?;
             let Ok((geometry, texels, uvs, is_source)) = meshes.get(active.0) else {
-                return fail_with("there is no active mesh".into());
+                return Err("there is no active mesh".into());
             };
             let mesh = &geometry.0;
-            let nv = mesh.vertex_count();
-            let texels = texels.filter(|t| t.0.len() == nv);
-            let uvs = uvs.filter(|u| u.0.len() == mesh.corner_count());
-            let use_uvs = match settings.coordinates {
-                HeightCoordinates::Auto => uvs.is_some(),
-                HeightCoordinates::CornerUvs => true,
-                HeightCoordinates::SourceTexels => false,
-            };
-            // Coarse steps: sampling, the one-rings and each smoothing pass,
-            // normals, displacing (seconds at a million vertices).
-            let smoothing_steps = if settings.smoothing > 0 {
-                1 + u64::from(settings.smoothing)
-            } else {
-                0
-            };
-            let progress = Progress::new(3 + smoothing_steps, Self::KIND);
+            let coordinates = height_coordinates(mesh, texels, uvs, settings.coordinates)?;
+            let progress = Progress::new(displace_progress_steps(settings.smoothing), Self::KIND);
             let _finish = progress.finish_on_drop();
-            progress.set_part("heights");
-            let (mut heights, moved) = if use_uvs {
-                let Some(uvs) = uvs else {
-                    return fail_with(
-                        "coordinates = \"corner_uvs\" but the active mesh has no per-corner texture coordinates; run jump_surface first or use \"source_texels\"".into(),
-                    );
-                };
-                heights_at_corner_uvs(height, channels.wrap, nv, &mesh.corner_vertex, &uvs.0)
-            } else {
-                let Some(texels) = texels else {
-                    return fail_with(
-                        "the active mesh has no recorded exemplar coordinates (SourceTexels); run a synthesis stage (init_colours, match, graph_match, jump_surface) before displace".into(),
-                    );
-                };
-                (heights_at_texels(height, channels.wrap, &texels.0), vec![true; nv])
-            };
-            progress.inc(1);
-            if settings.smoothing > 0 {
-                progress.set_part("smoothing");
-                let topo = crate::mesh::Topology::build(mesh);
-                progress.inc(1);
-                smooth_vertex_heights_with_progress(
-                    &topo,
-                    &mut heights,
-                    &moved,
-                    settings.smoothing,
-                    &progress,
-                );
-            }
-            progress.set_part("normals");
-            let mean = mean_height(height);
-            let normals = mesh.vertex_normals();
-            progress.inc(1);
-            progress.set_part("displacing");
             let amplitude = match settings.amplitude_unit {
                 AmplitudeUnit::World => settings.amplitude as f32,
                 AmplitudeUnit::Texels => settings.amplitude as f32 * spacing.0,
             };
             metrics.record(ctx.index, "amplitude_world", amplitude);
-            let positions =
-                displace_along_normals(&mesh.positions, &normals, &heights, &moved, mean, amplitude);
-            let max_offset = mesh
-                .positions
-                .iter()
-                .zip(&positions)
-                .map(|(a, b)| (*a - *b).length())
-                .fold(0.0f32, f32::max);
-            let mut displaced = mesh.clone();
-            displaced.positions = positions;
-            progress.inc(1);
-            progress.finish();
-            metrics.record(ctx.index, "vertices", nv);
-            metrics.record(ctx.index, "vertices_moved", moved.iter().filter(|&&m| m).count());
-            metrics.record(
-                ctx.index,
-                "coordinates",
-                if use_uvs { "corner_uvs" } else { "source_texels" },
+            let displaced = displace_by_height_with_progress(
+                mesh,
+                height,
+                channels.wrap,
+                coordinates,
+                settings.smoothing,
+                amplitude,
+                &progress,
             );
-            metrics.record(ctx.index, "coordinates_setting", settings.coordinates.name());
-            metrics.record(ctx.index, "height_mean", mean);
-            metrics.record(ctx.index, "max_offset", max_offset);
+            progress.finish();
+            record_metrics(&mut metrics, ctx.index, &settings, coordinates, &displaced);
+            let mut mesh = mesh.clone();
+            mesh.positions = displaced.positions;
             if is_source {
                 // The loaded mesh stays as loaded: displace a copy (with every
                 // cloneable attribute) and make it the active mesh.
@@ -254,13 +199,65 @@ impl Stage for Displace {
                     .clone_and_spawn_with_opt_out(|b| {
                         b.deny::<SourceMesh>();
                     })
-                    .insert(Geometry(displaced))
+                    .insert(Geometry(mesh))
                     .id();
                 active.0 = copy;
             } else {
-                commands.entity(active.0).insert(Geometry(displaced));
+                commands.entity(active.0).insert(Geometry(mesh));
             }
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, displace)
     }
+}
+
+/// The active mesh's exemplar coordinates the heights are read at, as
+/// `setting` asks: its per-corner UVs or its per-vertex source texels
+/// (`auto`: the UVs where it has them); errors say which stage records
+/// them.
+fn height_coordinates<'a>(
+    mesh: &crate::mesh::PolyMesh,
+    texels: Option<&'a SourceTexels>,
+    uvs: Option<&'a CornerUvs>,
+    setting: HeightCoordinates,
+) -> Result<ChannelCoordinates<'a>, String> {
+    let texels = texels.filter(|t| t.0.len() == mesh.vertex_count());
+    let uvs = uvs.filter(|u| u.0.len() == mesh.corner_count());
+    let use_uvs = match setting {
+        HeightCoordinates::Auto => uvs.is_some(),
+        HeightCoordinates::CornerUvs => true,
+        HeightCoordinates::SourceTexels => false,
+    };
+    if use_uvs {
+        let uvs = uvs.ok_or(
+            "coordinates = \"corner_uvs\" but the active mesh has no per-corner texture coordinates; run jump_surface first or use \"source_texels\"",
+        )?;
+        Ok(ChannelCoordinates::CornerUvs(&uvs.0))
+    } else {
+        let texels = texels.ok_or(
+            "the active mesh has no recorded exemplar coordinates (SourceTexels); run a synthesis stage (init_colours, match, graph_match, jump_surface) before displace",
+        )?;
+        Ok(ChannelCoordinates::Texels(&texels.0))
+    }
+}
+
+/// Records what the displacement read and did.
+fn record_metrics(
+    metrics: &mut Metrics,
+    index: usize,
+    settings: &DisplaceSettings,
+    coordinates: ChannelCoordinates,
+    displaced: &Displaced,
+) {
+    metrics.record(index, "vertices", displaced.moved.len());
+    let moved = displaced.moved.iter().filter(|&&m| m).count();
+    metrics.record(index, "vertices_moved", moved);
+    let read = match coordinates {
+        ChannelCoordinates::CornerUvs(_) => "corner_uvs",
+        ChannelCoordinates::Texels(_) => "source_texels",
+    };
+    metrics.record(index, "coordinates", read);
+    metrics.record(index, "coordinates_setting", settings.coordinates.name());
+    metrics.record(index, "height_mean", displaced.mean);
+    metrics.record(index, "max_offset", displaced.max_offset);
 }

@@ -3,14 +3,18 @@
 //! pyramid, every level `l` draws from level `l` of the exemplar's Gaussian
 //! pyramid ("assigning random colors from the corresponding level in G_a"),
 //! which equalises the colour histograms level by level.
+//!
+//! Reads: `ActiveMesh` and the mesh pyramid's geometry, `Exemplar`,
+//! `RunSeed`. Writes: `VertexColours` and `SourceTexels` on every pyramid
+//! level (or the active mesh).
 
 use crate::config::params::{ParamDoc, StageSettings};
+use crate::kernels::wei_levoy::random_texels::{random_texels, texels_to_level_zero};
 use crate::stage::{Datum, Stage, StageCtx};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
-use glam::Vec2;
 use serde::{Deserialize, Serialize};
 
 /// Settings of `init_colours` (none yet).
@@ -22,37 +26,19 @@ impl StageSettings for InitColoursSettings {
     const PARAMS: &'static [ParamDoc] = &[];
 }
 
-/// Random exemplar texels for `count` vertices: colours and source texel
-/// coordinates. Vertex `v` draws from its own stream `mix(seed, v)`, so the
-/// result does not depend on thread count.
-pub fn random_texels(
+/// Random exemplar texels for `count` vertices as components
+/// ([`random_texels`]).
+fn random_components(
     exemplar: &crate::image::Image,
     count: usize,
     seed: u64,
 ) -> (VertexColours, SourceTexels) {
-    use rayon::prelude::*;
-    let c = exemplar.channels as usize;
-    let (w, h) = (exemplar.width as u64, exemplar.height as u64);
-    let mut values = vec![0.0f32; count * c];
-    let mut texels = vec![Vec2::ZERO; count];
-    values
-        .par_chunks_mut(c)
-        .zip(texels.par_iter_mut())
-        .enumerate()
-        .for_each(|(v, (out, texel))| {
-            let r = mix(seed, v as u64, 1);
-            let x = ((r >> 32) * w) >> 32;
-            let y = ((r & 0xFFFF_FFFF) * h) >> 32;
-            out.copy_from_slice(exemplar.pixel(x as u32, y as u32));
-            *texel = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
-        });
-    (
-        VertexColours {
-            channels: c,
-            values,
-        },
-        SourceTexels(texels),
-    )
+    let (values, texels) = random_texels(exemplar, count, seed);
+    let colours = VertexColours {
+        channels: exemplar.channels as usize,
+        values,
+    };
+    (colours, SourceTexels(texels))
 }
 
 /// The `init_colours` stage.
@@ -94,23 +80,20 @@ impl Stage for InitColours {
                 let Ok(geometry) = meshes.get(e) else {
                     continue;
                 };
-                let (colours, mut texels) = random_texels(
+                let (colours, mut texels) = random_components(
                     &images[l],
                     geometry.0.vertex_count(),
                     seed.derive(ctx.index, l as u64),
                 );
                 // Texels in pixels of the exemplar itself (level 0).
-                let scale = 2f32.powi(l as i32);
-                for t in &mut texels.0 {
-                    *t = (*t - Vec2::splat(0.5)) * scale + Vec2::splat(0.5);
-                }
+                texels_to_level_zero(&mut texels.0, l);
                 commands.entity(e).insert((colours, texels));
             }
             if !pyramid.contains(&active.0) {
                 let Ok(geometry) = meshes.get(active.0) else {
                     return;
                 };
-                let (colours, texels) = random_texels(
+                let (colours, texels) = random_components(
                     &exemplar.image,
                     geometry.0.vertex_count(),
                     seed.derive(ctx.index, 0),

@@ -9,11 +9,16 @@
 //! components go onto the source entity; the active mesh does not change.
 //! `export` then also writes `<name>_original.ply` (format `ply`) and
 //! `original_preview_*.png` (format `preview`).
+//!
+//! Reads: `ActiveMesh` (`Geometry`, `VertexColours`, `SourceTexels`,
+//! `Frames`), the `SourceMesh` geometry, `TexelSpacing`. Writes:
+//! `VertexColours`, `SourceTexels` and `Frames` on the `SourceMesh`
+//! entity, metrics.
 
 use crate::config::params::{ParamDoc, StageSettings};
 use crate::kernels::wei_levoy::retile::{ResultAttributes, map_back_with_progress};
 use crate::progress::Progress;
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -56,48 +61,30 @@ impl Stage for MapBack {
         vec![]
     }
     fn systems(_settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               active: Res<ActiveMesh>,
-               spacing: Res<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               sources: Query<Entity, With<SourceMesh>>,
-               meshes: ResultQuery| {
+        let map = move |mut commands: Commands,
+                        active: Res<ActiveMesh>,
+                        spacing: Res<TexelSpacing>,
+                        mut metrics: ResMut<Metrics>,
+                        sources: Query<Entity, With<SourceMesh>>,
+                        meshes: ResultQuery|
+              -> SystemResult {
             let _span = tracing::info_span!("map_back").entered();
-            let Ok(source) = sources.single() else {
-                fail(
-                    &mut failure,
-                    ctx.index,
-                    Self::KIND,
-                    "there is no input mesh to map the result back onto",
-                );
-                return;
-            };
+            let source = sources
+                .single()
+                .map_err(|_| "there is no input mesh to map the result back onto")?;
             if source == active.0 {
                 // The result already lives on the input mesh.
                 metrics.record(ctx.index, "mapped", false);
-                return;
+                return Ok(());
             }
             let (Ok((original, ..)), Ok((result, colours, texels, frames))) =
                 (meshes.get(source), meshes.get(active.0))
             else {
-                fail(
-                    &mut failure,
-                    ctx.index,
-                    Self::KIND,
-                    "the input or the result mesh is missing",
-                );
-                return;
+                return Err("the input or the result mesh is missing".into());
             };
-            let Some(colours) = colours else {
-                fail(
-                    &mut failure,
-                    ctx.index,
-                    Self::KIND,
-                    "the result has no vertex colours: put `match` (or `init_colours`) before `map_back`",
-                );
-                return;
-            };
+            let colours = colours.ok_or(
+                "the result has no vertex colours: put `match` (or `init_colours`) before `map_back`",
+            )?;
             let attributes = ResultAttributes {
                 colours: &colours.values,
                 channels: colours.channels,
@@ -115,25 +102,8 @@ impl Stage for MapBack {
                 &progress,
             );
             progress.finish();
-            let mapped = match mapped {
-                Ok(m) => m,
-                Err(e) => {
-                    fail(&mut failure, ctx.index, Self::KIND, e.to_string());
-                    return;
-                }
-            };
-            let n = mapped.distance.len().max(1) as f64;
-            let mean = mapped.distance.iter().map(|&d| d as f64).sum::<f64>() / n;
-            let max = mapped.distance.iter().copied().fold(0.0f32, f32::max);
-            metrics.record(ctx.index, "mapped", true);
-            metrics.record(ctx.index, "vertices", mapped.distance.len());
-            metrics.record(ctx.index, "mean_distance", mean);
-            metrics.record(ctx.index, "max_distance", max);
-            metrics.record(
-                ctx.index,
-                "max_distance_texels",
-                max / spacing.0.max(f32::MIN_POSITIVE),
-            );
+            let mapped = mapped.map_err(|e| e.to_string())?;
+            record_distances(&mut metrics, ctx.index, &mapped.distance, spacing.0);
             let mut entity = commands.entity(source);
             entity.insert(VertexColours {
                 channels: colours.channels,
@@ -145,7 +115,23 @@ impl Stage for MapBack {
             if let Some(f) = mapped.frames {
                 entity.insert(Frames(f));
             }
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, map)
     }
+}
+
+/// Records that the result was mapped and how far each input vertex
+/// lies from the result surface: mean and largest (also in texels of
+/// `spacing` world units).
+fn record_distances(metrics: &mut Metrics, index: usize, distances: &[f32], spacing: f32) {
+    let n = distances.len().max(1) as f64;
+    let mean = distances.iter().map(|&d| d as f64).sum::<f64>() / n;
+    let max = distances.iter().copied().fold(0.0f32, f32::max);
+    metrics.record(index, "mapped", true);
+    metrics.record(index, "vertices", distances.len());
+    metrics.record(index, "mean_distance", mean);
+    metrics.record(index, "max_distance", max);
+    let texels = max / spacing.max(f32::MIN_POSITIVE);
+    metrics.record(index, "max_distance_texels", texels);
 }

@@ -8,23 +8,22 @@
 //! Anchor and singularity positions are world points (`at`) or fractions of
 //! the active mesh's bounding box (`at_bbox`, [`crate::stages::position`]).
 //! In field mode, a connected component that no anchor is on gets one
-//! automatic anchor (`kernels::surface::component_fallback::fallback_keys`: at its
-//! vertex nearest its centroid, `up` projected there), since the anchors
-//! blend by edge-path distance and never reach it; metric
+//! automatic anchor (`kernels::surface::orientation_field::up_field_with_fallback`:
+//! at its vertex nearest its centroid, `up` projected there), since the
+//! anchors blend by edge-path distance and never reach it; metric
 //! `fallback_components`. Singularities act through space and reach every
 //! component.
+//!
+//! Reads: `ActiveMesh` geometry, `RunSeed`. Writes: `Frames` on the active
+//! mesh, metrics.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::surface::component_fallback::{
-    Components, fallback_keys, spread_over_components,
-};
 use crate::kernels::surface::frames::{
     TangentFrame, frames_from_global_direction, frames_with_angles,
 };
-use crate::kernels::surface::geodesic::nearest_vertex;
-use crate::kernels::surface::orientation_field::{Anchor, Singularity, up_field};
+use crate::kernels::surface::orientation_field::{Anchor, Singularity, up_field_with_fallback};
 use crate::mesh::Topology;
-use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::stages::position;
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -255,72 +254,18 @@ pub fn orientation_frames(
             (r >> 40) as f32 / (1u64 << 24) as f32 * std::f32::consts::TAU
         }),
         OrientationMode::Field => {
+            let (anchors, singularities) = field_points(settings, mesh.bounding_box())?;
             let topo = Topology::build(mesh);
-            let bbox = mesh.bounding_box();
-            let mut anchors = Vec::with_capacity(settings.anchors.len());
-            for (i, a) in settings.anchors.iter().enumerate() {
-                anchors.push(Anchor {
-                    at: point(a.at, a.at_bbox, bbox)
-                        .map_err(|m| format!("anchors: anchor {}: {m}", i + 1))?,
-                    up: a.up.into(),
-                });
-            }
-            let mut singularities = Vec::with_capacity(settings.singularities.len());
-            for (i, s) in settings.singularities.iter().enumerate() {
-                singularities.push(Singularity {
-                    at: point(s.at, s.at_bbox, bbox)
-                        .map_err(|m| format!("singularities: singularity {}: {m}", i + 1))?,
-                    sign: if s.kind == SingularityKind::Source {
-                        1.0
-                    } else {
-                        -1.0
-                    },
-                    strength: s.strength,
-                });
-            }
-            // The anchors blend by edge-path distance: a component none of
-            // them is on gets one automatic anchor, spread over the
-            // component directly (one anchor alone gives its own vector
-            // everywhere; no search per component, however many there
-            // are). Without anchors the field is the singularities', which
-            // reach every component.
-            let mut unreached = None;
-            if !anchors.is_empty() {
-                let anchored: Vec<u32> = anchors
-                    .iter()
-                    .filter_map(|a| nearest_vertex(&mesh.positions, a.at))
-                    .collect();
-                let (count, of_vertex) = topo.components();
-                let automatic = fallback_keys(
-                    &mesh.positions,
-                    &normals,
-                    Components {
-                        count,
-                        of_vertex: &of_vertex,
-                    },
-                    &anchored,
-                    up,
-                );
-                fallback_components = automatic.len();
-                if !automatic.is_empty() {
-                    unreached = Some(spread_over_components(
-                        Components {
-                            count,
-                            of_vertex: &of_vertex,
-                        },
-                        &automatic,
-                    ));
-                }
-            }
-            up_field(
+            let (frames, fallback) = up_field_with_fallback(
                 &mesh.positions,
                 &normals,
                 &topo,
                 &anchors,
-                unreached.as_deref(),
                 &singularities,
                 up,
-            )
+            );
+            fallback_components = fallback;
+            frames
         }
     };
     let rotation = settings.angle.to_radians();
@@ -331,6 +276,36 @@ pub fn orientation_frames(
         frames,
         fallback_components,
     })
+}
+
+/// The anchors and singularities of `settings` at their world points on a
+/// mesh with bounding box `bbox`; errors name the entry.
+fn field_points(
+    settings: &OrientationSettings,
+    bbox: Option<(Vec3, Vec3)>,
+) -> Result<(Vec<Anchor>, Vec<Singularity>), String> {
+    let mut anchors = Vec::with_capacity(settings.anchors.len());
+    for (i, a) in settings.anchors.iter().enumerate() {
+        anchors.push(Anchor {
+            at: point(a.at, a.at_bbox, bbox)
+                .map_err(|m| format!("anchors: anchor {}: {m}", i + 1))?,
+            up: a.up.into(),
+        });
+    }
+    let mut singularities = Vec::with_capacity(settings.singularities.len());
+    for (i, s) in settings.singularities.iter().enumerate() {
+        singularities.push(Singularity {
+            at: point(s.at, s.at_bbox, bbox)
+                .map_err(|m| format!("singularities: singularity {}: {m}", i + 1))?,
+            sign: if s.kind == SingularityKind::Source {
+                1.0
+            } else {
+                -1.0
+            },
+            strength: s.strength,
+        });
+    }
+    Ok((anchors, singularities))
 }
 
 /// The `orientation` stage.
@@ -351,35 +326,22 @@ impl Stage for Orientation {
         vec![Datum::Frames]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               active: Res<ActiveMesh>,
-               seed: Res<RunSeed>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: Query<&Geometry>| {
+        let orient = move |mut commands: Commands,
+                           active: Res<ActiveMesh>,
+                           seed: Res<RunSeed>,
+                           mut metrics: ResMut<Metrics>,
+                           meshes: Query<&Geometry>|
+              -> SystemResult {
             let Ok(geometry) = meshes.get(active.0) else {
-                return;
+                return Ok(());
             };
-            match orientation_frames(&geometry.0, &settings, seed.derive(ctx.index, 0)) {
-                Ok(result) => {
-                    if settings.mode == OrientationMode::Field {
-                        metrics.record(
-                            ctx.index,
-                            "fallback_components",
-                            result.fallback_components,
-                        );
-                    }
-                    commands.entity(active.0).insert(Frames(result.frames));
-                }
-                Err(message) => {
-                    failure.0 = Some(StageError {
-                        index: ctx.index + 1,
-                        kind: Self::KIND.into(),
-                        message,
-                    });
-                }
+            let result = orientation_frames(&geometry.0, &settings, seed.derive(ctx.index, 0))?;
+            if settings.mode == OrientationMode::Field {
+                metrics.record(ctx.index, "fallback_components", result.fallback_components);
             }
-        })
-        .into_configs()
+            commands.entity(active.0).insert(Frames(result.frames));
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, orient)
     }
 }

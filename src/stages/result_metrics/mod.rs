@@ -9,16 +9,21 @@
 //! pastes (Praun et al.), which are composited in paste order with alpha at
 //! every template point (the renderer's compositing) and measured in the
 //! frames of the topmost paste at each vertex.
+//!
+//! Reads: `ActiveMesh` (`Geometry`, `Frames`, `VertexColours`,
+//! `CornerUvs`, `SourceTexels`, lapped pastes), `TexturePatches`,
+//! `PlaneImage`, `BakedAsset`, the `SourceMesh`, `Exemplar`,
+//! `TexelSpacing`. Writes: `Metrics::result`. The measuring is
+//! `kernels::metrics` (`result::measure_surface`, the histogram samples).
 
 use crate::config::params::to_json;
 use crate::image::Image;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
-use crate::kernels::lapped::coverage::{lattice_level, lattice_samples_into};
-use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_quality, surface_verbatim};
-use crate::kernels::metrics::{
-    EnergySettings, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
+use crate::kernels::metrics::result::{
+    atlas_samples, histogram_density, histogram_distance, measure_surface,
 };
-use crate::kernels::metrics::{SourceMap, image_quality};
+use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_verbatim};
+use crate::kernels::metrics::{EnergySettings, SourceMap, SurfaceSignal, image_quality};
 use crate::kernels::surface::frames::frames_from_global_direction;
 use crate::kernels::surface::surface_sample::CornerFn;
 use crate::kernels::wei_levoy::retile::{ResultAttributes, map_back};
@@ -27,20 +32,24 @@ use crate::progress::Progress;
 use crate::world::*;
 use crate::world::{PasteOf, PasteOrder, PatchFaces, PatchUvs, TexturePatchIndex, TexturePatches};
 use bevy_ecs::prelude::*;
+use bevy_ecs::query::ROQueryItem;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
+use std::borrow::Cow;
 
-type ResultQuery<'w, 's> = Query<
-    'w,
-    's,
-    (
-        &'static Geometry,
-        Option<&'static Frames>,
-        Option<&'static VertexColours>,
-        Option<&'static CornerUvs>,
-        Option<&'static SourceTexels>,
-    ),
->;
+/// What the result metrics read of the active mesh.
+type ResultData = (
+    &'static Geometry,
+    Option<&'static Frames>,
+    Option<&'static VertexColours>,
+    Option<&'static CornerUvs>,
+    Option<&'static SourceTexels>,
+);
+
+type ResultQuery<'w, 's> = Query<'w, 's, ResultData>;
+
+/// One item of [`ResultQuery`].
+type ResultItem<'a> = ROQueryItem<'a, 'a, ResultData>;
 
 type PasteQuery<'w, 's> = Query<
     'w,
@@ -76,10 +85,9 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             plane_quality(plane, &exemplar.image, &settings, &mut metrics);
         }
         progress.inc(1);
-        let Ok((geometry, frames, colours, uvs, sources)) = meshes.get(active.0) else {
+        let Ok(result) = meshes.get(active.0) else {
             return;
         };
-        let mesh = &geometry.0;
         let n = settings.neighbourhood;
         if exemplar.image.width < n || exemplar.image.height < n {
             metrics.result.insert(
@@ -90,77 +98,116 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             );
             return;
         }
-        if let (Some(asset), Ok((source, source_frames))) = (baked.as_deref(), source.single()) {
-            // The synthesis's copied regions (a bake blends look-ups at
-            // seams but moves no source).
-            let sources = sources
-                .map(|s| &s.0[..])
-                .filter(|s| s.len() == mesh.vertex_count());
-            // Measured in the source's frames, else in the synthesis frames
-            // carried onto it, else texture-up along +y (`orientation`'s
-            // default).
-            let carried = match (source_frames, frames) {
-                (None, Some(f)) if f.0.len() == mesh.vertex_count() => {
-                    frames_carried_onto(mesh, &f.0, &source.0)
-                }
-                _ => None,
-            };
-            baked_quality(
-                asset,
-                &source.0,
-                source_frames.map(|f| &f.0[..]).or(carried.as_deref()),
-                &exemplar.image,
-                spacing.0,
-                &settings,
-                &mut metrics,
-            );
-            let frames = frames
-                .map(|f| &f.0[..])
-                .filter(|f| f.len() == mesh.vertex_count());
-            if let (Some(s), Some(frames)) = (sources, frames) {
-                let topo = Topology::build_edges_and_vertex_faces(mesh);
-                let v = surface_verbatim(
-                    &SurfaceResult {
-                        mesh,
-                        topo: &topo,
-                        frames,
-                        spacing: spacing.0,
-                        signal: &SurfaceSignal::VertexColours {
-                            values: &[],
-                            channels: 0,
-                        },
-                    },
-                    s,
-                    exemplar.image.width,
-                    exemplar.image.height,
-                );
-                metrics.result.insert("verbatim".into(), to_json(&v));
-            }
+        let measure = Measure {
+            exemplar: &exemplar,
+            spacing: spacing.0,
+            settings: &settings,
+        };
+        if let (Some(asset), Ok(source)) = (baked.as_deref(), source.single()) {
+            measure.baked(result, asset, source, &mut metrics);
             progress.inc(4);
             return;
         }
-        // Lapped pastes on the active mesh, in paste order.
-        let mut records: Vec<(u32, PasteRecord)> = pastes
-            .iter()
-            .filter(|(of, ..)| of.0 == active.0)
-            .map(|(_, order, tex, faces, puv)| {
-                (
-                    order.0,
-                    PasteRecord {
-                        texture: tex.0,
-                        faces: &faces.0,
-                        uvs: &puv.0,
-                    },
-                )
-            })
-            .collect();
-        records.sort_by_key(|r| r.0);
-        let records: Vec<PasteRecord> = records.into_iter().map(|r| r.1).collect();
+        let records = paste_records(&pastes, active.0);
+        let textures = patch_textures.as_deref().map(|t| t.0.as_slice());
+        measure.active(result, &records, textures, &mut metrics, &progress);
+    })
+    .into_configs()
+}
+
+/// The lapped pastes on `mesh`, in paste order.
+fn paste_records<'a>(pastes: &'a PasteQuery, mesh: Entity) -> Vec<PasteRecord<'a>> {
+    let mut records: Vec<(u32, PasteRecord)> = pastes
+        .iter()
+        .filter(|(of, ..)| of.0 == mesh)
+        .map(|(_, order, tex, faces, puv)| {
+            (
+                order.0,
+                PasteRecord {
+                    texture: tex.0,
+                    faces: &faces.0,
+                    uvs: &puv.0,
+                },
+            )
+        })
+        .collect();
+    records.sort_by_key(|r| r.0);
+    records.into_iter().map(|r| r.1).collect()
+}
+
+/// What every measure reads: the exemplar, the world units of one
+/// exemplar pixel, the settings.
+struct Measure<'a> {
+    exemplar: &'a Exemplar,
+    spacing: f32,
+    settings: &'a EnergySettings,
+}
+
+impl Measure<'_> {
+    /// After a `bake`: the baked atlas on the source mesh
+    /// ([`baked_quality`]), and the synthesis's copied regions on the
+    /// active mesh (a bake blends look-ups at seams but moves no source).
+    fn baked(
+        &self,
+        (geometry, frames, _, _, sources): ResultItem,
+        asset: &BakedAsset,
+        (source, source_frames): (&Geometry, Option<&Frames>),
+        metrics: &mut Metrics,
+    ) {
+        let mesh = &geometry.0;
+        let sources = sources
+            .map(|s| &s.0[..])
+            .filter(|s| s.len() == mesh.vertex_count());
+        // Measured in the source's frames, else in the synthesis frames
+        // carried onto it, else texture-up along +y (`orientation`'s
+        // default).
+        let carried = match (source_frames, frames) {
+            (None, Some(f)) if f.0.len() == mesh.vertex_count() => {
+                frames_carried_onto(mesh, &f.0, &source.0)
+            }
+            _ => None,
+        };
+        let source_frames = source_frames.map(|f| &f.0[..]).or(carried.as_deref());
+        baked_quality(asset, &source.0, source_frames, self, metrics);
+        let frames = frames
+            .map(|f| &f.0[..])
+            .filter(|f| f.len() == mesh.vertex_count());
+        if let (Some(s), Some(frames)) = (sources, frames) {
+            let topo = Topology::build_edges_and_vertex_faces(mesh);
+            let result = SurfaceResult {
+                mesh,
+                topo: &topo,
+                frames,
+                spacing: self.spacing,
+                signal: &SurfaceSignal::VertexColours {
+                    values: &[],
+                    channels: 0,
+                },
+            };
+            let image = &self.exemplar.image;
+            let v = surface_verbatim(&result, s, image.width, image.height);
+            metrics.result.insert("verbatim".into(), to_json(&v));
+        }
+    }
+
+    /// Whichever signal the active mesh carries: per-corner UVs, vertex
+    /// colours, or lapped pastes (`records` of `textures`) composited in
+    /// paste order and measured in the frames of the topmost paste.
+    fn active(
+        &self,
+        (geometry, frames, colours, uvs, sources): ResultItem,
+        records: &[PasteRecord],
+        textures: Option<&[Image]>,
+        metrics: &mut Metrics,
+        progress: &Progress,
+    ) {
+        let mesh = &geometry.0;
+        let exemplar = self.exemplar;
         progress.set_part("composite");
         let background = exemplar.image.mean();
-        let composite = match (uvs, colours, patch_textures.as_deref()) {
+        let composite = match (uvs, colours, textures) {
             (None, None, Some(textures)) if !records.is_empty() => {
-                match LappedComposite::new(mesh, &records, &textures.0, &background) {
+                match LappedComposite::new(mesh, records, textures, &background) {
                     Ok(c) => Some(c),
                     Err(e) => {
                         metrics.result.insert(
@@ -194,50 +241,36 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             },
             (None, None, None) => return,
         };
-        let owned_frames;
         let frames = match (&composite, frames) {
-            (Some(c), _) => {
-                owned_frames = c.frames(mesh, glam::Vec3::X);
-                &owned_frames
-            }
-            (None, Some(f)) if f.0.len() == mesh.vertex_count() => &f.0,
-            _ => {
-                owned_frames = frames_from_global_direction(&mesh.vertex_normals(), glam::Vec3::X);
-                &owned_frames
-            }
+            (Some(c), _) => Cow::Owned(c.frames(mesh, glam::Vec3::X)),
+            (None, Some(f)) if f.0.len() == mesh.vertex_count() => Cow::Borrowed(&f.0[..]),
+            _ => Cow::Owned(frames_from_global_direction(
+                &mesh.vertex_normals(),
+                glam::Vec3::X,
+            )),
         };
         progress.inc(1);
-        progress.set_part("texture energy");
-        // The metrics read only the edges and the faces of each vertex.
-        let topo = Topology::build_edges_and_vertex_faces(mesh);
-        let stats = surface_texture_energy(
-            mesh,
-            &topo,
-            frames,
-            spacing.0,
-            &signal,
-            &exemplar.image,
-            &settings,
-        );
-        progress.inc(1);
-        progress.set_part("quality");
         // The measures that see what the energy forgives (kernels/metrics).
         let sources = sources
             .map(|s| &s.0[..])
             .filter(|s| s.len() == mesh.vertex_count());
-        let q = surface_quality(
-            &SurfaceResult {
-                mesh,
-                topo: &topo,
-                frames,
-                spacing: spacing.0,
-                signal: &signal,
-            },
+        let (stats, q) = measure_surface(
+            mesh,
+            &frames,
+            self.spacing,
+            &signal,
             &exemplar.image,
-            &settings,
+            self.settings,
             sources,
+            progress,
         );
-        record_surface_measures(&mut metrics, &stats, &q, n, spacing.0);
+        record_surface_measures(
+            metrics,
+            &stats,
+            &q,
+            self.settings.neighbourhood,
+            self.spacing,
+        );
         if let Some(v) = q.verbatim {
             metrics.result.insert("verbatim".into(), to_json(&v));
         }
@@ -246,21 +279,16 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
         let values = match (colours, &composite) {
             (Some(c), _) => Some((c.values.clone(), c.channels)),
             (None, Some(c)) => {
-                // About 20 000 composite samples spread by area.
-                let area: f32 = mesh.face_areas().iter().sum();
-                Some((
-                    c.sample_colours(mesh, histogram_density(area)),
-                    c.channels(),
-                ))
+                let density = histogram_density(mesh.face_areas().iter().sum());
+                Some((c.sample_colours(mesh, density), c.channels()))
             }
             _ => None,
         };
         if let Some((values, channels)) = values {
-            record_histogram(&mut metrics, values, channels, &exemplar.image);
+            record_histogram(metrics, values, channels, &exemplar.image);
         }
         progress.inc(1);
-    })
-    .into_configs()
+    }
 }
 
 /// The surface measures of the baked atlas on the original mesh (what
@@ -270,13 +298,11 @@ fn baked_quality(
     asset: &BakedAsset,
     source: &crate::mesh::PolyMesh,
     source_frames: Option<&[crate::kernels::surface::frames::TangentFrame]>,
-    exemplar: &Image,
-    spacing: f32,
-    settings: &EnergySettings,
+    measure: &Measure,
     metrics: &mut Metrics,
 ) {
     let mesh = asset.mesh_or(source);
-    let rgb = exemplar.to_rgb();
+    let rgb = measure.exemplar.image.to_rgb();
     let signal = SurfaceSignal::CornerUvs {
         uvs: &asset.uvs,
         texture: &asset.colour,
@@ -290,43 +316,15 @@ fn baked_quality(
             &owned
         }
     };
-    let topo = Topology::build_edges_and_vertex_faces(mesh);
-    let stats = surface_texture_energy(mesh, &topo, frames, spacing, &signal, &rgb, settings);
-    let q = surface_quality(
-        &SurfaceResult {
-            mesh,
-            topo: &topo,
-            frames,
-            spacing,
-            signal: &signal,
-        },
-        &rgb,
-        settings,
-        None,
+    let (spacing, settings) = (measure.spacing, measure.settings);
+    let hidden = Progress::hidden();
+    let (stats, q) = measure_surface(
+        mesh, frames, spacing, &signal, &rgb, settings, None, &hidden,
     );
     record_surface_measures(metrics, &stats, &q, settings.neighbourhood, spacing);
-    // The histogram of the atlas as the mesh shows it: read at lattice
-    // points of every triangle, about 20 000 spread by area.
+    // The histogram of the atlas as the mesh shows it.
     let per_area = histogram_density(mesh.face_areas().iter().sum());
-    let mut values = Vec::new();
-    let mut px = [0.0f32; 3];
-    let mut lattice = Vec::new();
-    for f in 0..mesh.face_count() {
-        let corners = mesh.face_corners(f);
-        if corners.len() != 3 {
-            continue;
-        }
-        let k = lattice_level(mesh.face_area(f), per_area);
-        lattice_samples_into(k, &mut lattice);
-        let uv = &asset.uvs[corners];
-        for b in &lattice {
-            let p = uv[0] * b[0] + uv[1] * b[1] + uv[2] * b[2];
-            asset
-                .colour
-                .sample_uv(p.x, p.y, crate::image::sample::Wrap::Clamp, &mut px);
-            values.extend_from_slice(&px);
-        }
-    }
+    let values = atlas_samples(mesh, &asset.uvs, &asset.colour, per_area);
     record_histogram(metrics, values, 3, &rgb);
     metrics
         .result
@@ -361,26 +359,12 @@ fn frames_carried_onto(
 /// exemplar's, per channel (`histogram_wasserstein`) and their mean
 /// (`histogram`).
 fn record_histogram(metrics: &mut Metrics, values: Vec<f32>, channels: usize, exemplar: &Image) {
-    let as_image = Image::from_data(
-        (values.len() / channels.max(1)) as u32,
-        1,
-        channels as u32,
-        values,
-    );
-    if let Some(img) = as_image.filter(|i| i.width > 0) {
-        let w = histogram_wasserstein(&img, exemplar);
-        let mean = w.iter().sum::<f32>() / w.len().max(1) as f32;
+    if let Some((w, mean)) = histogram_distance(values, channels, exemplar) {
         metrics
             .result
             .insert("histogram_wasserstein".into(), to_json(&w));
         metrics.result.insert("histogram".into(), to_json(&mean));
     }
-}
-
-/// Samples per unit area for a histogram of about 20 000 samples over a
-/// surface of `area`.
-fn histogram_density(area: f32) -> f32 {
-    20_000.0 / area.max(f32::MIN_POSITIVE)
 }
 
 /// Writes the texture energy (as `texture_energy` and `coherence`) and the

@@ -17,6 +17,10 @@
 //!
 //! Lapped textures work on triangles: a polygon mesh is fan-triangulated
 //! into a new active mesh level first.
+//!
+//! Reads: `ActiveMesh` (`Geometry`, `Frames` in frames mode),
+//! `TextureScale`. Writes: `FaceField` on the active mesh (or on the new
+//! triangulated level, which becomes the active mesh), metrics.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings, to_json};
 use crate::kernels::lapped::TriMesh;
@@ -25,7 +29,7 @@ use crate::kernels::lapped::tangent_field::{
 };
 use crate::kernels::surface::component_fallback::{Components, unseeded_components};
 use crate::mesh::Topology;
-use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::stages::position;
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -365,40 +369,23 @@ impl Stage for TangentField {
         vec![Datum::FaceField]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               mut active: ResMut<ActiveMesh>,
-               texture_scale: Res<TextureScale>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: Query<(&Geometry, Option<&Frames>)>| {
+        let field = move |mut commands: Commands,
+                          mut active: ResMut<ActiveMesh>,
+                          texture_scale: Res<TextureScale>,
+                          mut metrics: ResMut<Metrics>,
+                          meshes: Query<(&Geometry, Option<&Frames>)>|
+              -> SystemResult {
             let Ok((geometry, frames)) = meshes.get(active.0) else {
-                return;
-            };
-            let fail = |message: String| StageError {
-                index: ctx.index + 1,
-                kind: Self::KIND.into(),
-                message,
+                return Ok(());
             };
             // Lapped textures need triangles: fan-triangulate polygons
             // into a new mesh level (vertices, and so frames, unchanged).
             let triangulated = (!geometry.0.is_triangle_mesh()).then(|| geometry.0.triangulated());
             let mesh = triangulated.as_ref().unwrap_or(&geometry.0);
-            let tri = match TriMesh::new(mesh) {
-                Ok(t) => t,
-                Err(e) => {
-                    failure.0 = Some(fail(e.to_string()));
-                    return;
-                }
-            };
+            let tri = TriMesh::new(mesh).map_err(|e| e.to_string())?;
             let frames = frames.map(|f| f.0.as_slice());
             let (field, stage_metrics) =
-                match face_field(mesh, &tri, &settings, frames, texture_scale.texels_per_unit) {
-                    Ok(x) => x,
-                    Err(message) => {
-                        failure.0 = Some(fail(message));
-                        return;
-                    }
-                };
+                face_field(mesh, &tri, &settings, frames, texture_scale.texels_per_unit)?;
             for (k, v) in stage_metrics {
                 metrics.record(ctx.index, &k, v);
             }
@@ -416,7 +403,8 @@ impl Stage for TangentField {
                     commands.entity(active.0).insert(field);
                 }
             }
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, field)
     }
 }

@@ -10,7 +10,7 @@
 //! resource, `TexelSpacing` (one image pixel), metrics.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -85,19 +85,16 @@ impl Stage for Triplanar {
             .then(|| crate::image::load_image(Path::new(&settings.image)))
             .transpose()
             .map_err(|e| e.to_string());
-        (move |mut commands: Commands,
-               exemplar: Res<Exemplar>,
-               texture_scale: Option<Res<TextureScale>>,
-               mut spacing: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>| {
+        let project = move |mut commands: Commands,
+                            exemplar: Res<Exemplar>,
+                            texture_scale: Option<Res<TextureScale>>,
+                            mut spacing: ResMut<TexelSpacing>,
+                            mut metrics: ResMut<Metrics>|
+              -> SystemResult {
             let image = match &image {
                 Ok(Some(img)) => img.clone(),
                 Ok(None) => exemplar.image.clone(),
-                Err(e) => {
-                    fail(&mut failure, ctx.index, Self::KIND, e.clone());
-                    return;
-                }
+                Err(e) => return Err(e.clone()),
             };
             let texels_per_unit = run_texels_per_unit(texture_scale.as_deref(), &spacing);
             // The result metrics resample the surface at one image pixel.
@@ -109,7 +106,8 @@ impl Stage for Triplanar {
                 texels_per_unit,
                 sharpness: settings.sharpness as f32,
             });
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, project)
     }
 }
