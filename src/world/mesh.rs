@@ -5,8 +5,10 @@
 //! structure-of-arrays: a vertex is a row (`u32` id) in each per-vertex array.
 
 use crate::kernels::surface::frames::TangentFrame;
+use crate::kernels::wei_levoy::relax_orientation::complete_frames;
 use crate::mesh::PolyMesh;
 use bevy_ecs::prelude::*;
+use bevy_ecs::system::SystemParam;
 use glam::{Vec2, Vec3};
 
 /// Marks the mesh as loaded from `[input]`; it is never modified, so results
@@ -109,6 +111,99 @@ pub fn pyramid_entities(
         return Err("there is no mesh".into());
     }
     Ok(chosen.into_iter().map(|(_, e)| e).collect())
+}
+
+/// The mesh levels a pyramid is picked from ([`pyramid_entities`]).
+pub type PyramidLevels<'w, 's> =
+    Query<'w, 's, (Entity, &'static MeshLevel, Has<SourceMesh>), With<Geometry>>;
+
+/// What a synthesis stage reads of a mesh level: its geometry, frames,
+/// colours and source texels.
+pub type LevelFields = (
+    &'static Geometry,
+    Option<&'static Frames>,
+    Option<&'static VertexColours>,
+    Option<&'static SourceTexels>,
+);
+
+/// The [`LevelFields`] of mesh levels.
+pub type LevelData<'w, 's> = Query<'w, 's, LevelFields>;
+
+/// The mesh pyramid as a per-vertex synthesis stage (`match`, `coherent`)
+/// reads it: the levels, their data, and the active mesh.
+#[derive(SystemParam)]
+pub struct Pyramid<'w, 's> {
+    active: Res<'w, ActiveMesh>,
+    levels: PyramidLevels<'w, 's>,
+    /// Each level's data.
+    pub data: LevelData<'w, 's>,
+}
+
+impl Pyramid<'_, '_> {
+    /// The pyramid's levels (finest first, [`pyramid_entities`]) with their
+    /// meshes and frames; a level without frames (or with the wrong count)
+    /// takes frames transferred from the nearest level that has them, else
+    /// from the active mesh when it lies outside the pyramid
+    /// ([`complete_frames`]).
+    ///
+    /// # Errors
+    /// As [`pyramid_entities`]; no level and not the active mesh has frames.
+    pub fn input(&self) -> Result<PyramidInput<'_>, String> {
+        let data = &self.data;
+        let entities = pyramid_entities(self.levels.iter().map(|(e, l, s)| (e, *l, s)))?;
+        let meshes: Vec<&PolyMesh> = entities
+            .iter()
+            .filter_map(|&e| data.get(e).ok().map(|d| &d.0.0))
+            .collect();
+        let given: Vec<Option<&[TangentFrame]>> = entities
+            .iter()
+            .map(|&e| data.get(e).ok().and_then(|d| d.1).map(|f| &f.0[..]))
+            .collect();
+        let active = data
+            .get(self.active.0)
+            .ok()
+            .and_then(|(g, f, _, _)| f.map(|f| (&g.0, &f.0[..])))
+            .filter(|(g, f)| f.len() == g.vertex_count());
+        let frames = complete_frames(&meshes, &given, active)?;
+        Ok(PyramidInput {
+            entities,
+            meshes,
+            given,
+            frames,
+        })
+    }
+}
+
+/// The levels of a [`Pyramid`]: their entities (finest first), their
+/// meshes, the frames they carry and the frames of every level.
+pub struct PyramidInput<'a> {
+    /// Level entities, finest first.
+    pub entities: Vec<Entity>,
+    /// Their meshes.
+    pub meshes: Vec<&'a PolyMesh>,
+    /// Their own frames, where they have them.
+    pub given: Vec<Option<&'a [TangentFrame]>>,
+    /// Every level's frames: its own, or completed.
+    pub frames: Vec<Vec<TangentFrame>>,
+}
+
+impl PyramidInput<'_> {
+    /// Writes level `l`'s synthesised `colours` and their exemplar `texels`
+    /// on its entity, and its completed frames where it had none of its
+    /// own.
+    pub fn write_level(
+        &self,
+        commands: &mut Commands,
+        l: usize,
+        colours: VertexColours,
+        texels: Vec<Vec2>,
+    ) {
+        let mut e = commands.entity(self.entities[l]);
+        e.insert((colours, SourceTexels(texels)));
+        if self.given[l].is_none() {
+            e.insert(Frames(self.frames[l].clone()));
+        }
+    }
 }
 
 /// Per-vertex sweep value (Turk 2001; Bangay & Morkel 2006 §3.1.1): grows

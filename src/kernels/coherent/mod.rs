@@ -928,6 +928,16 @@ fn synthesis(
     Ok(out)
 }
 
+/// The colours of `image` at pixel centres `texels` (as [`pixel_centres`]
+/// gives them), the image's channels per texel.
+pub fn pixel_colours(image: &Image, texels: &[Vec2]) -> Vec<f32> {
+    let mut values = Vec::with_capacity(texels.len() * image.channels as usize);
+    for t in texels {
+        values.extend_from_slice(image.pixel(t.x as u32, t.y as u32));
+    }
+    values
+}
+
 /// The exemplar pixel centre under each coordinate (what the colours copy).
 pub fn pixel_centres(coords: &[Vec2], width: u32, height: u32, wrap: Wrap) -> Vec<Vec2> {
     let domain = Domain {

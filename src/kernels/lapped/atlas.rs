@@ -11,6 +11,7 @@
 //! on the texture's mean colour); the gutters are then filled by dilation.
 
 use super::TriMesh;
+use super::composite::{PasteIndex, PasteRecord};
 use super::coverage::Coverage;
 use super::mask::TexturePatch;
 use crate::image::Image;
@@ -19,6 +20,8 @@ use crate::kernels::atlas::raster::{barycentric, signed_area2};
 pub use crate::kernels::atlas::{
     AtlasSettings, Charts, pack_charts, rasterise_faces, skyline_pack,
 };
+use crate::mesh::PolyMesh;
+use crate::progress::Progress;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -176,6 +179,74 @@ pub fn build_atlas_with(
         fill: area,
         image,
     })
+}
+
+/// The texture atlas's charts and coordinates, before the pastes exist.
+#[derive(Clone, Debug, Default)]
+pub struct AtlasLayout {
+    /// Number of charts.
+    pub charts: usize,
+    /// Per face, its corners' atlas coordinates.
+    pub corner_uvs: Vec<[Vec2; 3]>,
+    /// Atlas texels per world unit.
+    pub texels_per_unit: f32,
+    /// Fraction of the atlas covered by chart faces.
+    pub fill: f32,
+}
+
+/// Lays out the atlas of `mesh` (triangles only; the paste loop reports
+/// any other face) with the shared atlas kernel. Laying out a
+/// million-vertex scan takes tens of seconds: it is the part `"atlas"` of
+/// `progress`.
+///
+/// # Errors
+/// A face that is not a triangle, or the UV atlas's message.
+pub fn atlas_layout(
+    mesh: &PolyMesh,
+    settings: &AtlasSettings,
+    progress: &Progress,
+) -> Result<AtlasLayout, String> {
+    let tris: Vec<[u32; 3]> = (0..mesh.face_count())
+        .map(|f| match mesh.face(f) {
+            &[a, b, c] => Ok([a, b, c]),
+            _ => Err(format!("face {f} is not a triangle")),
+        })
+        .collect::<Result<_, _>>()?;
+    let uv = crate::kernels::atlas::build_uv_atlas_with_progress(
+        &mesh.positions,
+        &tris,
+        settings,
+        progress,
+    )
+    .map_err(|e| e.to_string())?;
+    Ok(AtlasLayout {
+        charts: uv.charts.count,
+        corner_uvs: uv.corner_uvs,
+        texels_per_unit: uv.texels_per_unit,
+        fill: uv.fill,
+    })
+}
+
+/// Composites `pastes` (in paste order) into an atlas of `layout`'s
+/// coordinates (see [`composite_atlas_with`]).
+///
+/// # Errors
+/// As [`PasteIndex::new`] (a paste names a face the layout does not have).
+pub fn composite_pastes(
+    layout: &AtlasLayout,
+    pastes: &[PasteRecord<'_>],
+    textures: &[TexturePatch],
+    size: u32,
+    padding_px: u32,
+) -> Result<Image, String> {
+    let index = PasteIndex::new(layout.corner_uvs.len(), pastes)?;
+    Ok(composite_atlas_with(
+        &layout.corner_uvs,
+        &|f, out| out.extend(index.layers(f).map(|(_, t, uv)| (t, uv))),
+        textures,
+        size,
+        padding_px,
+    ))
 }
 
 #[cfg(test)]

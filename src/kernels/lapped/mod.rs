@@ -7,6 +7,9 @@
 //!
 //! - [`mask`] — texture patches: an exemplar region with an alpha mask that
 //!   falls off near its boundary (§3.1): circle, seeded splotch, user mask.
+//! - [`cut`] — cutting the texture patches out of the exemplar: a user
+//!   mask, or seeded shapes at seeded places (§3.1); [`patch_cache`] — their
+//!   entries in the analysis cache.
 //! - [`hull`] — the conservative polygonal hull of a mask (§3.3, Fig. 4).
 //! - [`tangent_field`] — the per-face field `T` (§3.2): global up, Gaussian
 //!   RBF interpolation of constraints over geodesic distance, isotropic scale.
@@ -33,11 +36,13 @@
 pub mod atlas;
 pub mod choice;
 pub mod coverage;
+pub mod cut;
 pub mod grow;
 pub mod hull;
 pub mod mask;
 pub mod param;
 pub mod paste;
+pub mod patch_cache;
 pub mod tangent_field;
 
 // For the quality metrics of `result_metrics`.
@@ -374,6 +379,14 @@ impl FaceField<'_> {
     #[inline]
     pub fn at(&self, f: usize) -> Vec3 {
         self.t[f] * self.scale
+    }
+
+    /// The mean length of `T` over the faces ([`FaceField::at`]).
+    pub fn mean_length(&self) -> f64 {
+        (0..self.t.len())
+            .map(|f| self.at(f).length() as f64)
+            .sum::<f64>()
+            / self.t.len().max(1) as f64
     }
 }
 

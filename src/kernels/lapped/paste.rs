@@ -148,6 +148,51 @@ pub struct Paste {
     pub uvs: Vec<[Vec2; 3]>,
 }
 
+/// A paste reduced to the faces runtime pasting draws (§4): the texture
+/// patch, those faces, and their corners' texture coordinates flattened
+/// (three per face).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DrawnPaste {
+    /// Index of the texture patch.
+    pub texture: u32,
+    /// The drawn faces, in the paste's order.
+    pub faces: Vec<u32>,
+    /// `3 · faces.len()` texture coordinates.
+    pub uvs: Vec<Vec2>,
+}
+
+impl Paste {
+    /// The paste with only the faces `drawn` flags (one flag per face, as
+    /// `coverage::drawn_faces` gives them).
+    pub fn drawn_only(self, drawn: &[bool]) -> DrawnPaste {
+        let n = drawn.iter().filter(|&&d| d).count();
+        let mut faces = Vec::with_capacity(n);
+        let mut uvs = Vec::with_capacity(3 * n);
+        for ((&f, uv), &d) in self.faces.iter().zip(&self.uvs).zip(drawn) {
+            if d {
+                faces.push(f);
+                uvs.extend_from_slice(uv);
+            }
+        }
+        DrawnPaste {
+            texture: self.texture,
+            faces,
+            uvs,
+        }
+    }
+}
+
+impl DrawnPaste {
+    /// The paste as the compositor reads it.
+    pub fn record(&self) -> super::composite::PasteRecord<'_> {
+        super::composite::PasteRecord {
+            texture: self.texture,
+            faces: &self.faces,
+            uvs: &self.uvs,
+        }
+    }
+}
+
 /// What the loop did.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PasteReport {
@@ -189,6 +234,57 @@ pub struct LappedTexture {
     pub coverage: Coverage,
     /// Summary.
     pub report: PasteReport,
+}
+
+/// What runtime pasting keeps of a lapped texture (§4).
+#[derive(Clone, Debug)]
+pub struct RuntimePastes {
+    /// Per paste, the faces it draws.
+    pub pastes: Vec<DrawnPaste>,
+    /// What the loop did.
+    pub report: PasteReport,
+    /// Faces drawn, summed over the pastes, per face of the mesh.
+    pub draws_per_face: f64,
+}
+
+/// [`paste_until_covered`] (the part `"pasting"` of `progress`), then only
+/// the faces runtime pasting draws are kept (§4,
+/// [`super::coverage::drawn_faces`]; one of two steps of the part
+/// `"drawing"`): the hidden ones were ~3/4 of all layers on a scan. The
+/// coverage goes before the pastes are reduced.
+pub fn paste_for_runtime(
+    mesh: &TriMesh,
+    field: FaceField,
+    textures: &[TexturePatch],
+    settings: &PasteSettings,
+    progress: &Progress,
+) -> RuntimePastes {
+    progress.start_part("pasting", PASTING_PROGRESS_STEPS);
+    let out = paste_until_covered(mesh, field, textures, settings, progress);
+    progress.start_part("drawing", 2);
+    let drawn_span = tracing::info_span!("drawn_faces").entered();
+    let sizes: Vec<usize> = out.pastes.iter().map(|p| p.faces.len()).collect();
+    let drawn = super::coverage::drawn_faces(&out.coverage, &sizes, textures, &settings.coverage);
+    let draws: usize = drawn.iter().map(|d| d.iter().filter(|&&x| x).count()).sum();
+    let draws_per_face = draws as f64 / mesh.face_count().max(1) as f64;
+    drop(drawn_span);
+    progress.inc(1);
+    let LappedTexture {
+        pastes,
+        coverage,
+        report,
+    } = out;
+    drop(coverage);
+    let pastes = pastes
+        .into_iter()
+        .zip(&drawn)
+        .map(|(paste, drawn)| paste.drawn_only(drawn))
+        .collect();
+    RuntimePastes {
+        pastes,
+        report,
+        draws_per_face,
+    }
 }
 
 /// How hard a face is to parametrise, `[0, 1]`: the larger of its largest

@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use crate::kernels::surface::flatten::{TriangleAdjacency, template_spacing};
 use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::wei_levoy::wl_match::parents::{SurfacePoint, TriangleBvh};
-use crate::mesh::Topology;
+use crate::mesh::{PolyMesh, Topology};
 use crate::progress::{Progress, level_label};
 
 /// How `s` directions are chosen.
@@ -456,6 +456,77 @@ fn circular_minimiser(angles: &[f32], n: u32) -> f32 {
     // Express as the smallest rotation.
     let m = best.1;
     m - round(m / period) * period
+}
+
+/// Frames of `to` interpolated from `from`'s `frames` ([`transfer_frames`],
+/// no symmetry assumed).
+pub fn transfer_frames_between(
+    from: &PolyMesh,
+    frames: &[TangentFrame],
+    to: &PolyMesh,
+) -> Vec<TangentFrame> {
+    let level = |m: &PolyMesh| {
+        (
+            m.vertex_normals(),
+            Topology::build(m),
+            TriangleAdjacency::new(m),
+        )
+    };
+    let (fnorm, ftopo, fadj) = level(from);
+    let (tnorm, ttopo, tadj) = level(to);
+    transfer_frames(
+        &OrientationLevel {
+            positions: &from.positions,
+            normals: &fnorm,
+            topology: &ftopo,
+            adjacency: &fadj,
+        },
+        frames,
+        &OrientationLevel {
+            positions: &to.positions,
+            normals: &tnorm,
+            topology: &ttopo,
+            adjacency: &tadj,
+        },
+        1,
+    )
+}
+
+/// Frames for every level of a pyramid (`meshes`, finest first): the
+/// `given` ones; levels without frames (or with the wrong count) take
+/// frames transferred from the nearest level that has them, else from
+/// `external` (a mesh outside the pyramid with its frames).
+///
+/// # Errors
+/// No level and no external mesh has frames.
+pub fn complete_frames(
+    meshes: &[&PolyMesh],
+    given: &[Option<&[TangentFrame]>],
+    external: Option<(&PolyMesh, &[TangentFrame])>,
+) -> Result<Vec<Vec<TangentFrame>>, String> {
+    let ok = |l: usize| given[l].filter(|f| f.len() == meshes[l].vertex_count());
+    let mut out = Vec::with_capacity(meshes.len());
+    for l in 0..meshes.len() {
+        if let Some(f) = ok(l) {
+            out.push(f.to_vec());
+            continue;
+        }
+        let nearest = (0..meshes.len())
+            .filter(|&k| ok(k).is_some())
+            .min_by_key(|&k| k.abs_diff(l));
+        let (from_mesh, from_frames) = match (nearest, external) {
+            (Some(k), _) => (meshes[k], ok(k).unwrap_or(&[])),
+            (None, Some(e)) => e,
+            (None, None) => {
+                return Err(
+                    "needs tangent frames on the mesh: add `orientation` or `relax_orientation` before it"
+                        .into(),
+                );
+            }
+        };
+        out.push(transfer_frames_between(from_mesh, from_frames, meshes[l]));
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

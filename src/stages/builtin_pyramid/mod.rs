@@ -4,13 +4,16 @@
 //! resolution). A stand-in for `retile` (Wei & Levoy 2001 §3.1) on shapes
 //! whose uniform tessellations are known, and a fixed pyramid for tests and
 //! benches. The input mesh is left as it is; level 0 becomes the active mesh.
+//!
+//! Reads: nothing but its settings. Writes: the level entities
+//! (`MeshLevel`, `Geometry`), `ActiveMesh`, `TexelSpacing`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::surface::flatten::{mean_fan_triangle_area, template_spacing};
 use crate::mesh::PolyMesh;
 use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
 use crate::stage::memory::{BYTES_PER_MESH_VERTEX, InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -211,21 +214,11 @@ impl Stage for BuiltinPyramid {
         }
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               mut metrics: ResMut<Metrics>,
-               mut spacing: ResMut<TexelSpacing>,
-               mut failure: ResMut<StageFailure>| {
-            let meshes = match builtin_pyramid(&settings) {
-                Ok(m) => m,
-                Err(message) => {
-                    failure.0 = Some(StageError {
-                        index: ctx.index + 1,
-                        kind: Self::KIND.into(),
-                        message,
-                    });
-                    return;
-                }
-            };
+        let build = move |mut commands: Commands,
+                          mut metrics: ResMut<Metrics>,
+                          mut spacing: ResMut<TexelSpacing>|
+              -> SystemResult {
+            let meshes = builtin_pyramid(&settings)?;
             let counts: Vec<usize> = meshes.iter().map(PolyMesh::vertex_count).collect();
             metrics.record(ctx.index, "vertices_per_level", &counts);
             if let Some(m) = meshes.first() {
@@ -240,7 +233,8 @@ impl Stage for BuiltinPyramid {
             if let Some(e) = finest {
                 commands.insert_resource(ActiveMesh(e));
             }
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, build)
     }
 }

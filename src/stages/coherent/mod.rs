@@ -8,17 +8,26 @@
 //! `MeshLevel` entities (`retile`, `builtin_pyramid` or `subdivide_sqrt2`),
 //! or the source mesh alone as a one-level pyramid. Level 0 becomes the
 //! active mesh.
+//!
+//! Reads: the pyramid's levels (`Geometry`, `Frames`; the finest level's
+//! `SourceTexels` with `start = "sources"`), the exemplar, `TextureScale`
+//! (or `TexelSpacing` when refining), the analysis cache. Writes: on every
+//! level `VertexColours` and `SourceTexels` (removing `CornerUvs`), `Frames`
+//! where it had none; `ActiveMesh`, `TexelSpacing`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::coherent::{CoherentSettings, coherent_synthesis, pixel_centres};
+use crate::image::sample::Wrap;
+use crate::kernels::coherent::{
+    CoherentLevel, CoherentSettings, coherent_synthesis, pixel_centres, pixel_colours,
+};
 use crate::kernels::wei_levoy::wl_match::SynthesisLevel;
 use crate::progress::Progress;
-use crate::stage::{Datum, Stage, StageCtx, StageError};
-use crate::stages::wl_match::{DataQuery, LevelQuery, PyramidInput, frames_missing, pyramid_input};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
+use glam::Vec2;
 use serde::{Deserialize, Serialize};
 
 /// Where the coordinates start.
@@ -166,6 +175,77 @@ impl StageSettings for CoherentStageSettings {
     }
 }
 
+impl CoherentStageSettings {
+    /// The kernel's settings: the scale is `scale`, or when refining the
+    /// scale of the result refined (the texel spacing `spacing` the earlier
+    /// stage set), else the run's `texture_scale`.
+    fn kernel_settings(
+        &self,
+        spacing: f32,
+        texture_scale: f32,
+        seed: u64,
+        wrap: Wrap,
+    ) -> CoherentSettings {
+        CoherentSettings {
+            passes: self.passes,
+            k: self.k as usize,
+            dims: self.appearance_dims as usize,
+            window: self.window,
+            ring: self.ring,
+            jitter: self.jitter,
+            spread: self.spread,
+            coherence: self.coherence,
+            scale: match (self.scale, self.start) {
+                (s, _) if s > 0.0 => s,
+                (_, Start::Sources) => 1.0 / spacing.max(f32::MIN_POSITIVE),
+                (_, Start::Random) => texture_scale,
+            },
+            seed,
+            wrap,
+        }
+    }
+}
+
+/// The finest level's source texels to refine (`start = "sources"`), or
+/// none (`start = "random"`).
+fn start_texels<'a>(
+    start: Start,
+    data: &'a LevelData,
+    input: &PyramidInput,
+) -> Result<Option<&'a [Vec2]>, String> {
+    if start == Start::Random {
+        return Ok(None);
+    }
+    let texels = data
+        .get(input.entities[0])
+        .ok()
+        .and_then(|d| d.3)
+        .map(|t| &t.0[..])
+        .filter(|t| t.len() == input.meshes[0].vertex_count());
+    if texels.is_none() {
+        return Err(
+            "start = \"sources\" needs source texels on the finest mesh level: put a stage that records them (jump_surface, match, graph_match, coherent) before it".into(),
+        );
+    }
+    Ok(texels)
+}
+
+/// Records the levels' figures as metrics of stage `index`; returns the
+/// finest level's texels per world unit, if any.
+fn record_metrics(metrics: &mut Metrics, index: usize, results: &[CoherentLevel]) -> Option<f32> {
+    let reports: Vec<_> = results.iter().map(|r| r.report.clone()).collect();
+    metrics.record(index, "levels", &reports);
+    let r = reports.first()?;
+    let texels_per_unit = r.texels_per_spacing / r.spacing;
+    metrics.record(index, "texels_per_world_unit", texels_per_unit);
+    metrics.record(
+        index,
+        "energy_finest",
+        r.energy.last().copied().unwrap_or(0.0),
+    );
+    Some(texels_per_unit)
+}
+
 /// The `coherent` stage.
 pub struct Coherent;
 
@@ -183,129 +263,54 @@ impl Stage for Coherent {
         vec![Datum::Colours]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               seed: Res<RunSeed>,
-               exemplar: Res<Exemplar>,
-               active: Res<ActiveMesh>,
-               texture_scale: Res<TextureScale>,
-               mut spacing_res: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               levels: LevelQuery,
-               data: DataQuery| {
-            let fail = |message: String| StageError {
-                index: ctx.index + 1,
-                kind: Self::KIND.into(),
-                message,
-            };
-            let PyramidInput {
-                entities,
-                meshes,
-                given,
-                frames,
-            } = match pyramid_input(&levels, &data, active.0) {
-                Ok(p) => p,
-                Err(m) => {
-                    failure.0 = Some(fail(m));
-                    return;
-                }
-            };
-            let inputs: Vec<SynthesisLevel> = meshes
+        let synthesize = move |mut commands: Commands,
+                               seed: Res<RunSeed>,
+                               exemplar: Res<Exemplar>,
+                               texture_scale: Res<TextureScale>,
+                               mut spacing_res: ResMut<TexelSpacing>,
+                               mut metrics: ResMut<Metrics>,
+                               pyramid: Pyramid|
+              -> SystemResult {
+            let input = pyramid.input()?;
+            let inputs: Vec<SynthesisLevel> = input
+                .meshes
                 .iter()
-                .zip(&frames)
+                .zip(&input.frames)
                 .map(|(m, f)| SynthesisLevel { mesh: m, frames: f })
                 .collect();
-            let kernel = CoherentSettings {
-                passes: settings.passes,
-                k: settings.k as usize,
-                dims: settings.appearance_dims as usize,
-                window: settings.window,
-                ring: settings.ring,
-                jitter: settings.jitter,
-                spread: settings.spread,
-                coherence: settings.coherence,
-                // Refining keeps the scale of the result it refines (the
-                // texel spacing the earlier stage set).
-                scale: match (settings.scale, settings.start) {
-                    (s, _) if s > 0.0 => s,
-                    (_, Start::Sources) => 1.0 / spacing_res.0.max(f32::MIN_POSITIVE),
-                    (_, Start::Random) => texture_scale.texels_per_unit,
-                },
-                seed: seed.derive(ctx.index, 0),
-                wrap: exemplar.wrap,
-            };
+            let kernel = settings.kernel_settings(
+                spacing_res.0,
+                texture_scale.texels_per_unit,
+                seed.derive(ctx.index, 0),
+                exemplar.wrap,
+            );
             let store = crate::cache::DiskCache::if_enabled(settings.cache);
             // The kernel sets the length: vertices times passes.
             let progress = Progress::new(0, Self::KIND);
             let _finish = progress.finish_on_drop();
-            let start = match settings.start {
-                Start::Random => None,
-                Start::Sources => {
-                    let st = data
-                        .get(entities[0])
-                        .ok()
-                        .and_then(|d| d.3)
-                        .map(|t| &t.0[..])
-                        .filter(|t| t.len() == meshes[0].vertex_count());
-                    if st.is_none() {
-                        failure.0 = Some(fail(
-                            "start = \"sources\" needs source texels on the finest mesh level: put a stage that records them (jump_surface, match, graph_match, coherent) before it".into(),
-                        ));
-                        return;
-                    }
-                    st
-                }
-            };
-            let results = match coherent_synthesis(
-                &inputs,
-                &exemplar.image,
-                &kernel,
-                start,
-                store.as_ref().map(|s| s as _),
-                &progress,
-            ) {
-                Ok(r) => r,
-                Err(e) => {
-                    failure.0 = Some(fail(e.to_string()));
-                    return;
-                }
-            };
+            let start = start_texels(settings.start, &pyramid.data, &input)?;
+            let store = store.as_ref().map(|s| s as _);
+            let results =
+                coherent_synthesis(&inputs, &exemplar.image, &kernel, start, store, &progress)
+                    .map_err(|e| e.to_string())?;
             progress.finish();
-            let reports: Vec<_> = results.iter().map(|r| r.report.clone()).collect();
-            metrics.record(ctx.index, "levels", &reports);
-            if let Some(r) = reports.first() {
-                let texels_per_unit = r.texels_per_spacing / r.spacing;
-                metrics.record(ctx.index, "texels_per_world_unit", texels_per_unit);
-                metrics.record(
-                    ctx.index,
-                    "energy_finest",
-                    r.energy.last().copied().unwrap_or(0.0),
-                );
+            if let Some(texels_per_unit) = record_metrics(&mut metrics, ctx.index, &results) {
                 spacing_res.0 = 1.0 / texels_per_unit;
             }
             let img = &exemplar.image;
-            let ch = img.channels as usize;
-            for (l, (e, r)) in entities.iter().zip(results).enumerate() {
+            for (l, r) in results.into_iter().enumerate() {
                 let texels = pixel_centres(&r.coords, img.width, img.height, exemplar.wrap);
-                let mut values = Vec::with_capacity(texels.len() * ch);
-                for t in &texels {
-                    values.extend_from_slice(img.pixel(t.x as u32, t.y as u32));
-                }
+                let colours = VertexColours {
+                    channels: img.channels as usize,
+                    values: pixel_colours(img, &texels),
+                };
                 // The vertex colours replace an earlier per-corner result.
-                commands.entity(*e).remove::<CornerUvs>();
-                commands.entity(*e).insert((
-                    VertexColours {
-                        channels: ch,
-                        values,
-                    },
-                    SourceTexels(texels),
-                ));
-                if frames_missing(&given, l) {
-                    commands.entity(*e).insert(Frames(frames[l].clone()));
-                }
+                commands.entity(input.entities[l]).remove::<CornerUvs>();
+                input.write_level(&mut commands, l, colours, texels);
             }
-            commands.insert_resource(ActiveMesh(entities[0]));
-        })
-        .into_configs()
+            commands.insert_resource(ActiveMesh(input.entities[0]));
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, synthesize)
     }
 }

@@ -41,24 +41,29 @@
 //! cut its point — larger copied pieces, fewer seams
 //! (`configs/plane/bangay_morkel_coherent.toml`; measured in README,
 //! "Bangay–Morkel with coherent candidates").
+//!
+//! Reads: the `Sqrt2Pyramid` levels (or the active mesh alone): their
+//! `Geometry`, `Frames` (or the active mesh's), `VertexColours`,
+//! `SourceTexels`, `SweepField`, `LevelParents`; the exemplar,
+//! `TextureScale`. Writes: on every level `VertexColours`, `SourceTexels`,
+//! `VertexScale`; `TexelSpacing`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::bangay_morkel::graph_match::{
-    BatchRule, Candidates, GraphMatchSettings, ImageLevels, LevelMesh, MatchImages, PassStats,
-    SynthesisState, match_pass_with_progress, mean_edge_lengths, pass_work_per_vertex,
+use crate::image::Image;
+use crate::kernels::bangay_morkel::graph_match::hierarchy::{
+    HierarchyLevel, HierarchySettings, LevelMatch, match_hierarchy,
 };
-use crate::kernels::bangay_morkel::sweep::{sweep_field, sweep_order};
-use crate::kernels::surface::frames::TangentFrame;
-use crate::mesh::Topology;
-use crate::progress::{Progress, level_label};
-use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::kernels::bangay_morkel::graph_match::{
+    Candidates, GraphMatchSettings, ImageLevels, MatchImages, PassStats,
+};
+use crate::progress::Progress;
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
+use bevy_ecs::query::ROQueryItem;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
-use rand::seq::SliceRandom;
 use serde::{Deserialize, Serialize};
-use std::time::Instant;
 
 /// Order of the first pass on the coarsest level.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -294,9 +299,65 @@ pub fn default_k_max(region: f32, r_scale: f32, finest_edge: f32, k_min: u32) ->
 }
 
 impl GraphMatchStageSettings {
-    fn passes_for(&self, level_from_coarsest: usize) -> u32 {
-        let i = level_from_coarsest.min(self.passes.len().saturating_sub(1));
-        self.passes.get(i).copied().unwrap_or(1)
+    /// The kernel's settings for `exemplar`, with the run's texture scale
+    /// `texels_per_unit` and the finest level's mean edge `finest_edge`
+    /// standing in for the parameters left at 0.
+    fn kernel_settings(
+        &self,
+        exemplar: &Image,
+        texels_per_unit: f32,
+        finest_edge: f32,
+    ) -> GraphMatchSettings {
+        let r_scale = if self.r_scale > 0.0 {
+            self.r_scale
+        } else {
+            texels_per_unit
+        };
+        let region = if self.region > 0.0 {
+            self.region
+        } else {
+            default_region(exemplar.width, exemplar.height)
+        };
+        let k_max = if self.k_max > 0 {
+            self.k_max
+        } else {
+            default_k_max(region, r_scale, finest_edge, self.k_min)
+        };
+        GraphMatchSettings {
+            r_scale,
+            region_texels: region,
+            k_min: self.k_min,
+            k_max,
+            averaging: self.averaging,
+            graph_cut: self.graph_cut,
+            cut_sigma: self.cut_sigma,
+            candidates: self.candidates,
+            jump_cost: self.jump_cost,
+            spread: self.spread,
+            density_invariant: self.density_invariant,
+        }
+    }
+
+    /// How the hierarchy is matched with `kernel`.
+    fn hierarchy(&self, kernel: GraphMatchSettings) -> HierarchySettings<'_> {
+        HierarchySettings {
+            kernel,
+            passes: &self.passes,
+            sweep_first: self.coarse_order == CoarseOrder::Sweep,
+            similar: self.similar as usize,
+        }
+    }
+
+    /// The exemplar's Gaussian stack or pyramid.
+    fn match_images(&self, exemplar: &Exemplar) -> MatchImages {
+        let img = &exemplar.image;
+        let level_count = if self.image_level_count > 0 {
+            self.image_level_count as usize
+        } else {
+            MatchImages::default_levels(img)
+        };
+        let _span = tracing::info_span!("exemplar_levels", levels = level_count).entered();
+        MatchImages::new(img, self.image_levels, level_count, exemplar.wrap)
     }
 }
 
@@ -312,39 +373,88 @@ fn per_cut(s: &PassStats) -> f64 {
 /// The `graph_match` stage.
 pub struct GraphMatch;
 
-type LevelQuery<'w, 's> = Query<
-    'w,
-    's,
-    (
-        &'static Geometry,
-        Option<&'static Frames>,
-        Option<&'static VertexColours>,
-        Option<&'static SweepField>,
-        Option<&'static LevelParents>,
-        Option<&'static SourceTexels>,
-    ),
->;
+/// What the stage reads of a hierarchy level.
+type HierarchyData = (
+    &'static Geometry,
+    Option<&'static Frames>,
+    Option<&'static VertexColours>,
+    Option<&'static SweepField>,
+    Option<&'static LevelParents>,
+    Option<&'static SourceTexels>,
+);
 
-/// Frames for a level: its own, or the active mesh's restricted to the
-/// level's vertices (√2 keeps ids) and re-projected onto its normals.
-fn level_frames(
-    mesh: &crate::mesh::PolyMesh,
-    own: Option<&Frames>,
-    finest: Option<&Frames>,
-) -> Option<Vec<TangentFrame>> {
-    let n = mesh.vertex_count();
-    if let Some(f) = own.filter(|f| f.0.len() == n) {
-        return Some(f.0.clone());
+type LevelQuery<'w, 's> = Query<'w, 's, HierarchyData>;
+
+/// A level of the hierarchy as the kernel reads it.
+fn hierarchy_level<'a>(
+    (geometry, frames, colours, sweep, parents, texels): ROQueryItem<'a, 'a, HierarchyData>,
+) -> HierarchyLevel<'a> {
+    HierarchyLevel {
+        mesh: &geometry.0,
+        frames: frames.map(|f| &f.0[..]),
+        colours: colours.map(|c| (&c.values[..], c.channels)),
+        texels: texels.map(|t| &t.0[..]),
+        sweep: sweep.map(|s| &s.0[..]),
+        parents: parents.map(|p| &p.0),
     }
-    let f = finest.filter(|f| f.0.len() >= n)?;
-    let normals = mesh.vertex_normals();
-    Some(
-        normals
-            .iter()
-            .zip(&f.0)
-            .map(|(&nrm, fr)| TangentFrame::from_up(nrm, fr.t))
-            .collect(),
-    )
+}
+
+/// Records the derived settings of the match as metrics of stage `index`.
+fn record_settings(
+    metrics: &mut Metrics,
+    index: usize,
+    kernel: &GraphMatchSettings,
+    images: &MatchImages,
+) {
+    metrics.record(index, "r_scale", kernel.r_scale);
+    metrics.record(index, "region", kernel.region_texels);
+    metrics.record(index, "k_min", kernel.k_min);
+    metrics.record(index, "k_max", kernel.k_max);
+    metrics.record(index, "image_levels", images.levels());
+}
+
+/// Writes each level's match (coarsest first) on its entity, its colours
+/// in the exemplar's channels and its scale `r_scale`, and records the
+/// per-level and total counts.
+fn write_levels(
+    commands: &mut Commands,
+    metrics: &mut Metrics,
+    index: usize,
+    entities: &[Entity],
+    matched: Vec<LevelMatch>,
+    exemplar: &Exemplar,
+    r_scale: f32,
+) {
+    let channels = exemplar.image.channels as usize;
+    let count = matched.len();
+    let mut per_level = Vec::with_capacity(count);
+    let mut total = PassStats::default();
+    for (li, (&e, m)) in entities.iter().zip(matched).enumerate() {
+        let nv = m.texels.len();
+        per_level.push(serde_json::json!({
+            "level": count - 1 - li,
+            "vertices": nv,
+            "passes": m.passes,
+            "seconds": m.seconds,
+            "stats": m.stats,
+            "cut_vertices_per_cut": per_cut(&m.stats),
+        }));
+        total += m.stats;
+        commands.entity(e).insert((
+            VertexColours {
+                channels,
+                values: m.colours,
+            },
+            SourceTexels(m.texels),
+            // The scale the sources were matched at, so a renderer
+            // can continue each source across its vertex's
+            // neighbourhood (`export`'s `plane_colours = "sources"`).
+            VertexScale(vec![r_scale; nv]),
+        ));
+    }
+    metrics.record(index, "levels", per_level);
+    metrics.record(index, "total", total);
+    metrics.record(index, "cut_vertices_per_cut", per_cut(&total));
 }
 
 impl Stage for GraphMatch {
@@ -360,238 +470,64 @@ impl Stage for GraphMatch {
         vec![Datum::Colours]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               active: Res<ActiveMesh>,
-               pyramid: Option<Res<Sqrt2Pyramid>>,
-               exemplar: Res<Exemplar>,
-               seed: Res<RunSeed>,
-               texture_scale: Res<TextureScale>,
-               mut spacing: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: LevelQuery| {
-            let fail = |failure: &mut StageFailure, message: String| {
-                failure.0 = Some(StageError {
-                    index: ctx.index + 1,
-                    kind: Self::KIND.into(),
-                    message,
-                });
-            };
+        let synthesize = move |mut commands: Commands,
+                               active: Res<ActiveMesh>,
+                               pyramid: Option<Res<Sqrt2Pyramid>>,
+                               exemplar: Res<Exemplar>,
+                               seed: Res<RunSeed>,
+                               texture_scale: Res<TextureScale>,
+                               mut spacing: ResMut<TexelSpacing>,
+                               mut metrics: ResMut<Metrics>,
+                               meshes: LevelQuery|
+              -> SystemResult {
             let idx = ctx.index;
-            let levels: Vec<Entity> = match pyramid.as_deref() {
+            // Coarsest first: the √2 hierarchy, or just the active mesh.
+            let entities: Vec<Entity> = match pyramid.as_deref() {
                 Some(p) if !p.0.is_empty() => p.0.iter().rev().copied().collect(),
                 _ => vec![active.0],
             };
-            let Ok((finest_geometry, finest_frames, ..)) = meshes.get(active.0) else {
-                return;
+            let Ok((finest, finest_frames, ..)) = meshes.get(active.0) else {
+                return Ok(());
             };
-            let r_scale = if settings.r_scale > 0.0 {
-                settings.r_scale
-            } else {
-                texture_scale.texels_per_unit
+            let levels: Option<Vec<HierarchyLevel>> = entities
+                .iter()
+                .map(|&e| meshes.get(e).ok().map(hierarchy_level))
+                .collect();
+            let Some(levels) = levels else {
+                return Ok(());
             };
-            let img = &exemplar.image;
-            let level_count = if settings.image_level_count > 0 {
-                settings.image_level_count as usize
-            } else {
-                MatchImages::default_levels(img)
-            };
-            let mut images = {
-                let _span = tracing::info_span!("exemplar_levels", levels = level_count).entered();
-                MatchImages::new(img, settings.image_levels, level_count, exemplar.wrap)
-            };
-            let region = if settings.region > 0.0 {
-                settings.region
-            } else {
-                default_region(img.width, img.height)
-            };
-            let k_max = if settings.k_max > 0 {
-                settings.k_max
-            } else {
-                default_k_max(
-                    region,
-                    r_scale,
-                    finest_geometry.0.average_edge_length(),
-                    settings.k_min,
-                )
-            };
-            let kernel = GraphMatchSettings {
-                r_scale,
-                region_texels: region,
-                k_min: settings.k_min,
-                k_max,
-                averaging: settings.averaging,
-                graph_cut: settings.graph_cut,
-                cut_sigma: settings.cut_sigma,
-                candidates: settings.candidates,
-                jump_cost: settings.jump_cost,
-                spread: settings.spread,
-                density_invariant: settings.density_invariant,
-            };
-            metrics.record(idx, "r_scale", r_scale);
-            metrics.record(idx, "region", region);
-            metrics.record(idx, "k_min", settings.k_min);
-            metrics.record(idx, "k_max", k_max);
-            metrics.record(idx, "image_levels", images.levels());
-            let ch = img.channels as usize;
-            // One bar for the stage: each level's passes weighed by the
-            // level's vertices times a vertex's work at the level's mean
-            // edge (without graph cut its region's size), so the finest
-            // levels, with the most vertices and the largest regions, take
-            // their share of the ETA.
-            let part = |li: usize, pass: u32, passes: u32| {
-                format!(
-                    "{} pass {}/{passes}",
-                    level_label(levels.len() - 1 - li, levels.len()),
-                    pass + 1
-                )
-            };
+            let kernel = settings.kernel_settings(
+                &exemplar.image,
+                texture_scale.texels_per_unit,
+                finest.0.average_edge_length(),
+            );
+            let mut images = settings.match_images(&exemplar);
+            record_settings(&mut metrics, idx, &kernel, &images);
+            let hierarchy = settings.hierarchy(kernel);
+            // One bar for the stage, its parts the levels' passes.
             let progress = Progress::new(0, Self::KIND);
             let _finish = progress.finish_on_drop();
-            progress.plan(levels.iter().enumerate().flat_map(|(li, &e)| {
-                let passes = settings.passes_for(li);
-                let work = meshes.get(e).map_or(0.0, |m| {
-                    let mesh = &m.0.0;
-                    let per_vertex = pass_work_per_vertex(&images, &kernel, mesh.average_edge_length());
-                    mesh.vertex_count() as f64 * per_vertex
-                });
-                (0..passes).map(move |pass| (part(li, pass, passes), work))
-            }));
-            let mut state: Option<SynthesisState> = None;
-            let mut per_level = Vec::new();
-            let mut total = PassStats::default();
-            for (li, &e) in levels.iter().enumerate() {
-                let Ok((geometry, frames, colours, sweep, parents, texels)) = meshes.get(e) else {
-                    return;
-                };
-                let mesh = &geometry.0;
-                let nv = mesh.vertex_count();
-                let started = Instant::now();
-                let _span = tracing::info_span!("match_level", level = levels.len() - 1 - li, vertices = nv).entered();
-                let Some(frames) = level_frames(mesh, frames, finest_frames) else {
-                    return fail(&mut failure, "a level has no tangent frames".into());
-                };
-                let topo = Topology::build(mesh);
-                let mean_edge = mean_edge_lengths(&mesh.positions, &topo);
-                if settings.candidates == Candidates::Coherent {
-                    // Similarity sets of the image levels this mesh level is
-                    // matched on (each level's depend only on the level and
-                    // the seed, so preparing them level by level changes
-                    // nothing).
-                    let _span = tracing::info_span!("similarity_sets", k = settings.similar).entered();
-                    let mut used = vec![false; images.levels()];
-                    for &m in &mean_edge {
-                        used[images.level_for(r_scale * m)] = true;
-                    }
-                    let used: Vec<usize> = (0..used.len()).filter(|&l| used[l]).collect();
-                    images.prepare_similar(&used, settings.similar as usize, seed.derive(idx, 0xC0DE));
-                }
-                let mut st = match (state.take(), parents) {
-                    // Colours already there (e.g. `init_colours`: exemplar
-                    // texels) stand for level 0.
-                    (None, _) => match colours {
-                        Some(c) if c.channels == ch && c.values.len() == nv * ch => {
-                            let mut s = SynthesisState::from_colours(c.values.clone(), ch, 0);
-                            // Keep where those colours came from, so vertices
-                            // no pass rematches still name their texel.
-                            if let Some(t) = texels.filter(|t| t.0.len() == nv) {
-                                s.texels.clone_from(&t.0);
-                            }
-                            s
-                        }
-                        _ => SynthesisState::uncoloured(nv, ch),
-                    },
-                    (Some(prev), Some(p)) if p.0.len() == nv => prev.carried(&p.0),
-                    _ => {
-                        return fail(
-                            &mut failure,
-                            "a hierarchy level has no parents in the level above".into(),
-                        );
-                    }
-                };
-                let level = LevelMesh {
-                    positions: &mesh.positions,
-                    topo: &topo,
-                    frames: &frames,
-                    mean_edge: &mean_edge,
-                };
-                let passes = settings.passes_for(li);
-                let mut level_stats = PassStats::default();
-                for pass in 0..passes {
-                    progress.start_part(&part(li, pass, passes), nv as u64);
-                    let (order, rule) = if li == 0 && pass == 0 && settings.coarse_order == CoarseOrder::Sweep {
-                        let values = match sweep {
-                            Some(s) if s.0.len() == nv => s.0.clone(),
-                            _ => {
-                                let dirs: Vec<glam::Vec3> = frames.iter().map(|f| f.t).collect();
-                                sweep_field(&mesh.positions, &topo, &dirs, &[0], 30)
-                            }
-                        };
-                        (sweep_order(&values), BatchRule::Exact)
-                    } else {
-                        let mut o: Vec<u32> = (0..nv as u32).collect();
-                        o.shuffle(&mut seed.rng(idx, ((li as u64) << 16) | pass as u64));
-                        (o, BatchRule::Relaxed)
-                    };
-                    // The first coarse pass lays the pattern out by
-                    // exhaustive matching; coherent candidates would copy
-                    // the exemplar verbatim from the first vertex on.
-                    let pass_kernel = if li == 0 && pass == 0 {
-                        GraphMatchSettings {
-                            candidates: Candidates::Exhaustive,
-                            ..kernel
-                        }
-                    } else {
-                        kernel
-                    };
-                    let s = match_pass_with_progress(
-                        &level,
-                        &images,
-                        &pass_kernel,
-                        &order,
-                        rule,
-                        seed.derive(idx, (1 << 40) | ((li as u64) << 16) | pass as u64),
-                        &mut st,
-                        &progress,
-                    );
-                    level_stats += s;
-                }
-                let seconds = started.elapsed().as_secs_f64();
-                tracing::info!(
-                    "level {} ({nv} vertices): {passes} passes, {} matched, {} comparisons ({} without averaging), {seconds:.2} s",
-                    levels.len() - 1 - li,
-                    level_stats.matched,
-                    level_stats.comparisons_averaged,
-                    level_stats.comparisons_plain
-                );
-                per_level.push(serde_json::json!({
-                    "level": levels.len() - 1 - li,
-                    "vertices": nv,
-                    "passes": passes,
-                    "seconds": seconds,
-                    "stats": level_stats,
-                    "cut_vertices_per_cut": per_cut(&level_stats),
-                }));
-                total += level_stats;
-                commands.entity(e).insert((
-                    VertexColours {
-                        channels: ch,
-                        values: st.colours.clone(),
-                    },
-                    SourceTexels(st.texels.clone()),
-                    // The scale the sources were matched at, so a renderer
-                    // can continue each source across its vertex's
-                    // neighbourhood (`export`'s `plane_colours = "sources"`).
-                    VertexScale(vec![r_scale; st.texels.len()]),
-                ));
-                state = Some(st);
-            }
+            let matched = match_hierarchy(
+                &levels,
+                finest_frames.map(|f| &f.0[..]),
+                &mut images,
+                &hierarchy,
+                &|stream| seed.derive(idx, stream),
+                &progress,
+            )?;
             progress.finish();
-            metrics.record(idx, "levels", per_level);
-            metrics.record(idx, "total", total);
-            metrics.record(idx, "cut_vertices_per_cut", per_cut(&total));
-            spacing.0 = 1.0 / r_scale;
-        })
-        .into_configs()
+            write_levels(
+                &mut commands,
+                &mut metrics,
+                idx,
+                &entities,
+                matched,
+                &exemplar,
+                kernel.r_scale,
+            );
+            spacing.0 = 1.0 / kernel.r_scale;
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, synthesize)
     }
 }

@@ -6,22 +6,22 @@
 //! with every other method's (the stage's own texture energy against a
 //! shuffled exemplar, 0.12–0.16 s per 256² image, was dropped in stop 28:
 //! a baseline nothing real fails, and it made the stage look 5× slower).
+//!
+//! Reads: `ExemplarJumpMap`, the exemplar. Writes: `SynthesisedImage`, and
+//! the three images in `ExportJob`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::image::Image;
-use crate::kernels::jump_maps::jump_map::Boundary;
-use crate::kernels::jump_maps::jump_map::refine::{
-    ALIGN_SWEEPS, SEAM_REFINE_LEVELS, SEAM_REFINE_PASSES, SEAM_REFINE_RADIUS, align_regions,
-    refine_seams_pyramid,
+use crate::kernels::jump_maps::jump_image::{
+    PixelRefine, PlaneMethod, patches_image, synthesize_plane,
 };
+use crate::kernels::jump_maps::jump_map::refine::SEAM_REFINE_LEVELS;
 use crate::kernels::jump_maps::jump_map::{
     ControlField, ControlledSynthesisSettings, PatchSeams, PatchSynthesisSettings, PixelChoice,
-    PixelOrder, PixelSynthesisSettings, synthesize_controlled_with_progress,
-    synthesize_patches_with_progress, synthesize_pixels_with_progress,
+    PixelOrder, PixelSynthesisSettings,
 };
 use crate::progress::Progress;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -191,16 +191,60 @@ fn pixel_order(name: &str) -> PixelOrder {
     }
 }
 
-/// The source-coordinate map as a 2-channel image in `[0, 1]`.
-fn source_image(width: u32, height: u32, sources: &[[f32; 2]], ew: u32, eh: u32) -> Image {
-    let sx = 1.0 / (ew.max(2) - 1) as f32;
-    let sy = 1.0 / (eh.max(2) - 1) as f32;
-    let mut out = Image::new(width, height, 3);
-    for (o, s) in out.data.chunks_exact_mut(3).zip(sources) {
-        o[0] = s[0] * sx;
-        o[1] = s[1] * sy;
+impl JumpImageSettings {
+    /// The synthesis method of these settings, seeded with `seed`.
+    fn plane_method(&self, seed: u64) -> PlaneMethod {
+        let (w, h) = (self.width, self.height);
+        match self.method.as_str() {
+            "patch" => PlaneMethod::Patches(PatchSynthesisSettings {
+                width: w,
+                height: h,
+                patch_fraction: self.patch_side,
+                seed,
+                seams: if self.seams == "straight" {
+                    PatchSeams::Straight
+                } else {
+                    PatchSeams::Cut
+                },
+            }),
+            "controlled" => {
+                let [a, b] = self.field_scale;
+                let field = match self.field.as_str() {
+                    "radial" => ControlField::radial(w, h, a, b),
+                    "uniform" => ControlField::uniform(w, h, self.field_angle.to_radians(), a),
+                    _ => ControlField::perspective(w, h, a, b),
+                };
+                let settings = ControlledSynthesisSettings {
+                    order: pixel_order(&self.order),
+                    patch_fraction: self.patch_fraction,
+                    boundary_fraction: self.boundary_fraction,
+                    seed,
+                };
+                PlaneMethod::Controlled(field, settings)
+            }
+            _ => {
+                let settings = PixelSynthesisSettings {
+                    width: w,
+                    height: h,
+                    order: pixel_order(&self.order),
+                    patch_fraction: self.patch_fraction,
+                    boundary_fraction: self.boundary_fraction,
+                    seed,
+                    choice: if self.choice == "matched" {
+                        PixelChoice::Matched
+                    } else {
+                        PixelChoice::Random
+                    },
+                };
+                let refine = match self.refine.as_str() {
+                    "aligned_seams" => PixelRefine::AlignedSeams,
+                    "seams" => PixelRefine::Seams,
+                    _ => PixelRefine::None,
+                };
+                PlaneMethod::Pixels(settings, refine)
+            }
+        }
     }
-    out
 }
 
 /// Bytes per output pixel at the stage's peak, measured with a counting
@@ -244,171 +288,45 @@ impl Stage for JumpImage {
         }
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               exemplar: Res<Exemplar>,
-               map: Res<ExemplarJumpMap>,
-               seed: Res<RunSeed>,
-               mut job: ResMut<ExportJob>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>| {
-            let map = &*map.0;
-            let ex = &exemplar.image;
-            let s = seed.derive(ctx.index, 0);
+        let synthesize = move |mut commands: Commands,
+                               exemplar: Res<Exemplar>,
+                               map: Res<ExemplarJumpMap>,
+                               seed: Res<RunSeed>,
+                               mut job: ResMut<ExportJob>,
+                               mut metrics: ResMut<Metrics>|
+              -> SystemResult {
             let started = std::time::Instant::now();
             // The kernels set the length: pixels, or patches.
             let progress = Progress::new(0, Self::KIND);
             let _finish = progress.finish_on_drop();
-            let mut refined = None;
-            let mut aligned = Vec::new();
-            let result = match settings.method.as_str() {
-                "patch" => synthesize_patches_with_progress(
-                    ex,
-                    map,
-                    &PatchSynthesisSettings {
-                        width: settings.width,
-                        height: settings.height,
-                        patch_fraction: settings.patch_side,
-                        seed: s,
-                        seams: if settings.seams == "straight" {
-                            PatchSeams::Straight
-                        } else {
-                            PatchSeams::Cut
-                        },
-                    },
-                    &progress,
-                )
-                .map(|o| {
-                    let src: Vec<[f32; 2]> = o
-                        .sources
-                        .texels
-                        .iter()
-                        .map(|t| [t.x as f32, t.y as f32])
-                        .collect();
-                    (o.image, src)
-                }),
-                "controlled" => {
-                    let (w, h) = (settings.width, settings.height);
-                    let [a, b] = settings.field_scale;
-                    let field = match settings.field.as_str() {
-                        "radial" => ControlField::radial(w, h, a, b),
-                        "uniform" => {
-                            ControlField::uniform(w, h, settings.field_angle.to_radians(), a)
-                        }
-                        _ => ControlField::perspective(w, h, a, b),
-                    };
-                    synthesize_controlled_with_progress(
-                        ex,
-                        map,
-                        &field,
-                        &ControlledSynthesisSettings {
-                            order: pixel_order(&settings.order),
-                            patch_fraction: settings.patch_fraction,
-                            boundary_fraction: settings.boundary_fraction,
-                            seed: s,
-                        },
-                        &progress,
-                    )
-                    .map(|o| (o.image, o.sources))
-                }
-                _ => synthesize_pixels_with_progress(
-                    ex,
-                    map,
-                    &PixelSynthesisSettings {
-                        width: settings.width,
-                        height: settings.height,
-                        order: pixel_order(&settings.order),
-                        patch_fraction: settings.patch_fraction,
-                        boundary_fraction: settings.boundary_fraction,
-                        seed: s,
-                        choice: if settings.choice == "matched" {
-                            PixelChoice::Matched
-                        } else {
-                            PixelChoice::Random
-                        },
-                    },
-                    &progress,
-                )
-                .map(|mut o| {
-                    let align = settings.refine == "aligned_seams";
-                    let toroidal = map.boundary() == Boundary::Toroidal;
-                    let mut align_now =
-                        |sources: &mut crate::kernels::jump_maps::jump_map::SourceMap| {
-                            if align {
-                                let _s = tracing::info_span!("align_regions").entered();
-                                progress.start_part("align", 0);
-                                aligned.push(align_regions(
-                                    sources,
-                                    ex,
-                                    toroidal,
-                                    ALIGN_SWEEPS,
-                                    &progress,
-                                ));
-                            }
-                        };
-                    if settings.refine == "seams" || align {
-                        align_now(&mut o.sources);
-                        progress.start_part("seams", 0);
-                        let seams_span = tracing::info_span!("refine_seams").entered();
-                        let report = refine_seams_pyramid(
-                            &mut o.sources,
-                            ex,
-                            toroidal,
-                            SEAM_REFINE_PASSES,
-                            SEAM_REFINE_RADIUS,
-                            SEAM_REFINE_LEVELS,
-                            &progress,
-                        );
-                        drop(seams_span);
-                        align_now(&mut o.sources);
-                        refined = Some(report);
-                        if let Ok(image) = o.sources.gather(ex) {
-                            o.image = image;
-                        }
-                    }
-                    let src: Vec<[f32; 2]> = o
-                        .sources
-                        .texels
-                        .iter()
-                        .map(|t| [t.x as f32, t.y as f32])
-                        .collect();
-                    (o.image, src)
-                }),
-            };
+            let method = settings.plane_method(seed.derive(ctx.index, 0));
+            let result = synthesize_plane(&exemplar.image, &map.0, &method, &progress);
             progress.finish();
-            let (image, sources) = match result {
-                Ok(r) => r,
-                Err(e) => {
-                    fail(&mut failure, ctx.index, Self::KIND, e.to_string());
-                    return;
-                }
-            };
+            let out = result.map_err(|e| e.to_string())?;
             let secs = started.elapsed().as_secs_f64();
-            if let Some(r) = refined {
-                metrics.record(ctx.index, "refine_visited", r.visited);
-                metrics.record(ctx.index, "refine_moved", r.moved);
+            if let Some(r) = &out.refined {
+                metrics.record(ctx.index, "refine_visited", &r.visited);
+                metrics.record(ctx.index, "refine_moved", &r.moved);
                 metrics.record(ctx.index, "refine_levels", SEAM_REFINE_LEVELS);
             }
-            if !aligned.is_empty() {
-                metrics.record(ctx.index, "align", &aligned);
+            if !out.aligned.is_empty() {
+                metrics.record(ctx.index, "align", &out.aligned);
             }
-            let px = image.pixel_count() as f64;
+            let px = out.image.pixel_count() as f64;
             metrics.record(ctx.index, "pixels", px);
             metrics.record(ctx.index, "pixels_per_second", px / secs.max(1e-9));
-            let src_img = source_image(image.width, image.height, &sources, ex.width, ex.height);
             commands.insert_resource(SynthesisedImage {
-                image: image.clone(),
-                sources,
+                image: out.image.clone(),
+                sources: out.sources,
             });
             let name = &settings.name;
+            let patches = patches_image(&out.source_image);
             job.images
-                .push((format!("{name}_sources.png"), src_img.clone()));
-            let mut patches = src_img;
-            for px in patches.data.chunks_exact_mut(3) {
-                px[2] = 0.25;
-            }
+                .push((format!("{name}_sources.png"), out.source_image));
             job.images.push((format!("{name}_patches.png"), patches));
-            job.images.push((format!("{name}.png"), image));
-        })
-        .into_configs()
+            job.images.push((format!("{name}.png"), out.image));
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, synthesize)
     }
 }

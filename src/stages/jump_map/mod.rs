@@ -2,6 +2,9 @@
 //! Garland 2004 §4), cached on disk keyed by a hash of the exemplar pixels and
 //! every analysis parameter. A cached file is re-validated (magic, version,
 //! key, checksum) and rebuilt when stale or corrupt, never trusted.
+//!
+//! Reads: the exemplar; the analysis cache (`cache = true`). Writes:
+//! `ExemplarJumpMap`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::sample::Wrap;
@@ -11,7 +14,7 @@ use crate::kernels::jump_maps::jump_map::{
 };
 use crate::progress::Progress;
 use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -316,44 +319,41 @@ impl Stage for JumpMapStage {
         }]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               exemplar: Res<Exemplar>,
-               seed: Res<RunSeed>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>| {
+        let analyse = move |mut commands: Commands,
+                            exemplar: Res<Exemplar>,
+                            seed: Res<RunSeed>,
+                            mut metrics: ResMut<Metrics>|
+              -> SystemResult {
             let ks = settings.kernel_settings(exemplar.wrap, seed.derive(ctx.index, 0));
             let started = std::time::Instant::now();
-            match load_or_analyse(&exemplar.image, &ks, settings.cache) {
-                Ok((map, cached, stats)) => {
-                    let secs = started.elapsed().as_secs_f64();
-                    metrics.record(ctx.index, "cache_hit", cached);
-                    metrics.record(ctx.index, "seconds", secs);
-                    metrics.record(
-                        ctx.index,
-                        "boundary",
-                        format!("{:?}", map.boundary()).to_lowercase(),
-                    );
-                    if let Some(s) = stats {
-                        metrics.record(ctx.index, "pca_components", s.components);
-                        metrics.record(ctx.index, "explained_variance", s.explained_variance);
-                        metrics.record(ctx.index, "mean_jumps", s.mean_jumps);
-                        metrics.record(ctx.index, "full_fraction", s.full_fraction);
-                    }
-                    tracing::info!(
-                        "jump map {}x{} {} in {secs:.3} s",
-                        map.width(),
-                        map.height(),
-                        if cached {
-                            "loaded from cache"
-                        } else {
-                            "analysed"
-                        }
-                    );
-                    commands.insert_resource(ExemplarJumpMap(Arc::new(map)));
-                }
-                Err(message) => fail(&mut failure, ctx.index, Self::KIND, message),
+            let (map, cached, stats) = load_or_analyse(&exemplar.image, &ks, settings.cache)?;
+            let secs = started.elapsed().as_secs_f64();
+            metrics.record(ctx.index, "cache_hit", cached);
+            metrics.record(ctx.index, "seconds", secs);
+            metrics.record(
+                ctx.index,
+                "boundary",
+                format!("{:?}", map.boundary()).to_lowercase(),
+            );
+            if let Some(s) = stats {
+                metrics.record(ctx.index, "pca_components", s.components);
+                metrics.record(ctx.index, "explained_variance", s.explained_variance);
+                metrics.record(ctx.index, "mean_jumps", s.mean_jumps);
+                metrics.record(ctx.index, "full_fraction", s.full_fraction);
             }
-        })
-        .into_configs()
+            tracing::info!(
+                "jump map {}x{} {} in {secs:.3} s",
+                map.width(),
+                map.height(),
+                if cached {
+                    "loaded from cache"
+                } else {
+                    "analysed"
+                }
+            );
+            commands.insert_resource(ExemplarJumpMap(Arc::new(map)));
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, analyse)
     }
 }

@@ -3,24 +3,28 @@
 //! per-corner texture coordinates (one base vertex per face, for OBJ) plus
 //! the three base-vertex layers of the §6.5 blend (for previews and bakes).
 //! Texture scale is a parameter only: no remeshing.
+//!
+//! Reads: the active mesh's `Geometry` and `Frames`, `ExemplarJumpMap`, the
+//! exemplar, `TextureScale`; with `refine = "seams"` the analysis cache.
+//! Writes: on the active mesh `CornerUvs`, `BlendUvs`, `SourceTexels`,
+//! `VertexScale`; `TexelSpacing`. The system's phases are in `run.rs`.
+
+mod run;
+
+use run::StageRun;
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::coherent::{CoherentSettings, coherent_refine};
-use crate::kernels::jump_maps::jump_map::Boundary;
-use crate::kernels::jump_maps::jump_surface::{
-    Matcher, SurfaceSynthSettings, corner_side_offsets, corner_uvs, edge_offsets, seam_band,
-    synthesize_surface_matched,
-};
+use crate::kernels::jump_maps::jump_surface::corner_side_offsets;
 use crate::kernels::jump_maps::vertex_order::VertexOrder;
 use crate::kernels::wei_levoy::wl_match::SynthesisLevel;
-use crate::mesh::Topology;
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
+use std::time::Instant;
 
 /// Settings of `jump_surface`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -52,42 +56,6 @@ pub struct JumpSurfaceSettings {
     /// on-disk analysis cache.
     pub cache: bool,
 }
-
-/// The seam refinement's correction (`refine = "seams"`): the coherent
-/// kernel's defaults with coherent shifts only (k = 0: a seam vertex takes
-/// a neighbour's patch, never a new exemplar place) over three rings.
-pub const REFINE_SETTINGS: CoherentSettings = CoherentSettings {
-    k: 0,
-    ..CoherentSettings::DEFAULT
-};
-
-/// The band `refine = "seams"` corrects: vertices within this many edges
-/// of a seam (their neighbourhoods are compared over
-/// [`REFINE_SETTINGS`]`.ring` rings). Once a vertex moves, its neighbours
-/// in the band are revisited. On the planar benchmark (seeds 1–3, the five
-/// shared photos) one ring gives the same quality as three within ±0.04
-/// of the peer's figures, and on a messy 92 k-vertex scan it holds 40 %
-/// rather than 87 % of the vertices (the band's neighbourhoods are its
-/// memory).
-pub const REFINE_BAND_RINGS: u32 = 1;
-
-/// The coarsest mesh `refine = "seams"` works on, in exemplar pixels per
-/// edge (mean). The refinement moves seams by whole vertices and compares
-/// neighbourhoods at vertex spacing: on a mesh as fine as the texture or
-/// finer it follows the texture's features; on a coarser one a seam lies
-/// inside faces, where the per-corner blend covers it, and moving whole
-/// vertices only shifts patches by many pixels (measured on the 1.8 k-vertex
-/// bunny of config 02, 15.5 pixels per edge: every vertex moved and the
-/// texture energy rose 0.0024 → 0.0029).
-pub const REFINE_MAX_TEXELS_PER_EDGE: f32 = 2.0;
-
-/// The finest mesh `refine = "seams"` works on, in exemplar pixels per
-/// edge (mean). On a mesh with several vertices per pixel the three rings
-/// compared span about one pixel and see nothing of the texture's
-/// structure, and the band is a large part of the mesh (a 901 k-vertex
-/// messy scan at 0.44 pixels per edge: 40 % of the vertices, 5.7 s against
-/// the synthesis's 0.7 s).
-pub const REFINE_MIN_TEXELS_PER_EDGE: f32 = 0.5;
 
 /// Default of `max_patch_area`: a quarter of the exemplar, below the third
 /// above which a copied region counts as a large verbatim copy (the quality
@@ -191,38 +159,6 @@ impl StageSettings for JumpSurfaceSettings {
     }
 }
 
-/// Per-vertex scale (pixels per world unit) for a mesh: `settings.scale`,
-/// or `texture_scale` (the run's `[input] texture_scale`, pixels per unit)
-/// when it is 0, times the `scale_by_height` ramp.
-pub fn vertex_scales(
-    positions: &[Vec3],
-    settings: &JumpSurfaceSettings,
-    texture_scale: f32,
-) -> Vec<f32> {
-    let base = if settings.scale > 0.0 {
-        settings.scale
-    } else {
-        texture_scale
-    };
-    let [lo_f, hi_f] = settings.scale_by_height;
-    if (lo_f - 1.0).abs() < 1e-9 && (hi_f - 1.0).abs() < 1e-9 {
-        return vec![base; positions.len()];
-    }
-    let axis = Vec3::from(settings.height_axis).normalize_or_zero();
-    let (lo, hi) = positions.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| {
-        let h = p.dot(axis);
-        (lo.min(h), hi.max(h))
-    });
-    let span = (hi - lo).max(1e-12);
-    positions
-        .iter()
-        .map(|p| {
-            let t = (p.dot(axis) - lo) / span;
-            base * (lo_f + (hi_f - lo_f) * t)
-        })
-        .collect()
-}
-
 /// The `jump_surface` stage.
 pub struct JumpSurface;
 
@@ -240,184 +176,44 @@ impl Stage for JumpSurface {
         vec![Datum::CornerUvs]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               active: Res<ActiveMesh>,
-               seed: Res<RunSeed>,
-               map: Res<ExemplarJumpMap>,
-               exemplar: Res<Exemplar>,
-               texture_scale: Res<TextureScale>,
-               mut spacing: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: Query<(&Geometry, &Frames)>| {
+        let synthesize = move |mut commands: Commands,
+                               active: Res<ActiveMesh>,
+                               seed: Res<RunSeed>,
+                               map: Res<ExemplarJumpMap>,
+                               exemplar: Res<Exemplar>,
+                               texture_scale: Res<TextureScale>,
+                               mut spacing: ResMut<TexelSpacing>,
+                               mut metrics: ResMut<Metrics>,
+                               meshes: Query<(&Geometry, &Frames)>|
+              -> SystemResult {
             let Ok((geometry, frames)) = meshes.get(active.0) else {
-                fail(
-                    &mut failure,
-                    ctx.index,
-                    Self::KIND,
-                    "the active mesh has no tangent frames",
-                );
-                return;
+                return Err("the active mesh has no tangent frames".into());
             };
-            let mesh = &geometry.0;
-            if frames.0.len() != mesh.vertex_count() {
-                fail(
-                    &mut failure,
-                    ctx.index,
-                    Self::KIND,
-                    "tangent frames do not match the mesh",
-                );
-                return;
+            let (mesh, frames) = (&geometry.0, &frames.0);
+            if frames.len() != mesh.vertex_count() {
+                return Err("tangent frames do not match the mesh".into());
             }
-            let started = std::time::Instant::now();
+            let started = Instant::now();
             let map = &*map.0;
-            let scales = vertex_scales(&mesh.positions, &settings, texture_scale.texels_per_unit);
-            let topo = {
-                let _s = tracing::info_span!("topology").entered();
-                Topology::build(mesh)
-            };
-            let offsets = {
-                let _s = tracing::info_span!("edge_offsets").entered();
-                edge_offsets(&mesh.positions, &frames.0, &scales, &topo)
-            };
-            let synth = SurfaceSynthSettings {
-                patch_fraction: settings.patch_fraction,
-                boundary_fraction: settings.boundary_fraction,
-                tileable: map.boundary() == Boundary::Toroidal,
-                order: settings.order,
-                seed: seed.derive(ctx.index, 0),
-                max_patch_area: settings.max_patch_area,
-                pixel_aligned: settings.pixel_aligned,
-            };
-            let progress =
-                crate::progress::Progress::new(mesh.vertex_count() as u64, "jump_surface");
-            let _finish = progress.finish_on_drop();
-            let out = {
-                let _s = tracing::info_span!("synthesize").entered();
-                let matcher = (settings.choice == "matched").then_some(Matcher {
-                    image: &exemplar.image,
-                    wrap: exemplar.wrap,
-                });
-                synthesize_surface_matched(&topo, &offsets, map, &synth, matcher, &progress)
-            };
-            progress.finish();
+            let mut stage = StageRun::new(&settings, ctx.index, &exemplar, &mut metrics);
+            let scales = stage.scales(mesh, texture_scale.texels_per_unit);
+            let (topo, offsets) = run::offsets(mesh, frames, &scales);
+            let mut out = stage.synthesize(&topo, &offsets, map, seed.derive(ctx.index, 0));
             let synthesis_seconds = started.elapsed().as_secs_f64();
-            let uniform = scales.iter().all(|&s| s == scales[0]);
-            // Exemplar pixels per edge, on average.
-            let texels_per_edge =
-                offsets.iter().map(|o| o.length()).sum::<f32>() / offsets.len().max(1) as f32;
-            let fine = (REFINE_MIN_TEXELS_PER_EDGE..=REFINE_MAX_TEXELS_PER_EDGE)
-                .contains(&texels_per_edge);
-            let refine = settings.refine == "seams" && uniform && fine && !scales.is_empty();
-            let band = refine.then(|| {
-                seam_band(&topo, &out.patch, REFINE_BAND_RINGS)
-            });
-            metrics.record(ctx.index, "texels_per_edge", texels_per_edge);
-            if settings.refine == "seams" && !uniform {
-                metrics.record(ctx.index, "refine_skipped", "scale_by_height is not [1, 1]");
-            } else if settings.refine == "seams" && !fine {
-                metrics.record(
-                    ctx.index,
-                    "refine_skipped",
-                    format!(
-                        "{texels_per_edge:.2} exemplar pixels per edge, outside {REFINE_MIN_TEXELS_PER_EDGE}..={REFINE_MAX_TEXELS_PER_EDGE}"
-                    ),
-                );
-            }
+            let band = stage.band(&scales, &offsets, &topo, &out.patch);
             // The per-edge offsets and, after the refinement, the topology
             // (some 180 bytes per vertex together) go before the texture
             // coordinates are made.
             let sides = corner_side_offsets(mesh, &topo, &offsets);
             drop(offsets);
-            let mut out = out;
             if let Some(band) = band {
-                let _s = tracing::info_span!("refine_seams").entered();
-                let refine_started = std::time::Instant::now();
-                let kernel = CoherentSettings {
-                    scale: scales[0],
-                    seed: seed.derive(ctx.index, 1),
-                    wrap: exemplar.wrap,
-                    ..REFINE_SETTINGS
-                };
-                let store = crate::cache::DiskCache::if_enabled(settings.cache);
-                let start: Vec<Vec2> = out.texel.iter().map(|&t| t + Vec2::splat(0.5)).collect();
-                // Its own bar: on a large fine mesh the refinement can take
-                // longer than the synthesis.
-                let refine_progress = crate::progress::Progress::new(0, "jump_surface seams");
-                let _finish = refine_progress.finish_on_drop();
-                let level = SynthesisLevel {
-                    mesh,
-                    frames: &frames.0,
-                };
-                match coherent_refine(
-                    &level,
-                    Some(&topo),
-                    &exemplar.image,
-                    &kernel,
-                    &start,
-                    &band,
-                    store.as_ref().map(|s| s as _),
-                    &refine_progress,
-                ) {
-                    Ok(refined) => {
-                        let moved = refined
-                            .coords
-                            .iter()
-                            .zip(&start)
-                            .filter(|(a, b)| a != b)
-                            .count();
-                        for (t, c) in out.texel.iter_mut().zip(&refined.coords) {
-                            *t = *c - Vec2::splat(0.5);
-                        }
-                        metrics.record(
-                            ctx.index,
-                            "refine_band_vertices",
-                            band.iter().filter(|&&b| b).count(),
-                        );
-                        metrics.record(ctx.index, "refine_moved_vertices", moved);
-                        metrics.record(ctx.index, "refine_energy", refined.report.energy);
-                        metrics.record(ctx.index, "refine_visited", refined.report.visited);
-                        metrics.record(
-                            ctx.index,
-                            "refine_analysis_seconds",
-                            refined.report.analysis_seconds,
-                        );
-                        metrics.record(
-                            ctx.index,
-                            "refine_analysis_cached",
-                            refined.report.analysis_cached,
-                        );
-                    }
-                    Err(e) => {
-                        fail(&mut failure, ctx.index, Self::KIND, format!("refine: {e}"));
-                        return;
-                    }
-                }
-                // With the appearance analysis (exemplar only) included.
-                refine_progress.finish();
-                metrics.record(
-                    ctx.index,
-                    "refine_seconds",
-                    refine_started.elapsed().as_secs_f64(),
-                );
+                let level = SynthesisLevel { mesh, frames };
+                let scale_seed = (scales[0], seed.derive(ctx.index, 1));
+                stage.refine(&level, &topo, scale_seed, &mut out.texel, &band)?;
             }
             drop(topo);
-            let (single, blend) = {
-                let _s = tracing::info_span!("corner_uvs").entered();
-                // The side offsets move into the compact blend layers.
-                corner_uvs(mesh, sides, &out.texel, (map.width(), map.height()))
-            };
-            let secs = started.elapsed().as_secs_f64();
-            let n = mesh.vertex_count();
-            metrics.record(ctx.index, "vertices", n);
-            metrics.record(ctx.index, "vertices_per_second", n as f64 / secs.max(1e-9));
-            metrics.record(ctx.index, "synthesis_seconds", synthesis_seconds);
-            metrics.record(ctx.index, "jumps", out.jumps);
-            metrics.record(ctx.index, "random_assignments", out.random_assignments);
-            metrics.record(ctx.index, "matched_starts", out.matched_starts);
-            metrics.record(ctx.index, "unfit_vertices", out.unfit);
-            let mean_scale = scales.iter().sum::<f32>() / scales.len().max(1) as f32;
-            metrics.record(ctx.index, "mean_scale_pixels_per_unit", mean_scale);
+            let (single, blend) = run::uvs(mesh, sides, &out.texel, map);
+            let mean_scale = stage.record(&out, &scales, started, synthesis_seconds);
             if mean_scale > 0.0 {
                 spacing.0 = 1.0 / mean_scale;
             }
@@ -431,7 +227,8 @@ impl Stage for JumpSurface {
                 SourceTexels(texels),
                 VertexScale(scales),
             ));
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, synthesize)
     }
 }

@@ -2,66 +2,61 @@
 //! Texture patches are cut from the exemplar with an alpha mask (§3.1) and
 //! pasted onto surface patches grown on the active mesh (§3.3) and
 //! parametrised along the `tangent_field` (§3.4), until every face is
-//! covered (§3.6). Each paste becomes an entity (see [`components`]);
-//! faces that later pastes hide completely are flagged for runtime pasting
-//! (§4), and optionally the pastes are composited into a texture atlas (§4).
+//! covered (§3.6). Each paste becomes an entity (the components of
+//! `world::lapped`); faces that later pastes hide completely are dropped
+//! from it for runtime pasting (§4), and optionally the pastes are
+//! composited into a texture atlas (§4).
 //!
 //! Extension (issue 13): with `[input] texture_scale` the texture patches
 //! are automatic ([`auto_patches`]): several patches of at most 3/4 of the
 //! exemplar's side cut at random places, enough to cover it, so pastes show
 //! the exemplar's variety without copying more than about a quarter of it
 //! at once. On the planar benchmark this halves the coherence error and
-//! the structure distance on planks (ARCHITECTURE.md, "Lapped textures:
-//! the automatic texture patches"). The paper's single patch is
+//! the structure distance on planks (docs/notes/lapped_planar.md, "Lapped
+//! textures: the automatic texture patches"). The paper's single patch is
 //! `patches = 1` with `patch_pixels` the exemplar's side.
 //!
-//! Reads: the active mesh's `Geometry` and `FaceField`, the exemplar.
-//! Writes: paste entities, the `TexturePatches` resource, an
-//! `AtlasTexture` on the mesh (with `atlas_size > 0`), `TexelSpacing`.
+//! Reads: the active mesh's `Geometry` and `FaceField`, the exemplar; the
+//! analysis cache (`cache = true`). Writes: paste entities, the
+//! `TexturePatches` and `TexturePatchOrigins` resources, an `AtlasTexture`
+//! on the mesh (with `atlas_size > 0`), `TexelSpacing`.
+//!
+//! Files: this one (settings, the stage and its system); `sizes.rs` (the
+//! automatic patch size and count, the progress plan, the memory
+//! estimate); `run.rs` (the system's phases around the kernels: the paste
+//! loop on the mesh, the atlas, the paste entities, the metrics). Cutting
+//! the patches and their cache entries are kernels
+//! (`kernels::lapped::cut`, `kernels::lapped::patch_cache`).
+
+mod run;
+mod sizes;
+
+pub use crate::kernels::lapped::cut::MaskKind;
+pub use sizes::{
+    ATLAS_BYTES_PER_TEXEL, ATLAS_BYTES_PER_TRIANGLE, AUTO_PATCH_COVER, AUTO_PATCH_DIAGONAL,
+    AUTO_PATCH_MIN_PIXELS, AUTO_PATCH_SIDE_FRACTION, AUTO_PATCHES_MAX, BYTES_PER_PATCH_PIXEL,
+    LAYERS_PER_FACE, MATCHED_PATCH_PIXELS, MATCHED_PATCHES, PASTE_BYTES_PER_FACE, SPLOTCH_FILL,
+    auto_patches,
+};
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::image::Image;
-use crate::image::sample::Wrap;
-use crate::kernels::lapped::FaceField as FieldView;
-use crate::kernels::lapped::TriMesh;
-use crate::kernels::lapped::atlas::{AtlasSettings, composite_atlas_with};
-use crate::kernels::lapped::composite::{PasteIndex, PasteRecord};
-use crate::kernels::lapped::coverage::{CoverageSettings, drawn_faces};
+use crate::kernels::lapped::atlas::{AtlasSettings, atlas_layout};
+use crate::kernels::lapped::coverage::CoverageSettings;
+use crate::kernels::lapped::cut::CutSettings;
 use crate::kernels::lapped::grow::GrowSettings;
-use crate::kernels::lapped::hull::Hull;
-use crate::kernels::lapped::mask::{
-    Mask, TexturePatch, circle_mask, mask_from_image, patch_image, splotch_mask,
-};
 use crate::kernels::lapped::param::SolveSettings;
-use crate::kernels::lapped::paste::{
-    LappedTexture, PASTING_PROGRESS_STEPS, PasteSettings, paste_until_covered,
-};
-use crate::mesh::PolyMesh;
+use crate::kernels::lapped::paste::PasteSettings;
 use crate::progress::Progress;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx, StageError};
-use crate::world::FaceField;
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
-use glam::{Vec2, Vec3};
-use rayon::prelude::*;
+use run::release_freed_memory;
 use serde::{Deserialize, Serialize};
+use sizes::{PatchPlan, atlas_bytes, paste_bytes};
 use std::path::Path;
-
-/// The shape of the texture patches.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum MaskKind {
-    /// A seeded irregular blob, different for every texture patch.
-    #[default]
-    Splotch,
-    /// A disc.
-    Circle,
-    /// A user mask image (`mask_image`, the exemplar's size, white = inside).
-    Image,
-}
 
 /// Settings of `lapped_paste`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -330,572 +325,24 @@ impl LappedPasteSettings {
             expected_pastes: 0.0,
         }
     }
-}
-
-/// Largest share of the mesh's bounding-box diagonal a texture patch spans
-/// when its size follows `[input] texture_scale` (the default of an explicit
-/// `patch_size` in diagonals before the shared scale existed).
-pub const AUTO_PATCH_DIAGONAL: f32 = 0.3;
-
-/// Smallest side of a texture patch chosen automatically, pixels.
-pub const AUTO_PATCH_MIN_PIXELS: u32 = 16;
-
-/// Most texture patches chosen automatically.
-pub const AUTO_PATCHES_MAX: u32 = 16;
-
-/// Largest side of a texture patch chosen automatically, as a fraction of
-/// the exemplar's smaller side. A splotch fills about 47 % of its square
-/// (radius 55–100 % of the largest, [`splotch_mask`]), so one paste of a
-/// patch of 3/4 of the side shows about a quarter of the exemplar: below
-/// a third, the verbatim bound of the quality metrics
-/// (`large_region_repeats`). On the planar benchmark whole-exemplar
-/// patches copied regions of 45 % of the exemplar 4 times; 3/4 copied at
-/// most 25 %, none larger than a third.
-pub const AUTO_PATCH_SIDE_FRACTION: f32 = 0.75;
-
-/// Share of its square a splotch fills on average (see
-/// [`AUTO_PATCH_SIDE_FRACTION`]); sets the automatic patch count.
-pub const SPLOTCH_FILL: f64 = 0.47;
-
-/// Share of the exemplar the automatic texture patches cover together
-/// (each at a random place), so a lapped texture shows the exemplar's
-/// variety rather than a few regions of it.
-pub const AUTO_PATCH_COVER: f64 = 0.95;
-
-/// Texture patches chosen automatically with `choice = "matched"`: more
-/// candidates for each paste to choose from. On the planar benchmark
-/// (seeds 1–3, five photos, 96-pixel patches) 10 patches (the cover rule)
-/// left brick coherence at 0.98 × the peer's and planks completeness at
-/// 0.74 ×; 32 met issue 13's gates in 12 of 15 cases, 48 in 13 (brick
-/// completeness and planks p90 miss at one seed each); 64 cost a third
-/// more time for no further gain.
-pub const MATCHED_PATCHES: u32 = 48;
-
-/// Most pixels of all automatic texture patches together (RGBA and alpha,
-/// 20 bytes a pixel: 80 MB), so that a large exemplar gets fewer matched
-/// candidates instead of gigabytes of patches.
-pub const MATCHED_PATCH_PIXELS: u64 = 1 << 22;
-
-/// Mean exemplar pixels per world unit of a per-pixel field (lengths are
-/// world units per pixel).
-fn field_pixels_per_unit(t: &[Vec3]) -> f32 {
-    let mean = t.iter().map(|v| v.length() as f64).sum::<f64>() / t.len().max(1) as f64;
-    (1.0 / mean.max(f64::MIN_POSITIVE)) as f32
-}
-
-/// `patch_pixels` and `patches` when they are 0 and the field follows the
-/// texture scale: a patch spans at most [`AUTO_PATCH_DIAGONAL`] of the
-/// diagonal and at most [`AUTO_PATCH_SIDE_FRACTION`] of the exemplar's
-/// smaller side (at least [`AUTO_PATCH_MIN_PIXELS`]), and enough patches
-/// are cut at random places that their splotches cover
-/// [`AUTO_PATCH_COVER`] of the exemplar: `n` with `(1 − a)ⁿ ≤ 1 −
-/// AUTO_PATCH_COVER` for the share `a` of the exemplar one splotch fills
-/// (at most [`AUTO_PATCHES_MAX`]). With `choice = "matched"` at least
-/// [`MATCHED_PATCHES`], as far as [`MATCHED_PATCH_PIXELS`] allows.
-pub fn auto_patches(
-    settings: &LappedPasteSettings,
-    (w, h): (u32, u32),
-    pixels_per_unit: f32,
-    diagonal: f32,
-) -> (u32, u32) {
-    let side = w.min(h);
-    let pixels = if settings.patch_pixels > 0 {
-        settings.patch_pixels
-    } else {
-        let cap = ((AUTO_PATCH_SIDE_FRACTION * side as f32).floor() as u32).max(1);
-        let fit = (AUTO_PATCH_DIAGONAL * diagonal * pixels_per_unit).round();
-        (fit.clamp(0.0, cap as f32) as u32).clamp(AUTO_PATCH_MIN_PIXELS.min(cap), cap)
-    };
-    let patches = if settings.patches > 0 {
-        settings.patches
-    } else {
-        let p = f64::from(pixels.max(1));
-        let a = (SPLOTCH_FILL * p * p / (f64::from(w) * f64::from(h))).min(0.999);
-        let need = (1.0 - AUTO_PATCH_COVER).ln() / (1.0 - a).ln();
-        // A float-to-int cast saturates (an infinite `need` for a tiny
-        // patch becomes u32::MAX before the clamp).
-        let cover = (need.ceil() as u32).clamp(1, AUTO_PATCHES_MAX);
-        if settings.choice == "matched" {
-            let budget = (MATCHED_PATCH_PIXELS / (p * p) as u64).min(u64::from(MATCHED_PATCHES));
-            cover.max(budget as u32)
-        } else {
-            cover
-        }
-    };
-    (pixels, patches)
-}
-
-/// Version of the texture patches' cache entries: bump it whenever
-/// [`texture_patches`] would cut anything else for the same inputs.
-const PATCH_CACHE_VERSION: u32 = 1;
-
-/// First bytes of a texture-patch cache entry.
-const PATCH_CACHE_MAGIC: [u8; 8] = *b"SSPATCHS";
-
-/// [`texture_patches`] through the on-disk analysis cache in `dir`
-/// (`None`: no cache; a user mask image is never cached): a valid entry
-/// for the same exemplar, settings and seed is read instead of cutting
-/// (the same values, bit for bit); a missing, stale or corrupt one is
-/// rebuilt and written.
-///
-/// # Errors
-/// As [`texture_patches`].
-pub fn texture_patches_cached(
-    exemplar: &Image,
-    wrap: Wrap,
-    settings: &LappedPasteSettings,
-    mask: Option<&Image>,
-    seed: u64,
-    dir: Option<&std::path::Path>,
-) -> Result<Vec<TexturePatch>, String> {
-    let dir = match dir {
-        Some(d) if settings.mask != MaskKind::Image => d,
-        _ => return texture_patches(exemplar, wrap, settings, mask, seed),
-    };
-    let key = patch_cache_key(exemplar, wrap, settings, seed);
-    if let Some(patches) = crate::cache::read(dir, "patches", &key)
-        .and_then(|bytes| patches_from_bytes(&bytes, &key, exemplar, wrap))
-    {
-        return Ok(patches);
-    }
-    let patches = texture_patches(exemplar, wrap, settings, mask, seed)?;
-    crate::cache::write(dir, "patches", &key, &patches_to_bytes(&patches, &key));
-    Ok(patches)
-}
-
-/// The cache key of the texture patches: a BLAKE3 hash of the version, the
-/// exemplar (size, channels, every value's bits), its addressing, every
-/// setting [`texture_patches`] reads and the seed.
-fn patch_cache_key(
-    exemplar: &Image,
-    wrap: Wrap,
-    settings: &LappedPasteSettings,
-    seed: u64,
-) -> [u8; 32] {
-    let mut h = crate::cache_format::key_hasher(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, exemplar);
-    h.update(&[
-        match wrap {
-            Wrap::Repeat => 0u8,
-            Wrap::Clamp => 1,
-        },
-        match settings.mask {
-            MaskKind::Splotch => 0u8,
-            MaskKind::Circle => 1,
-            MaskKind::Image => 2,
-        },
-    ]);
-    for v in [
-        settings.patches,
-        settings.patch_pixels,
-        settings.hull_vertices,
-    ] {
-        h.update(&v.to_le_bytes());
-    }
-    h.update(&settings.falloff.to_bits().to_le_bytes());
-    h.update(&seed.to_le_bytes());
-    *h.finalize().as_bytes()
-}
-
-/// A cache entry of `patches`: what cutting computes (alpha, centre, hull,
-/// origin); the colours are copied from the exemplar again when read.
-fn patches_to_bytes(patches: &[TexturePatch], key: &[u8; 32]) -> Vec<u8> {
-    let mut b = crate::cache_format::entry_header(&PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key);
-    b.extend_from_slice(&(patches.len() as u32).to_le_bytes());
-    let f32s = |b: &mut Vec<u8>, v: &[f32]| {
-        for x in v {
-            b.extend_from_slice(&x.to_le_bytes());
-        }
-    };
-    for p in patches {
-        for v in [p.image.width, p.image.height] {
-            b.extend_from_slice(&v.to_le_bytes());
-        }
-        b.extend_from_slice(&(p.hull.vertices.len() as u32).to_le_bytes());
-        f32s(&mut b, &p.alpha);
-        f32s(&mut b, &[p.centre_px.x, p.centre_px.y]);
-        for v in &p.hull.vertices {
-            f32s(&mut b, &[v.x, v.y]);
-        }
-        for o in p.origin {
-            b.extend_from_slice(&o.to_le_bytes());
+    /// What cutting the texture patches reads.
+    pub fn cut_settings(&self) -> CutSettings {
+        CutSettings {
+            mask: self.mask,
+            patches: self.patches,
+            patch_pixels: self.patch_pixels,
+            falloff: self.falloff,
+            hull_vertices: self.hull_vertices,
         }
     }
-    crate::cache_format::seal(b)
-}
 
-/// The patches of an entry written by [`patches_to_bytes`] with `key`, their
-/// colours copied from `exemplar` (the key's); `None` for any other bytes.
-fn patches_from_bytes(
-    bytes: &[u8],
-    key: &[u8; 32],
-    exemplar: &Image,
-    wrap: Wrap,
-) -> Option<Vec<TexturePatch>> {
-    let body = crate::cache_format::payload(bytes, &PATCH_CACHE_MAGIC, PATCH_CACHE_VERSION, key)?;
-    let mut at = 0usize;
-    let mut take = |n: usize| -> Option<&[u8]> {
-        let s = body.get(at..at.checked_add(n)?)?;
-        at += n;
-        Some(s)
-    };
-    let u32_of = |s: &[u8]| u32::from_le_bytes([s[0], s[1], s[2], s[3]]);
-    let f32s_of = |s: &[u8]| -> Vec<f32> {
-        s.chunks_exact(4)
-            .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-            .collect()
-    };
-    let count = u32_of(take(4)?) as usize;
-    let mut patches = Vec::with_capacity(count.min(1024));
-    for _ in 0..count {
-        let (w, h) = (u32_of(take(4)?), u32_of(take(4)?));
-        let hull_n = u32_of(take(4)?) as usize;
-        let pixels = (w as usize).checked_mul(h as usize)?;
-        let alpha = f32s_of(take(pixels.checked_mul(4)?)?);
-        let centre = f32s_of(take(8)?);
-        let hull = f32s_of(take(hull_n.checked_mul(8)?)?);
-        let mut origin = [0i64; 2];
-        for o in origin.iter_mut() {
-            let s = take(8)?;
-            *o = i64::from_le_bytes(s.try_into().ok()?);
+    /// The atlas kernel's settings.
+    pub fn atlas_settings(&self) -> AtlasSettings {
+        AtlasSettings {
+            size: self.atlas_size,
+            normal_cone_deg: self.atlas_normal_cone,
+            padding_px: self.atlas_padding,
         }
-        if w == 0 || h == 0 {
-            return None;
-        }
-        patches.push(TexturePatch {
-            image: patch_image(exemplar, wrap, origin, w, h, &alpha),
-            alpha,
-            centre_px: Vec2::new(centre[0], centre[1]),
-            hull: Hull::new(
-                hull.chunks_exact(2)
-                    .map(|v| Vec2::new(v[0], v[1]))
-                    .collect(),
-            ),
-            origin,
-        });
-    }
-    (at == body.len()).then_some(patches)
-}
-
-/// Cuts the texture patches of `settings` out of the exemplar. `mask` is
-/// the user mask for `mask = "image"`. Errors name what to fix.
-pub fn texture_patches(
-    exemplar: &Image,
-    wrap: Wrap,
-    settings: &LappedPasteSettings,
-    mask: Option<&Image>,
-    seed: u64,
-) -> Result<Vec<TexturePatch>, String> {
-    let (w, h) = (exemplar.width, exemplar.height);
-    let hull_vertices = settings.hull_vertices as usize;
-    if settings.mask == MaskKind::Image {
-        let img = mask.ok_or("mask = \"image\" needs `mask_image`")?;
-        if (img.width, img.height) != (w, h) {
-            return Err(format!(
-                "mask_image is {}x{}, but the exemplar is {w}x{h}; they must match",
-                img.width, img.height
-            ));
-        }
-        let full = mask_from_image(img);
-        // Crop to the inside pixels plus a one-pixel transparent border.
-        let (mut x0, mut y0, mut x1, mut y1) = (i64::MAX, i64::MAX, i64::MIN, i64::MIN);
-        for y in 0..h as i64 {
-            for x in 0..w as i64 {
-                if full.at(x, y) {
-                    (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-                }
-            }
-        }
-        if x0 > x1 {
-            return Err("mask_image has no white (inside) pixel".into());
-        }
-        let (cw, ch) = ((x1 - x0 + 3) as u32, (y1 - y0 + 3) as u32);
-        let mut inside = vec![false; (cw * ch) as usize];
-        for y in 0..ch as i64 {
-            for x in 0..cw as i64 {
-                inside[(y * cw as i64 + x) as usize] = full.at(x0 - 1 + x, y0 - 1 + y);
-            }
-        }
-        let cropped = Mask {
-            width: cw,
-            height: ch,
-            inside,
-        };
-        let patch = TexturePatch::cut(
-            exemplar,
-            wrap,
-            [x0 - 1, y0 - 1],
-            &cropped,
-            settings.falloff,
-            hull_vertices,
-            "mask_image",
-        )
-        .map_err(|e| e.to_string())?;
-        return Ok(vec![patch]);
-    }
-    let side = if settings.patch_pixels == 0 {
-        w.min(h)
-    } else {
-        settings.patch_pixels
-    };
-    if side > w.min(h) && wrap == Wrap::Clamp {
-        return Err(format!(
-            "patch_pixels = {side} exceeds the exemplar's smaller side {} (a larger region needs exemplar_wrap = \"repeat\")",
-            w.min(h)
-        ));
-    }
-    if side < 8 {
-        return Err(format!(
-            "patch_pixels = {side} is too small; use at least 8"
-        ));
-    }
-    // Each patch from its own seed stream: cut in parallel, in order.
-    (0..settings.patches)
-        .into_par_iter()
-        .map(|k| {
-            let stream = mix(seed, k as u64, 1);
-            // Patches after the first may hang over a clamped exemplar's
-            // border (the part outside is masked out), so their opaque
-            // cores reach its corners too.
-            let overhang = match wrap {
-                Wrap::Clamp => (side as f32 * PATCH_OVERHANG) as i64,
-                Wrap::Repeat => 0,
-            };
-            let origin = if k == 0 {
-                [(w as i64 - side as i64) / 2, (h as i64 - side as i64) / 2]
-            } else {
-                let span = |n: u32| match wrap {
-                    Wrap::Repeat => n as u64,
-                    Wrap::Clamp => (n - side.min(n)) as u64 + 1 + 2 * overhang as u64,
-                };
-                [
-                    (stream % span(w)) as i64 - overhang,
-                    ((stream >> 32) % span(h)) as i64 - overhang,
-                ]
-            };
-            let mut mask = match settings.mask {
-                MaskKind::Circle => circle_mask(side),
-                _ => splotch_mask(side, mix(seed, k as u64, 2)),
-            };
-            if overhang > 0 && k > 0 {
-                for y in 0..mask.height {
-                    for x in 0..mask.width {
-                        let (ex, ey) = (origin[0] + x as i64, origin[1] + y as i64);
-                        if ex < 0 || ey < 0 || ex >= w as i64 || ey >= h as i64 {
-                            mask.inside[(y * mask.width + x) as usize] = false;
-                        }
-                    }
-                }
-            }
-            TexturePatch::cut(
-                exemplar,
-                wrap,
-                origin,
-                &mask,
-                settings.falloff,
-                hull_vertices,
-                "predefined",
-            )
-            .map_err(|e| e.to_string())
-        })
-        .collect()
-}
-
-/// How far a texture patch after the first may hang over a clamped
-/// (non-tileable) exemplar's border, as a fraction of its side; the part
-/// outside the exemplar is masked out. Inside the exemplar a patch's centre
-/// stays half a side from the border, and a splotch's opaque core (radius
-/// about 0.39 of the side) then never reaches the exemplar's corners and
-/// edges: on the planar benchmark completeness was 1.15–2.5 × the peer's.
-/// With a third of the side the centre comes within a sixth of the side of
-/// the border: completeness 0.45–1.13 ×, coherence unchanged (0.67–1.31 ×).
-/// A quarter left it 0.77–1.68 ×; half (centres on the border) gave
-/// 0.24–0.52 × but raised p90 on brick and planks to 1.57–1.67 × (more
-/// straight clipped edges).
-pub const PATCH_OVERHANG: f32 = 1.0 / 3.0;
-
-/// Records the paste loop's results as metrics of stage `index`.
-fn record_metrics(
-    metrics: &mut Metrics,
-    index: usize,
-    out: &LappedTexture,
-    draws_per_face: f64,
-    textures: &[TexturePatch],
-) {
-    let r = &out.report;
-    metrics.record(index, "pastes", r.pastes);
-    metrics.record(index, "mean_pastes_per_face", r.mean_pastes_per_face);
-    metrics.record(index, "mean_draws_per_face", draws_per_face);
-    metrics.record(index, "mean_faces_per_paste", r.mean_faces_per_paste);
-    metrics.record(index, "mean_held_per_face", r.mean_held_per_face);
-    metrics.record(index, "max_held_per_face", r.max_held_per_face);
-    metrics.record(index, "uncovered_faces", r.uncovered_faces.len());
-    metrics.record(
-        index,
-        "uncovered_face_ids",
-        r.uncovered_faces.iter().take(100).collect::<Vec<_>>(),
-    );
-    metrics.record(index, "regrown_faces", r.regrown_faces);
-    metrics.record(index, "rechosen_pastes", r.rechosen_pastes);
-    metrics.record(index, "shifted_pastes", r.shifted_pastes);
-    metrics.record(index, "cg_iterations", r.cg_iterations);
-    metrics.record(index, "unconverged_solves", r.unconverged_solves);
-    metrics.record(index, "direct_solves", r.direct_solves);
-    metrics.record(index, "texture_patches", textures.len());
-    metrics.record(
-        index,
-        "hull_vertices",
-        textures
-            .iter()
-            .map(|t| t.hull.vertices.len())
-            .collect::<Vec<_>>(),
-    );
-}
-
-/// The texture atlas's charts and coordinates, before the pastes exist.
-struct AtlasLayout {
-    charts: usize,
-    corner_uvs: Vec<[Vec2; 3]>,
-    texels_per_unit: f32,
-    fill: f32,
-}
-
-/// Lays out the atlas of `mesh` (triangles only; the paste loop reports
-/// any other face) with the shared atlas kernel.
-/// Laying out a million-vertex scan takes tens of seconds: it is the part
-/// `"atlas"` of the stage's `progress`.
-fn atlas_layout(
-    mesh: &PolyMesh,
-    settings: &AtlasSettings,
-    progress: &Progress,
-) -> Result<AtlasLayout, String> {
-    let tris: Vec<[u32; 3]> = (0..mesh.face_count())
-        .map(|f| match mesh.face(f) {
-            &[a, b, c] => Ok([a, b, c]),
-            _ => Err(format!("face {f} is not a triangle")),
-        })
-        .collect::<Result<_, _>>()?;
-    let uv = crate::kernels::atlas::build_uv_atlas_with_progress(
-        &mesh.positions,
-        &tris,
-        settings,
-        progress,
-    )
-    .map_err(|e| e.to_string())?;
-    Ok(AtlasLayout {
-        charts: uv.charts.count,
-        corner_uvs: uv.corner_uvs,
-        texels_per_unit: uv.texels_per_unit,
-        fill: uv.fill,
-    })
-}
-
-/// How many times over the pastes cover the surface: the bunny took 3.2 and
-/// 3.7 times the pastes its area over a splotch's gives (2 949 at
-/// `texture_scale = 0.06`, 305 at 0.2).
-const PASTE_OVERLAP: f64 = 3.4;
-
-/// The stage's parts and their work, for one progress bar: `"atlas"` (when
-/// there is one), `"pasting"` and `"drawing"` (the drawn faces and the
-/// atlas's compositing). In microseconds as measured on the bunny at
-/// `texture_scale = 0.06` (3 674 faces, 2 949 pastes, a 1024² atlas: 0.34 s
-/// atlas, mostly packing; 2.5 to 5 s pasting, 0.8 to 1.7 ms a paste; 0.9 s drawing and
-/// compositing); the pastes are estimated as the surface's area over the
-/// area a patch's splotch covers (`side_world` a side of a patch, world
-/// units) times [`PASTE_OVERLAP`], as a smaller texture scale makes them
-/// many and small.
-fn progress_plan(
-    faces: usize,
-    area: f64,
-    side_world: f64,
-    atlas_size: u32,
-) -> Vec<(&'static str, f64)> {
-    let pastes = expected_pastes(faces, area, side_world);
-    let faces = faces as f64;
-    let texels = f64::from(atlas_size) * f64::from(atlas_size);
-    let mut parts = Vec::with_capacity(3);
-    if atlas_size > 0 {
-        parts.push(("atlas", 6.0 * faces + 0.15 * texels));
-    }
-    parts.push(("pasting", 1200.0 * pastes + 10.0 * faces));
-    parts.push(("drawing", 50.0 * faces + 0.6 * texels));
-    parts
-}
-
-/// The pastes expected on a surface of `area` with patches of side
-/// `side_world` (world units): the area over a splotch's, times
-/// [`PASTE_OVERLAP`], within 1 and the kernel's cap of `4 × faces + 64`.
-fn expected_pastes(faces: usize, area: f64, side_world: f64) -> f64 {
-    let splotch = (side_world * side_world * SPLOTCH_FILL).max(f64::MIN_POSITIVE);
-    (PASTE_OVERLAP * area / splotch).clamp(1.0, 4.0 * faces as f64 + 64.0)
-}
-
-/// Bytes per texture-patch pixel: RGBA colours (16) and alpha (4).
-pub const BYTES_PER_PATCH_PIXEL: u64 = 20;
-
-/// Bytes per face of the pasting's per-face state beside the layer pool
-/// (coverage, levels, seeds, drawn flags; measured about 110).
-pub const PASTE_BYTES_PER_FACE: u64 = 150;
-
-/// Layers per face the pool is assumed to hold at once.
-pub const LAYERS_PER_FACE: u64 = 5;
-
-/// Bytes per atlas texel (RGBA `f32`) and per triangle of the atlas layout.
-pub const ATLAS_BYTES_PER_TEXEL: u64 = 16;
-/// See [`ATLAS_BYTES_PER_TEXEL`].
-pub const ATLAS_BYTES_PER_TRIANGLE: u64 = 150;
-
-/// The texture patches and the pasting of `settings` on an input of
-/// `sizes`: the patches' pixels as [`auto_patches`] chooses them at the
-/// run's texture scale (or as set), and the pasting's layer pool chunks and
-/// per-face state.
-fn paste_bytes(settings: &LappedPasteSettings, sizes: &InputSizes) -> (u64, u64) {
-    let (w, h) = (sizes.exemplar_width, sizes.exemplar_height);
-    let (pixels, patches) = if settings.patches == 0 && settings.patch_pixels == 0 {
-        auto_patches(
-            settings,
-            (w.max(1), h.max(1)),
-            sizes.texels_per_unit as f32,
-            sizes.diagonal as f32,
-        )
-    } else if settings.patch_pixels == 0 {
-        (w.min(h), settings.patches.max(1))
-    } else {
-        (settings.patch_pixels, settings.patches.max(1))
-    };
-    let patch_bytes =
-        u64::from(patches) * u64::from(pixels) * u64::from(pixels) * BYTES_PER_PATCH_PIXEL;
-    let chunks = (LAYERS_PER_FACE * sizes.triangles)
-        .div_ceil(crate::kernels::lapped::coverage::POOL_CHUNK_NODES)
-        .max(1);
-    let pasting = chunks * crate::kernels::lapped::coverage::POOL_CHUNK_BYTES
-        + PASTE_BYTES_PER_FACE * sizes.triangles;
-    (patch_bytes, pasting)
-}
-
-/// The atlas of side `size` (0: none) on `triangles`.
-fn atlas_bytes(size: u64, triangles: u64) -> u64 {
-    if size == 0 {
-        return 0;
-    }
-    (size * size)
-        .saturating_mul(ATLAS_BYTES_PER_TEXEL)
-        .saturating_add(ATLAS_BYTES_PER_TRIANGLE * triangles)
-}
-
-/// Returns the heap pages freed so far to the system (glibc's
-/// `malloc_trim`). Measured before `main` fixed glibc's mmap threshold: the
-/// paste loop's per-face arrays were freed in the middle of the heap, where
-/// glibc kept their pages resident, and the atlas kernel allocates blocks
-/// too large to reuse those holes, so the process peaked ~200 MB higher at
-/// 901 k vertices. With the fixed threshold large buffers go back by
-/// themselves; this still returns the loop's many small allocations
-/// (per-paste lists, coverage-test scratch) and the atlas kernel's.
-fn release_freed_memory() {
-    #[cfg(all(target_os = "linux", target_env = "gnu"))]
-    // SAFETY: `malloc_trim` only releases free pages of the allocator's own
-    // heaps; it is thread-safe and takes no pointer.
-    unsafe {
-        libc::malloc_trim(0);
     }
 }
 
@@ -939,314 +386,56 @@ impl Stage for LappedPaste {
             .then(|| crate::image::load_image(Path::new(&settings.mask_image)))
             .transpose()
             .map_err(|e| e.to_string());
-        (move |mut commands: Commands,
-               active: Res<ActiveMesh>,
-               exemplar: Res<Exemplar>,
-               seed: Res<RunSeed>,
-               mut spacing: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               mut meshes: Query<(&mut Geometry, &FaceField)>,
-               old: Query<(Entity, &PasteOf)>| {
-            let fail = |message: String| StageError {
-                index: ctx.index + 1,
-                kind: Self::KIND.into(),
-                message,
-            };
+        let paste = move |mut commands: Commands,
+                          active: Res<ActiveMesh>,
+                          exemplar: Res<Exemplar>,
+                          seed: Res<RunSeed>,
+                          mut spacing: ResMut<TexelSpacing>,
+                          mut metrics: ResMut<Metrics>,
+                          mut meshes: Query<(&mut Geometry, &FaceField)>,
+                          old: Query<(Entity, &PasteOf)>|
+              -> SystemResult {
             let Ok((mut geometry, field)) = meshes.get_mut(active.0) else {
-                failure.0 = Some(fail(
+                return Err(
                     "the active mesh has no tangent field; add `tangent_field` right before".into(),
-                ));
-                return;
+                );
             };
+            let idx = ctx.index;
+            let (w, h) = (exemplar.image.width, exemplar.image.height);
+            let plan = PatchPlan::new(&settings, &geometry.0, field, (w, h));
             // One bar for the stage: its parts weighed by their work, the
             // pastes' count estimated from a patch's size on the surface.
             let progress = Progress::new(0, Self::KIND);
             let _finish = progress.finish_on_drop();
-            // With a field in world units per pixel (`[input] texture_scale`)
-            // the patch size and count follow the mesh (`auto_patches`).
-            let pixels_per_unit = field_pixels_per_unit(&field.t);
-            let auto = field.per_pixel.then(|| {
-                let diagonal = geometry
-                    .0
-                    .bounding_box()
-                    .map_or(0.0, |(lo, hi)| (hi - lo).length());
-                auto_patches(
-                    &settings,
-                    (exemplar.image.width, exemplar.image.height),
-                    pixels_per_unit,
-                    diagonal,
-                )
-            });
-            // A patch's side on the surface: the field's length is world
-            // units per pixel, or per patch.
-            let mean_t = 1.0 / f64::from(pixels_per_unit);
-            let side_world = auto.map_or(mean_t, |(pixels, _)| f64::from(pixels) * mean_t);
-            progress.plan(progress_plan(
-                geometry.0.face_count(),
-                f64::from(geometry.0.area()),
-                side_world,
-                settings.atlas_size,
-            ));
+            progress.plan(plan.progress_parts(settings.atlas_size));
             // The atlas layout depends on the mesh alone: it is made first,
             // while nothing else of this stage is held (the shared atlas
             // kernel needs ~300 bytes per vertex while it runs).
-            let atlas_settings = AtlasSettings {
-                size: settings.atlas_size,
-                normal_cone_deg: settings.atlas_normal_cone,
-                padding_px: settings.atlas_padding,
-            };
-            let layout = (settings.atlas_size > 0)
-                .then(|| atlas_layout(&geometry.0, &atlas_settings, &progress));
+            let atlas = settings.atlas_settings();
+            let layout =
+                (settings.atlas_size > 0).then(|| atlas_layout(&geometry.0, &atlas, &progress));
             release_freed_memory();
-            let fits = match TriMesh::check(&geometry.0) {
-                Ok(()) => field.t.len() == geometry.0.face_count(),
-                Err(e) => {
-                    failure.0 = Some(fail(e.to_string()));
-                    return;
-                }
-            };
-            if !fits {
-                failure.0 = Some(fail(
-                    "the tangent field does not fit the mesh; run `tangent_field` after the last stage that changes the mesh".into(),
-                ));
-                return;
-            }
-            let mask = match &mask_image {
-                Ok(m) => m.as_ref(),
-                Err(e) => {
-                    failure.0 = Some(fail(e.clone()));
-                    return;
-                }
-            };
-            // With a field in world units per pixel the patch size and count
-            // follow the mesh (`auto`, above); T is then scaled by the patch
-            // image's side, below.
-            let mut settings = settings.clone();
-            if let Some((pixels, patches)) = auto {
-                metrics.record(ctx.index, "patch_pixels", pixels);
-                metrics.record(ctx.index, "patches", patches);
-                (settings.patch_pixels, settings.patches) = (pixels, patches);
-            } else if settings.patches == 0 {
-                settings.patches = 1;
-            }
-            let texture_span = tracing::info_span!("texture_patches").entered();
-            let cache_dir = settings.cache.then(crate::cache::default_dir).flatten();
-            let textures = match texture_patches_cached(
-                &exemplar.image,
-                exemplar.wrap,
-                &settings,
-                mask,
-                seed.derive(ctx.index, 1),
-                cache_dir.as_deref(),
-            ) {
-                Ok(t) => t,
-                Err(message) => {
-                    failure.0 = Some(fail(message));
-                    return;
-                }
-            };
-            drop(texture_span);
-            let mut paste_settings = settings.paste_settings(seed.derive(ctx.index, 0));
-            paste_settings.expected_pastes = expected_pastes(
-                geometry.0.face_count(),
-                f64::from(geometry.0.area()),
-                side_world,
-            );
-            let unit_px = textures.iter().map(TexturePatch::unit_px).fold(1.0f32, f32::max);
-            // A field in world units per pixel is read in patch units
-            // (scaled as it is read, not copied).
-            let view = FieldView {
-                t: &field.t,
-                isotropic: field.isotropic,
-                scale: if field.per_pixel { unit_px } else { 1.0 },
-            };
-            // The loop takes the mesh's positions and corners instead of
-            // copying them; they go back right after it, unchanged (so
-            // change detection is bypassed: the mesh is the same).
-            let tri = match TriMesh::from_owned(std::mem::take(
-                &mut geometry.bypass_change_detection().0,
-            )) {
-                Ok(t) => t,
-                Err((mesh, e)) => {
-                    geometry.bypass_change_detection().0 = mesh;
-                    failure.0 = Some(fail(e.to_string()));
-                    return;
-                }
-            };
-            progress.start_part("pasting", PASTING_PROGRESS_STEPS);
-            let out = paste_until_covered(&tri, view, &textures, &paste_settings, &progress);
-            progress.start_part("drawing", 2);
-            let drawn_span = tracing::info_span!("drawn_faces").entered();
-            let sizes: Vec<usize> = out.pastes.iter().map(|p| p.faces.len()).collect();
-            let drawn = drawn_faces(&out.coverage, &sizes, &textures, &paste_settings.coverage);
-            let draws: usize = drawn.iter().map(|d| d.iter().filter(|&&x| x).count()).sum();
-            let draws_per_face = draws as f64 / tri.face_count().max(1) as f64;
-            drop(drawn_span);
-            progress.inc(1);
-            record_metrics(&mut metrics, ctx.index, &out, draws_per_face, &textures);
-
-            // World units per exemplar texel, for the quality metrics.
-            let mean_scale = (0..view.t.len())
-                .map(|f| view.at(f).length() as f64)
-                .sum::<f64>()
-                / view.t.len().max(1) as f64;
-            spacing.0 = (mean_scale as f32 / unit_px).max(f32::MIN_POSITIVE);
-
-            // Only the faces runtime pasting draws are kept (§4): the
-            // hidden ones were ~3/4 of all layers on a scan. The coverage
-            // and the adjacency go before the atlas is composited.
-            let LappedTexture {
-                pastes, coverage, ..
-            } = out;
-            drop(coverage);
-            geometry.bypass_change_detection().0 = tri.into_poly_mesh();
-            let kept: Vec<(u32, Vec<u32>, Vec<Vec2>)> = pastes
-                .into_iter()
-                .zip(&drawn)
-                .map(|(paste, drawn)| {
-                    let n = drawn.iter().filter(|&&d| d).count();
-                    let mut faces = Vec::with_capacity(n);
-                    let mut uvs = Vec::with_capacity(3 * n);
-                    for ((&f, uv), &d) in paste.faces.iter().zip(&paste.uvs).zip(drawn) {
-                        if d {
-                            faces.push(f);
-                            uvs.extend_from_slice(uv);
-                        }
-                    }
-                    (paste.texture, faces, uvs)
-                })
-                .collect();
-            drop(drawn);
+            run::check_fit(&geometry.0, field)?;
+            let mask = mask_image.as_ref().map_err(Clone::clone)?.as_ref();
+            let settings = plan.settings(&settings, &mut metrics, idx);
+            let textures = run::cut_textures(&exemplar, &settings, mask, seed.derive(idx, 1))?;
+            let mut paste_settings = settings.paste_settings(seed.derive(idx, 0));
+            paste_settings.expected_pastes = plan.expected_pastes();
+            let mesh = &mut geometry.bypass_change_detection().0;
+            let (pasted, texel_spacing) =
+                run::paste(mesh, field, &textures, &paste_settings, &progress)?;
+            run::record_metrics(&mut metrics, idx, &pasted, &textures);
+            spacing.0 = texel_spacing;
             release_freed_memory();
-
-            match layout {
-                Some(Ok(layout)) => {
-                    let records: Vec<PasteRecord> = kept
-                        .iter()
-                        .map(|(texture, faces, uvs)| PasteRecord {
-                            texture: *texture,
-                            faces,
-                            uvs,
-                        })
-                        .collect();
-                    match PasteIndex::new(layout.corner_uvs.len(), &records) {
-                        Ok(index) => {
-                            let image = composite_atlas_with(
-                                &layout.corner_uvs,
-                                &|f, out| out.extend(index.layers(f).map(|(_, t, uv)| (t, uv))),
-                                &textures,
-                                atlas_settings.size,
-                                atlas_settings.padding_px,
-                            );
-                            metrics.record(ctx.index, "atlas_charts", layout.charts);
-                            metrics.record(ctx.index, "atlas_fill", layout.fill);
-                            metrics.record(
-                                ctx.index,
-                                "atlas_texels_per_unit",
-                                layout.texels_per_unit,
-                            );
-                            commands.entity(active.0).insert(AtlasTexture {
-                                uvs: layout.corner_uvs.into_flattened(),
-                                image,
-                            });
-                        }
-                        Err(reason) => metrics.record(
-                            ctx.index,
-                            "atlas",
-                            format!("skipped: {reason}"),
-                        ),
-                    }
-                }
-                Some(Err(reason)) => {
-                    metrics.record(ctx.index, "atlas", format!("skipped: {reason}"))
-                }
-                None => {}
+            let texture = run::composite(layout, &pasted, &textures, &atlas, &mut metrics, idx);
+            if let Some(texture) = texture {
+                commands.entity(active.0).insert(texture);
             }
             progress.inc(1);
-
             release_freed_memory();
-            for (entity, of) in &old {
-                if of.0 == active.0 {
-                    commands.entity(entity).despawn();
-                }
-            }
-            for (i, (texture, faces, uvs)) in kept.into_iter().enumerate() {
-                let n = faces.len();
-                commands.spawn((
-                    PasteOf(active.0),
-                    PasteOrder(i as u32),
-                    TexturePatchIndex(texture),
-                    PatchFaces(faces),
-                    PatchUvs(uvs),
-                    PatchDrawn(vec![true; n]),
-                ));
-            }
-            commands.insert_resource(TexturePatchOrigins(
-                textures.iter().map(|t| t.origin).collect(),
-            ));
-            commands.insert_resource(TexturePatches(
-                textures.into_iter().map(|t| t.image).collect(),
-            ));
-        })
-        .into_configs()
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn exemplar() -> Image {
-        let data = (0..48 * 40 * 3)
-            .map(|i| ((i * 37) % 101) as f32 / 100.0)
-            .collect();
-        Image::from_data(48, 40, 3, data).expect("size matches")
-    }
-
-    #[test]
-    fn texture_patch_cache_round_trips_and_rejects_other_keys_and_damage() {
-        let ex = exemplar();
-        let settings = LappedPasteSettings {
-            patches: 3,
-            patch_pixels: 24,
-            ..Default::default()
+            run::spawn_pastes(&mut commands, active.0, &old, pasted.pastes, textures);
+            Ok(())
         };
-        let cut = texture_patches(&ex, Wrap::Clamp, &settings, None, 7).expect("cut");
-        let key = patch_cache_key(&ex, Wrap::Clamp, &settings, 7);
-        let bytes = patches_to_bytes(&cut, &key);
-        let back = patches_from_bytes(&bytes, &key, &ex, Wrap::Clamp).expect("round trip");
-        assert_eq!(back.len(), cut.len());
-        for (a, b) in cut.iter().zip(&back) {
-            assert_eq!(a.image, b.image);
-            assert_eq!(a.alpha, b.alpha);
-            assert_eq!(a.centre_px, b.centre_px);
-            assert_eq!(a.hull.vertices, b.hull.vertices);
-            assert_eq!(a.hull.bounds, b.hull.bounds);
-            assert_eq!(a.origin, b.origin);
-        }
-        // Another seed or setting is another key.
-        assert_ne!(key, patch_cache_key(&ex, Wrap::Clamp, &settings, 8));
-        let other = LappedPasteSettings {
-            falloff: 2.0,
-            ..settings.clone()
-        };
-        assert_ne!(key, patch_cache_key(&ex, Wrap::Clamp, &other, 7));
-        let mut bad = bytes.clone();
-        bad[60] ^= 1;
-        assert!(patches_from_bytes(&bad, &key, &ex, Wrap::Clamp).is_none());
-        assert!(patches_from_bytes(&bytes[..bytes.len() - 3], &key, &ex, Wrap::Clamp).is_none());
-        // Through a cache folder: cut and written first, read second.
-        let dir = tempfile::tempdir().expect("temp dir");
-        let first = texture_patches_cached(&ex, Wrap::Clamp, &settings, None, 7, Some(dir.path()))
-            .expect("cut");
-        assert_eq!(std::fs::read_dir(dir.path()).expect("dir").count(), 1);
-        let second = texture_patches_cached(&ex, Wrap::Clamp, &settings, None, 7, Some(dir.path()))
-            .expect("read");
-        assert_eq!(first.len(), second.len());
-        for (a, b) in first.iter().zip(&second) {
-            assert_eq!(a.image, b.image);
-            assert_eq!(a.hull.vertices, b.hull.vertices);
-        }
+        ctx.fallible(Self::KIND, paste)
     }
 }

@@ -3,13 +3,19 @@
 //! pyramid (each coarser level a quarter of the vertices). Level entities get
 //! `MeshLevel(l)` (0 finest) and a `SourceCorrespondence` to map results back
 //! onto the input; the finest level becomes the active mesh.
+//!
+//! Reads: the `SourceMesh`'s `Geometry`, `TextureScale`. Writes: the level
+//! entities (`MeshLevel`, `Geometry`, `SourceCorrespondence`; the source
+//! mesh loses its `MeshLevel`), `ActiveMesh`, `TexelSpacing`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::wei_levoy::retile::{RetileSettings, RetileTarget, retile_with_progress};
-use crate::mesh::{PolyMesh, Topology};
+use crate::kernels::wei_levoy::retile::{
+    InputReport, RetileSettings, RetileTarget, RetiledLevel, edge_length_cv, retile_with_progress,
+};
+use crate::mesh::PolyMesh;
 use crate::progress::Progress;
 use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -106,18 +112,92 @@ pub struct SourceCorrespondence {
     pub bary: Vec<glam::Vec3>,
 }
 
-/// Edge-length coefficient of variation (std / mean) of a mesh.
-pub fn edge_length_cv(mesh: &PolyMesh) -> f32 {
-    let topo = Topology::build(mesh);
-    let lens: Vec<f64> = topo
-        .edges
-        .iter()
-        .map(|e| (mesh.positions[e[0] as usize] - mesh.positions[e[1] as usize]).length() as f64)
-        .collect();
-    let n = lens.len().max(1) as f64;
-    let mean = lens.iter().sum::<f64>() / n;
-    let var = lens.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / n;
-    (var.sqrt() / mean.max(1e-30)) as f32
+impl RetileStageSettings {
+    /// What the finest level aims at: `edge_length`, `vertices`, or the
+    /// vertices the `source` mesh's area needs at the texture scale
+    /// (recorded and logged).
+    fn target(
+        &self,
+        source: &PolyMesh,
+        texture_scale: &TextureScale,
+        metrics: &mut Metrics,
+        index: usize,
+    ) -> Result<RetileTarget, String> {
+        if self.edge_length > 0.0 {
+            return Ok(RetileTarget::EdgeLength(self.edge_length));
+        }
+        if self.vertices > 0 {
+            return Ok(RetileTarget::Vertices(self.vertices));
+        }
+        let area = f64::from(source.area()) / self.texels_per_vertex;
+        let n = texture_scale.derived_vertices(area, "retile.vertices", MAX_VERTICES as usize)?;
+        metrics.record(index, "vertices_from_texture_scale", n);
+        tracing::info!(
+            "retile: {} vertices for the {}",
+            n,
+            texture_scale.describe()
+        );
+        Ok(RetileTarget::Vertices(n as u32))
+    }
+}
+
+/// Records what preparing a messy input changed, for the user.
+fn record_input(metrics: &mut Metrics, index: usize, r: &InputReport) {
+    metrics.record(index, "input_components", r.components);
+    metrics.record(index, "input_boundary_loops", r.boundary_loops);
+    metrics.record(index, "input_cut_nonmanifold_edges", r.cut_edges);
+    metrics.record(
+        index,
+        "input_split_vertices",
+        r.split_vertices + r.cut_vertices,
+    );
+    metrics.record(
+        index,
+        "input_dropped_degenerate_triangles",
+        r.dropped_degenerate_triangles,
+    );
+    if r.cut_edges > 0 {
+        tracing::info!(
+            "retile: cut {} non-manifold edge(s) of the input into manifold pieces",
+            r.cut_edges
+        );
+    }
+}
+
+/// Spawns the retiled levels (finest first) with their correspondence to
+/// the input and records their figures; returns the finest level's entity
+/// and mean edge length.
+fn spawn_levels(
+    commands: &mut Commands,
+    levels: Vec<RetiledLevel>,
+    metrics: &mut Metrics,
+    index: usize,
+) -> Option<(Entity, f32)> {
+    let mut finest = None;
+    let mut counts = Vec::new();
+    let mut targets = Vec::new();
+    let mut cvs = Vec::new();
+    for (l, level) in levels.into_iter().enumerate() {
+        counts.push(level.mesh.vertex_count());
+        targets.push(level.target_vertices);
+        cvs.push(edge_length_cv(&level.mesh));
+        let edge = level.mesh.average_edge_length();
+        let e = commands
+            .spawn((
+                MeshLevel(l as u8),
+                Geometry(level.mesh),
+                SourceCorrespondence {
+                    face: level.source_face,
+                    bary: level.source_bary,
+                },
+            ))
+            .id();
+        finest.get_or_insert((e, edge));
+    }
+    metrics.record(index, "level_vertices", &counts);
+    metrics.record(index, "level_targets", &targets);
+    metrics.record(index, "level_edge_length_cv", &cvs);
+    finest
 }
 
 /// The `retile` stage.
@@ -193,46 +273,18 @@ impl Stage for Retile {
         vec![e]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               mut active: ResMut<ActiveMesh>,
-               seed: Res<RunSeed>,
-               texture_scale: Res<TextureScale>,
-               mut spacing: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               sources: Query<(Entity, &Geometry), With<SourceMesh>>| {
+        let retile = move |mut commands: Commands,
+                           mut active: ResMut<ActiveMesh>,
+                           seed: Res<RunSeed>,
+                           texture_scale: Res<TextureScale>,
+                           mut spacing: ResMut<TexelSpacing>,
+                           mut metrics: ResMut<Metrics>,
+                           sources: Query<(Entity, &Geometry), With<SourceMesh>>|
+              -> SystemResult {
             let Ok((source_entity, source)) = sources.single() else {
-                fail(
-                    &mut failure,
-                    ctx.index,
-                    Self::KIND,
-                    "no input mesh to retile",
-                );
-                return;
+                return Err("no input mesh to retile".into());
             };
-            let target = if settings.edge_length > 0.0 {
-                RetileTarget::EdgeLength(settings.edge_length)
-            } else if settings.vertices > 0 {
-                RetileTarget::Vertices(settings.vertices)
-            } else {
-                let area = f64::from(source.0.area()) / settings.texels_per_vertex;
-                match texture_scale.derived_vertices(area, "retile.vertices", MAX_VERTICES as usize)
-                {
-                    Ok(n) => {
-                        metrics.record(ctx.index, "vertices_from_texture_scale", n);
-                        tracing::info!(
-                            "retile: {} vertices for the {}",
-                            n,
-                            texture_scale.describe()
-                        );
-                        RetileTarget::Vertices(n as u32)
-                    }
-                    Err(message) => {
-                        fail(&mut failure, ctx.index, Self::KIND, message);
-                        return;
-                    }
-                }
-            };
+            let target = settings.target(&source.0, &texture_scale, &mut metrics, ctx.index)?;
             let rs = RetileSettings {
                 target,
                 levels: settings.levels,
@@ -243,64 +295,18 @@ impl Stage for Retile {
             let _finish = progress.finish_on_drop();
             let pyramid = retile_with_progress(&source.0, &rs, &progress);
             progress.finish();
-            let pyramid = match pyramid {
-                Ok(p) => p,
-                Err(e) => {
-                    fail(&mut failure, ctx.index, Self::KIND, e.to_string());
-                    return;
-                }
-            };
-            // What preparing a messy input changed, for the user.
-            let r = &pyramid.input;
-            metrics.record(ctx.index, "input_components", r.components);
-            metrics.record(ctx.index, "input_boundary_loops", r.boundary_loops);
-            metrics.record(ctx.index, "input_cut_nonmanifold_edges", r.cut_edges);
-            metrics.record(
-                ctx.index,
-                "input_split_vertices",
-                r.split_vertices + r.cut_vertices,
-            );
-            metrics.record(
-                ctx.index,
-                "input_dropped_degenerate_triangles",
-                r.dropped_degenerate_triangles,
-            );
-            if r.cut_edges > 0 {
-                tracing::info!(
-                    "retile: cut {} non-manifold edge(s) of the input into manifold pieces",
-                    r.cut_edges
-                );
-            }
+            let pyramid = pyramid.map_err(|e| e.to_string())?;
+            record_input(&mut metrics, ctx.index, &pyramid.input);
             // The input is no longer a pyramid level: the retiled levels are.
             commands.entity(source_entity).remove::<MeshLevel>();
-            let mut counts = Vec::new();
-            let mut targets = Vec::new();
-            let mut cvs = Vec::new();
-            for (l, level) in pyramid.levels.into_iter().enumerate() {
-                counts.push(level.mesh.vertex_count());
-                targets.push(level.target_vertices);
-                cvs.push(edge_length_cv(&level.mesh));
-                if l == 0 {
-                    spacing.0 = level.mesh.average_edge_length().max(f32::MIN_POSITIVE);
-                }
-                let e = commands
-                    .spawn((
-                        MeshLevel(l as u8),
-                        Geometry(level.mesh),
-                        SourceCorrespondence {
-                            face: level.source_face,
-                            bary: level.source_bary,
-                        },
-                    ))
-                    .id();
-                if l == 0 {
-                    active.0 = e;
-                }
+            if let Some((finest, edge)) =
+                spawn_levels(&mut commands, pyramid.levels, &mut metrics, ctx.index)
+            {
+                spacing.0 = edge.max(f32::MIN_POSITIVE);
+                active.0 = finest;
             }
-            metrics.record(ctx.index, "level_vertices", &counts);
-            metrics.record(ctx.index, "level_targets", &targets);
-            metrics.record(ctx.index, "level_edge_length_cv", &cvs);
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, retile)
     }
 }

@@ -11,103 +11,31 @@
 //! carries over to every level: old vertices keep their values bit for bit
 //! (the scheme keeps vertices, §3.2.1 first bullet), face points get their
 //! face's average. Per-corner data (UVs) does not carry over.
+//!
+//! Reads: the active mesh's `Geometry` and per-vertex attributes,
+//! `TextureScale`. Writes: the level entities (`MeshLevel`, `Geometry`,
+//! `LevelParents`, the carried attributes), `Sqrt2Pyramid`, `ActiveMesh`.
+//! The attributes and the level entities are in `levels.rs`.
+
+mod levels;
+
+/// Carrying attributes through √2 parents, for stages that build on the
+/// hierarchy (`diffuse_orientation`).
+pub use crate::kernels::bangay_morkel::sqrt2::carry_attribute;
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::bangay_morkel::sqrt2::{
-    AreaStats, MAX_HIERARCHY_LEVELS, MAX_HIERARCHY_VERTICES, Parents, Sqrt2Settings,
-    adaptive_sqrt2, sqrt2_subdivide_with,
+    InputSurface, MAX_HIERARCHY_LEVELS, MAX_HIERARCHY_VERTICES, Sqrt2Settings, UniformLevels,
 };
-use crate::kernels::surface::frames::TangentFrame;
-use crate::progress::Progress;
+use crate::mesh::PolyMesh;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
 use bevy_ecs::system::ScheduleSystem;
-use glam::{Vec2, Vec3};
+use levels::{Attributes, coarsen_dense, coarsest, record_levels, spawn_levels, uniform_levels};
 use serde::{Deserialize, Serialize};
-use std::ops::{Add, Mul};
-
-/// Moves every vertex of `mesh` to the closest point of the input surface
-/// on a triangle facing the same way as the vertex normal (so a point near
-/// a thin wall is not snapped onto its far side). Parallel, deterministic.
-fn onto_surface(
-    projector: &crate::kernels::wei_levoy::retile::SurfaceProjector,
-    mesh: &mut crate::mesh::PolyMesh,
-) {
-    use rayon::prelude::*;
-    let normals = mesh.vertex_normals();
-    mesh.positions
-        .par_iter_mut()
-        .zip(normals.par_iter())
-        .for_each(|(p, &n)| {
-            if let Some(hit) = projector.project_facing(*p, n, u32::MAX) {
-                *p = hit.point;
-            }
-        });
-}
-
-/// Angle between two faces' normals above which their shared vertex is on
-/// a feature of the input: 30°.
-const FEATURE_COS: f32 = 0.866;
-
-/// A position's exact bits, to find a vertex again by where it is.
-fn position_key(p: Vec3) -> [u32; 3] {
-    [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
-}
-
-/// The positions (as [`position_key`]s) of the input's corners: vertices
-/// whose incident faces' normals fall into three or more directions more
-/// than 30° apart (a box corner; a crease has two). Degenerate faces are
-/// ignored.
-fn corner_keys(mesh: &crate::mesh::PolyMesh) -> std::collections::HashSet<[u32; 3]> {
-    let normals = mesh.face_normals();
-    // Per vertex, up to three directions found so far.
-    let mut around = vec![([Vec3::ZERO; 3], 0u8); mesh.vertex_count()];
-    for (f, face) in mesh.faces().enumerate() {
-        let n = normals[f];
-        if !n.is_finite() || n.length_squared() < 0.5 {
-            continue;
-        }
-        for &v in face {
-            let (dirs, count) = &mut around[v as usize];
-            if *count < 3
-                && dirs[..*count as usize]
-                    .iter()
-                    .all(|c| c.dot(n) < FEATURE_COS)
-            {
-                dirs[*count as usize] = n;
-                *count += 1;
-            }
-        }
-    }
-    around
-        .iter()
-        .zip(&mesh.positions)
-        .filter(|((_, count), _)| *count >= 3)
-        .map(|(_, &p)| position_key(p))
-        .collect()
-}
-
-/// Puts the vertices of `after` that sat on one of `corners` in `before`
-/// (the same ids: a √2 step keeps its old vertices' ids) back on it: the
-/// vertex rule and the projection would move a corner along the surface,
-/// rounding it off.
-fn keep_corners(
-    corners: &std::collections::HashSet<[u32; 3]>,
-    before: &crate::mesh::PolyMesh,
-    after: &mut crate::mesh::PolyMesh,
-) {
-    if corners.is_empty() {
-        return;
-    }
-    for (v, &p) in before.positions.iter().enumerate() {
-        if corners.contains(&position_key(p)) {
-            after.positions[v] = p;
-        }
-    }
-}
 
 /// Settings of `subdivide_sqrt2`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -138,10 +66,6 @@ pub struct SubdivideSqrt2Settings {
     /// one-level hierarchy.
     pub coarsen_dense_input: bool,
 }
-
-/// Most uniform steps above a coarsened input: its remesh has at least
-/// `target / 2^COARSEN_STEPS` vertices.
-const COARSEN_STEPS: u32 = 6;
 
 impl Default for SubdivideSqrt2Settings {
     fn default() -> Self {
@@ -209,158 +133,39 @@ impl StageSettings for SubdivideSqrt2Settings {
     }
 }
 
-/// `input` remeshed evenly (one level of `retile`'s isotropic remesher) to
-/// `target / 2^s` vertices for the largest `s ≤ COARSEN_STEPS` whose count
-/// the input's connected pieces allow (at least 12 vertices), with `s`;
-/// `None` when not even `target / 2` is possible. When the pieces need more
-/// vertices than asked, retile names the floor, and the next try starts at
-/// the first count above it rather than one step finer.
-fn coarsened(
-    input: &crate::mesh::PolyMesh,
-    target: usize,
-    seed: u64,
-) -> Option<(crate::mesh::PolyMesh, u32)> {
-    use crate::kernels::wei_levoy::retile::{RetileError, RetileSettings, retile_with_progress};
-    let progress = Progress::new(0, "subdivide_sqrt2 (remeshing the dense input)");
-    let _finish = progress.finish_on_drop();
-    let mut at_least = RetileSettings::MIN_LEVEL_VERTICES as usize;
-    for steps in (1..=COARSEN_STEPS).rev() {
-        let n = target >> steps;
-        if (n as f64) * (1.0 + RetileSettings::COUNT_TOLERANCE) < at_least as f64 {
-            continue;
-        }
-        let settings = RetileSettings {
-            levels: 1,
-            seed,
-            ..RetileSettings::with_vertices(n as u32)
-        };
-        match retile_with_progress(input, &settings, &progress) {
-            Ok(mut p) => {
-                let level = p.levels.swap_remove(0);
-                // The surface's thin parts kept it above its target: try a
-                // finer base.
-                if (level.mesh.vertex_count() as f64)
-                    > (1.0 + RetileSettings::COUNT_TOLERANCE) * level.target_vertices as f64
-                {
-                    continue;
-                }
-                progress.finish();
-                return Some((level.mesh, steps));
-            }
-            // Too many pieces for so few vertices: a base above their floor.
-            Err(RetileError::TooManyComponents { floor, .. }) => at_least = floor,
-            Err(_) => return None,
+impl SubdivideSqrt2Settings {
+    /// Most uniform steps: `levels`, or as many as the budget allows.
+    fn max_steps(&self) -> u32 {
+        if self.levels > 0 {
+            self.levels.min(MAX_HIERARCHY_LEVELS)
+        } else {
+            MAX_HIERARCHY_LEVELS
         }
     }
-    None
-}
 
-/// Carries a per-vertex attribute to a refined level: identity parents copy
-/// the value exactly, others take the weighted sum of their parents.
-pub fn carry_attribute<T>(parents: &Parents, old: &[T]) -> Vec<T>
-where
-    T: Copy + Add<Output = T> + Mul<f32, Output = T>,
-{
-    (0..parents.len())
-        .map(|v| {
-            let (pv, pw) = parents.of(v);
-            match (pv, pw) {
-                ([s], [w]) if *w == 1.0 => old[*s as usize],
-                _ => {
-                    let mut acc = old[pv[0] as usize] * pw[0];
-                    for (&s, &w) in pv.iter().zip(pw).skip(1) {
-                        acc = acc + old[s as usize] * w;
-                    }
-                    acc
-                }
+    /// The finest level's vertex budget (0: none): `target_vertices`, or
+    /// with `levels = 0` the `coarse` mesh's area at the texture scale
+    /// (recorded).
+    fn target(
+        &self,
+        texture_scale: &TextureScale,
+        coarse: &PolyMesh,
+        metrics: &mut Metrics,
+        idx: usize,
+    ) -> Result<usize, String> {
+        Ok(match (self.levels, self.target_vertices) {
+            (_, t) if t > 0 => t as usize,
+            (0, _) => {
+                let n = texture_scale.derived_vertices(
+                    f64::from(coarse.area()),
+                    "subdivide_sqrt2.target_vertices",
+                    MAX_HIERARCHY_VERTICES,
+                )?;
+                metrics.record(idx, "target_vertices_from_texture_scale", n);
+                n
             }
+            _ => 0,
         })
-        .collect()
-}
-
-/// [`carry_attribute`] for rows of `channels` values (colours).
-pub fn carry_rows(parents: &Parents, old: &[f32], channels: usize) -> Vec<f32> {
-    let mut out = vec![0.0f32; parents.len() * channels];
-    for (v, row) in out.chunks_exact_mut(channels.max(1)).enumerate() {
-        let (pv, pw) = parents.of(v);
-        match (pv, pw) {
-            ([s], [w]) if *w == 1.0 => {
-                let s = *s as usize;
-                row.copy_from_slice(&old[s * channels..(s + 1) * channels]);
-            }
-            _ => {
-                for (&s, &w) in pv.iter().zip(pw) {
-                    let s = s as usize;
-                    for (o, &x) in row.iter_mut().zip(&old[s * channels..(s + 1) * channels]) {
-                        *o += x * w;
-                    }
-                }
-            }
-        }
-    }
-    out
-}
-
-/// Carries frames: old vertices keep theirs exactly; a new vertex takes its
-/// parents' mean up direction on its own normal.
-pub fn carry_frames(
-    parents: &Parents,
-    old: &[TangentFrame],
-    normals: &[Vec3],
-) -> Vec<TangentFrame> {
-    let ups: Vec<Vec3> = old.iter().map(|f| f.t).collect();
-    let carried = carry_attribute(parents, &ups);
-    (0..parents.len())
-        .map(|v| match parents.of(v) {
-            ([s], [w]) if *w == 1.0 => old[*s as usize],
-            _ => TangentFrame::from_up(normals[v], carried[v]),
-        })
-        .collect()
-}
-
-/// The per-vertex attributes a level carries.
-#[derive(Clone, Debug, Default)]
-struct Attributes {
-    frames: Option<Vec<TangentFrame>>,
-    colours: Option<VertexColours>,
-    texels: Option<Vec<Vec2>>,
-    sweep: Option<Vec<f32>>,
-    scale: Option<Vec<f32>>,
-}
-
-impl Attributes {
-    fn carried(&self, parents: &Parents, mesh: &crate::mesh::PolyMesh) -> Self {
-        Self {
-            frames: self
-                .frames
-                .as_ref()
-                .map(|f| carry_frames(parents, f, &mesh.vertex_normals())),
-            colours: self.colours.as_ref().map(|c| VertexColours {
-                channels: c.channels,
-                values: carry_rows(parents, &c.values, c.channels),
-            }),
-            texels: self.texels.as_ref().map(|t| carry_attribute(parents, t)),
-            sweep: self.sweep.as_ref().map(|s| carry_attribute(parents, s)),
-            scale: self.scale.as_ref().map(|s| carry_attribute(parents, s)),
-        }
-    }
-
-    fn insert(self, e: &mut EntityCommands) {
-        if let Some(f) = self.frames {
-            e.insert(Frames(f));
-        }
-        if let Some(c) = self.colours {
-            e.insert(c);
-        }
-        if let Some(t) = self.texels {
-            e.insert(SourceTexels(t));
-        }
-        if let Some(s) = self.sweep {
-            e.insert(SweepField(s));
-        }
-        if let Some(s) = self.scale {
-            e.insert(VertexScale(s));
-        }
     }
 }
 
@@ -375,10 +180,7 @@ type SourceQuery<'w, 's> = Query<
     'w,
     's,
     (
-        &'static Geometry,
-        Option<&'static Frames>,
-        Option<&'static VertexColours>,
-        Option<&'static SourceTexels>,
+        LevelFields,
         Option<&'static SweepField>,
         Option<&'static VertexScale>,
     ),
@@ -446,195 +248,46 @@ impl Stage for SubdivideSqrt2 {
         vec![e]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               mut active: ResMut<ActiveMesh>,
-               texture_scale: Res<TextureScale>,
-               seed: Res<RunSeed>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               meshes: SourceQuery| {
-            let Ok((geometry, frames, colours, texels, sweep, scale)) = meshes.get(active.0) else {
-                return;
+        let subdivide = move |mut commands: Commands,
+                              mut active: ResMut<ActiveMesh>,
+                              texture_scale: Res<TextureScale>,
+                              seed: Res<RunSeed>,
+                              mut metrics: ResMut<Metrics>,
+                              meshes: SourceQuery|
+              -> SystemResult {
+            let Ok(((geometry, frames, colours, texels), sweep, scale)) = meshes.get(active.0)
+            else {
+                return Ok(());
             };
             let input = &geometry.0;
             if input.face_count() == 0 {
-                failure.0 = Some(crate::stage::StageError {
-                    index: ctx.index + 1,
-                    kind: Self::KIND.into(),
-                    message: "the mesh has no faces to subdivide".into(),
-                });
-                return;
+                return Err("the mesh has no faces to subdivide".into());
             }
+            let (idx, m) = (ctx.index, &mut *metrics);
             let nv = input.vertex_count();
-            let fits = |n: usize| n == nv;
-            let mut attrs = Attributes {
-                frames: frames.map(|f| f.0.clone()).filter(|f| fits(f.len())),
-                colours: colours
-                    .cloned()
-                    .filter(|c| fits(c.values.len() / c.channels.max(1))),
-                texels: texels.map(|t| t.0.clone()).filter(|t| fits(t.len())),
-                sweep: sweep.map(|s| s.0.clone()).filter(|s| fits(s.len())),
-                scale: scale.map(|s| s.0.clone()).filter(|s| fits(s.len())),
-            };
-            let idx = ctx.index;
-            // The input surface every level is put back on.
-            let projector = settings
-                .on_input_surface
-                .then(|| crate::kernels::wei_levoy::retile::SurfaceProjector::new(input));
-            // Its corners, which every level keeps where it has them.
-            let corners = if settings.on_input_surface {
-                corner_keys(input)
-            } else {
-                Default::default()
-            };
-            // Adaptive passes make the coarsest level (§3.2.2).
-            let coarse = if settings.adaptive_passes > 0 {
-                let mut a =
-                    adaptive_sqrt2(input, settings.adaptive_factor, settings.adaptive_passes);
-                if let Some(projector) = &projector {
-                    onto_surface(projector, &mut a.subdivided.mesh);
-                }
-                metrics.record(idx, "area_std_percent_before", a.before.std_percent_of_mean);
-                metrics.record(idx, "area_std_percent_after", a.after.std_percent_of_mean);
-                metrics.record(idx, "adaptive_refined_per_pass", &a.refined_per_pass);
-                attrs = attrs.carried(&a.subdivided.parents, &a.subdivided.mesh);
-                a.subdivided.mesh
-            } else {
-                let stats = AreaStats::of(input);
-                metrics.record(idx, "area_std_percent_before", stats.std_percent_of_mean);
-                input.clone()
-            };
+            let mut attrs = Attributes::of(nv, frames, colours, texels, sweep, scale);
+            // The input surface every level is put back on, with its corners.
+            let surface = settings.on_input_surface.then(|| InputSurface::new(input));
+            let surface = surface.as_ref();
+            let mut coarse = coarsest(&settings, input, surface, &mut attrs, m, idx);
+            let target = settings.target(&texture_scale, &coarse, m, idx)?;
+            let seed = seed.derive(idx, 0xC0A5);
+            coarsen_dense(&settings, &mut coarse, &mut attrs, target, seed, m, idx);
             // Uniform steps (§3.2.1), coarse to fine.
-            let step_settings = Sqrt2Settings {
-                vertex_relaxation: settings.vertex_relaxation,
+            let uniform = UniformLevels {
+                step: Sqrt2Settings {
+                    vertex_relaxation: settings.vertex_relaxation,
+                },
+                max_steps: settings.max_steps(),
+                target,
             };
-            let max_steps = if settings.levels > 0 {
-                settings.levels.min(MAX_HIERARCHY_LEVELS)
-            } else {
-                MAX_HIERARCHY_LEVELS
-            };
-            let target = match (settings.levels, settings.target_vertices) {
-                (_, t) if t > 0 => t as usize,
-                (0, _) => {
-                    let area = f64::from(coarse.area());
-                    match texture_scale.derived_vertices(
-                        area,
-                        "subdivide_sqrt2.target_vertices",
-                        MAX_HIERARCHY_VERTICES,
-                    ) {
-                        Ok(n) => {
-                            metrics.record(idx, "target_vertices_from_texture_scale", n);
-                            n
-                        }
-                        Err(message) => {
-                            failure.0 = Some(crate::stage::StageError {
-                                index: ctx.index + 1,
-                                kind: Self::KIND.into(),
-                                message,
-                            });
-                            return;
-                        }
-                    }
-                }
-                _ => 0,
-            };
-            // A dense input (more than twice the target) is remeshed coarse
-            // first, so the hierarchy refines at the texture's density.
-            let mut coarse = coarse;
-            if settings.coarsen_dense_input
-                && settings.adaptive_passes == 0
-                && target > 0
-                && coarse.vertex_count() > 2 * target
-            {
-                match coarsened(&coarse, target, seed.derive(idx, 0xC0A5)) {
-                    Some((mesh, steps)) => {
-                        metrics.record(idx, "coarsened_input_vertices", coarse.vertex_count());
-                        metrics.record(idx, "coarsened_to", mesh.vertex_count());
-                        tracing::info!(
-                            "subdivide_sqrt2: the input has {} vertices for a target of {target}: remeshed to {} vertices, refined in about {steps} steps",
-                            coarse.vertex_count(),
-                            mesh.vertex_count()
-                        );
-                        coarse = mesh;
-                        attrs = Attributes::default();
-                    }
-                    None => tracing::warn!(
-                        "subdivide_sqrt2: the dense input could not be remeshed coarser (too many small pieces for {target} vertices); synthesising on the input itself"
-                    ),
-                }
-            }
-            // Counted in vertices of the finest level: a step costs about
-            // what it adds (V' = V + F, about 2V).
-            let start_vertices = coarse.vertex_count();
-            let expected = if target > 0 {
-                target
-            } else {
-                start_vertices.saturating_mul(1 << max_steps.min(30))
-            }
-            .min(MAX_HIERARCHY_VERTICES)
-            .max(start_vertices);
-            let progress = Progress::new((expected - start_vertices) as u64, Self::KIND);
-            let _finish = progress.finish_on_drop();
-            let mut levels: Vec<(crate::mesh::PolyMesh, Option<Parents>, Attributes)> =
-                vec![(coarse, None, attrs)];
-            for step in 0..max_steps {
-                let (current, _, current_attrs) = levels.last().expect("one level at least");
-                let (nv, nf) = (current.vertex_count(), current.face_count());
-                if (target > 0 && nv >= target) || nf == 0 || nv + nf > MAX_HIERARCHY_VERTICES {
-                    break;
-                }
-                progress.set_part(&format!("step {}", step + 1));
-                let mut sub = sqrt2_subdivide_with(current, &step_settings);
-                if let Some(projector) = &projector {
-                    onto_surface(projector, &mut sub.mesh);
-                    keep_corners(&corners, current, &mut sub.mesh);
-                }
-                let next_attrs = current_attrs.carried(&sub.parents, &sub.mesh);
-                progress.inc(sub.mesh.vertex_count().saturating_sub(nv) as u64);
-                levels.push((sub.mesh, Some(sub.parents), next_attrs));
-            }
-            progress.finish();
-            // The finest level is the one closest to the target in ratio: the
-            // step past it may overshoot by up to 2x (V' = V + F).
-            if target > 0 && levels.len() >= 2 {
-                let n = |i: usize| levels[i].0.vertex_count() as f64;
-                let (last, prev) = (n(levels.len() - 1), n(levels.len() - 2));
-                if last >= target as f64 && last / target as f64 > target as f64 / prev {
-                    levels.pop();
-                }
-            }
-            if target > 0 && levels.len() == 1 {
-                let n = levels[0].0.vertex_count();
-                tracing::warn!(
-                    "subdivide_sqrt2: the mesh already has {n} vertices for a target of {target}: the hierarchy has one level (no coarse-to-fine synthesis); give `levels` to force steps, or a smaller texture scale"
-                );
-                metrics.record(idx, "warning", format!("one-level hierarchy: {n} vertices for a target of {target}"));
-            }
-            let count = levels.len();
-            let sizes: Vec<usize> = levels.iter().map(|l| l.0.vertex_count()).collect();
-            metrics.record(idx, "uniform_steps", count - 1);
-            metrics.record(idx, "level_vertices_coarse_to_fine", &sizes);
-            if let Some((finest, _, _)) = levels.last() {
-                metrics.record(idx, "finest_faces", finest.face_count());
-                metrics.record(
-                    idx,
-                    "finest_area_std_percent",
-                    AreaStats::of(finest).std_percent_of_mean,
-                );
-            }
-            let mut entities = vec![Entity::PLACEHOLDER; count];
-            for (i, (mesh, parents, attrs)) in levels.into_iter().enumerate() {
-                let level = (count - 1 - i) as u8;
-                let mut e = commands.spawn((MeshLevel(level), Geometry(mesh)));
-                if let Some(p) = parents {
-                    e.insert(LevelParents(p));
-                }
-                attrs.insert(&mut e);
-                entities[level as usize] = e.id();
-            }
+            let levels = uniform_levels(coarse, &uniform, surface);
+            record_levels(&levels, target, m, idx);
+            let entities = spawn_levels(&mut commands, levels, attrs);
             active.0 = entities[0];
             commands.insert_resource(Sqrt2Pyramid(entities));
-        })
-        .into_configs()
+            Ok(())
+        };
+        ctx.fallible(Self::KIND, subdivide)
     }
 }

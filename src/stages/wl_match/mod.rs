@@ -7,18 +7,19 @@
 //! Works on whatever mesh levels exist: the non-source `MeshLevel` entities
 //! (from `retile` or `builtin_pyramid`), or the source mesh alone as a
 //! one-level pyramid.
+//!
+//! Reads: the pyramid's levels (`Geometry`, `Frames`; the coarsest level's
+//! `VertexColours` and `SourceTexels` from `init_colours`), the exemplar.
+//! Writes: on every level `VertexColours` and `SourceTexels`, `Frames`
+//! where it had none; `ActiveMesh`, `TexelSpacing`.
 
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
-use crate::kernels::surface::flatten::TriangleAdjacency;
-use crate::kernels::surface::frames::TangentFrame;
-use crate::kernels::wei_levoy::relax_orientation::{OrientationLevel, transfer_frames};
 use crate::kernels::wei_levoy::wl_match::{
-    InitialColours, NeighbourhoodSpec, SearchKind, SynthesisLevel, WlSettings,
+    InitialColours, LevelReport, NeighbourhoodSpec, SearchKind, SynthesisLevel, WlSettings,
     wei_levoy_synthesis_with_progress,
 };
-use crate::mesh::{PolyMesh, Topology};
 use crate::progress::Progress;
-use crate::stage::{Datum, Stage, StageCtx, StageError};
+use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -181,18 +182,64 @@ impl MatchSettings {
 /// The `match` stage.
 pub struct Match;
 
-pub(crate) type LevelQuery<'w, 's> =
-    Query<'w, 's, (Entity, &'static MeshLevel, Has<SourceMesh>), With<Geometry>>;
-pub(crate) type DataQuery<'w, 's> = Query<
-    'w,
-    's,
-    (
-        &'static Geometry,
-        Option<&'static Frames>,
-        Option<&'static VertexColours>,
-        Option<&'static SourceTexels>,
-    ),
->;
+/// The coarsest level's colours from `init_colours` (its exemplar pixels,
+/// with their texels on the exemplar pyramid's top level), when they fit
+/// the level and the top level of the exemplar's pyramid (one level per
+/// level of `entities`, finest first).
+fn initial_colours(
+    data: &LevelData,
+    entities: &[Entity],
+    exemplar: &Exemplar,
+) -> Option<(Vec<f32>, Vec<[u32; 2]>)> {
+    let (count, coarsest) = (entities.len(), entities[entities.len() - 1]);
+    let scale = 2f32.powi(count as i32 - 1);
+    let init = data.get(coarsest).ok().and_then(|(g, _, c, t)| {
+        let (c, t) = (c?, t?);
+        let nv = g.0.vertex_count();
+        let ch = exemplar.image.channels as usize;
+        (c.channels == ch && c.values.len() == nv * ch && t.0.len() == nv).then(|| {
+            let texels: Vec<[u32; 2]> =
+                t.0.iter()
+                    .map(|p| {
+                        [
+                            ((p.x - 0.5) / scale).round() as u32,
+                            ((p.y - 0.5) / scale).round() as u32,
+                        ]
+                    })
+                    .collect();
+            (c.values.clone(), texels)
+        })
+    });
+    let pyramid_top =
+        crate::image::pyramid::gaussian_pyramid(&exemplar.image, count, exemplar.wrap);
+    let top = &pyramid_top[count - 1];
+    init.filter(|(_, t)| t.iter().all(|p| p[0] < top.width && p[1] < top.height))
+}
+
+/// Records the synthesis's figures as metrics of stage `index`; returns
+/// the finest level's texel spacing, if any.
+fn record_metrics(
+    metrics: &mut Metrics,
+    index: usize,
+    search: SearchBackend,
+    reports: &[LevelReport],
+) -> Option<f32> {
+    let search_seconds: f64 = reports.iter().map(|r| r.search_seconds).sum();
+    let values: u64 = reports.iter().map(|r| r.exhaustive_values).sum();
+    metrics.record(index, "levels", reports);
+    metrics.record(index, "search_seconds", search_seconds);
+    if search == SearchBackend::Exhaustive && search_seconds > 0.0 {
+        // Two flops (multiply, add) per compared value in the matrix products.
+        metrics.record(
+            index,
+            "exhaustive_gflops_per_second",
+            2.0 * values as f64 / search_seconds / 1e9,
+        );
+    }
+    let r = reports.first()?;
+    metrics.record(index, "mean_match_distance_finest", r.mean_distance[1]);
+    Some(r.spacing)
+}
 
 impl Stage for Match {
     const KIND: &'static str = "match";
@@ -208,61 +255,21 @@ impl Stage for Match {
         vec![Datum::Colours]
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
-        (move |mut commands: Commands,
-               seed: Res<RunSeed>,
-               exemplar: Res<Exemplar>,
-               active: Res<ActiveMesh>,
-               mut spacing_res: ResMut<TexelSpacing>,
-               mut metrics: ResMut<Metrics>,
-               mut failure: ResMut<StageFailure>,
-               levels: LevelQuery,
-               data: DataQuery| {
-            let fail = |message: String| StageError {
-                index: ctx.index + 1,
-                kind: Self::KIND.into(),
-                message,
-            };
-            let PyramidInput {
-                entities,
-                meshes,
-                given,
-                frames,
-            } = match pyramid_input(&levels, &data, active.0) {
-                Ok(p) => p,
-                Err(m) => {
-                    failure.0 = Some(fail(m));
-                    return;
-                }
-            };
-            let count = entities.len();
+        let synthesize = move |mut commands: Commands,
+                               seed: Res<RunSeed>,
+                               exemplar: Res<Exemplar>,
+                               mut spacing_res: ResMut<TexelSpacing>,
+                               mut metrics: ResMut<Metrics>,
+                               pyramid: Pyramid|
+              -> SystemResult {
+            let input = pyramid.input()?;
+            let entities = &input.entities;
             // The coarsest level starts from init_colours' pixels when it has them.
-            let coarsest = entities[count - 1];
-            let scale = 2f32.powi(count as i32 - 1);
-            let init = data.get(coarsest).ok().and_then(|(g, _, c, t)| {
-                let (c, t) = (c?, t?);
-                let nv = g.0.vertex_count();
-                let ch = exemplar.image.channels as usize;
-                (c.channels == ch && c.values.len() == nv * ch && t.0.len() == nv).then(|| {
-                    let texels: Vec<[u32; 2]> =
-                        t.0.iter()
-                            .map(|p| {
-                                [
-                                    ((p.x - 0.5) / scale).round() as u32,
-                                    ((p.y - 0.5) / scale).round() as u32,
-                                ]
-                            })
-                            .collect();
-                    (c.values.clone(), texels)
-                })
-            });
-            let pyramid_top =
-                crate::image::pyramid::gaussian_pyramid(&exemplar.image, count, exemplar.wrap);
-            let top = &pyramid_top[count - 1];
-            let init =
-                init.filter(|(_, t)| t.iter().all(|p| p[0] < top.width && p[1] < top.height));
-            let inputs: Vec<SynthesisLevel> = meshes
+            let init = initial_colours(&pyramid.data, entities, &exemplar);
+            let inputs: Vec<SynthesisLevel> = input
+                .meshes
                 .iter()
-                .zip(&frames)
+                .zip(&input.frames)
                 .map(|(m, f)| SynthesisLevel { mesh: m, frames: f })
                 .collect();
             let kernel = settings.kernel_settings(seed.derive(ctx.index, 0), exemplar.wrap);
@@ -277,157 +284,29 @@ impl Stage for Match {
                 &progress,
             );
             progress.finish();
-            let results = match result {
-                Ok(r) => r,
-                Err(e) => {
-                    failure.0 = Some(fail(e.to_string()));
-                    return;
-                }
-            };
+            let results = result.map_err(|e| e.to_string())?;
             let reports: Vec<_> = results.iter().map(|r| r.report.clone()).collect();
-            let search_seconds: f64 = reports.iter().map(|r| r.search_seconds).sum();
-            let values: u64 = reports.iter().map(|r| r.exhaustive_values).sum();
-            metrics.record(ctx.index, "levels", &reports);
-            metrics.record(ctx.index, "search_seconds", search_seconds);
-            if settings.search == SearchBackend::Exhaustive && search_seconds > 0.0 {
-                // Two flops (multiply, add) per compared value in the matrix products.
-                metrics.record(
-                    ctx.index,
-                    "exhaustive_gflops_per_second",
-                    2.0 * values as f64 / search_seconds / 1e9,
-                );
+            let finest_spacing = record_metrics(&mut metrics, ctx.index, settings.search, &reports);
+            if let Some(spacing) = finest_spacing {
+                spacing_res.0 = spacing;
             }
-            if let Some(r) = reports.first() {
-                metrics.record(ctx.index, "mean_match_distance_finest", r.mean_distance[1]);
-                spacing_res.0 = r.spacing;
-            }
-            let ch = exemplar.image.channels as usize;
-            for (l, (e, r)) in entities.iter().zip(results).enumerate() {
+            let channels = exemplar.image.channels as usize;
+            for (l, r) in results.into_iter().enumerate() {
                 let s = 2f32.powi(l as i32);
                 let texels: Vec<Vec2> = r
                     .texels
                     .iter()
                     .map(|t| Vec2::new(t[0] as f32 * s + 0.5, t[1] as f32 * s + 0.5))
                     .collect();
-                commands.entity(*e).insert((
-                    VertexColours {
-                        channels: ch,
-                        values: r.colours,
-                    },
-                    SourceTexels(texels),
-                ));
-                if frames_missing(&given, l) {
-                    commands.entity(*e).insert(Frames(frames[l].clone()));
-                }
+                let colours = VertexColours {
+                    channels,
+                    values: r.colours,
+                };
+                input.write_level(&mut commands, l, colours, texels);
             }
             commands.insert_resource(ActiveMesh(entities[0]));
-        })
-        .into_configs()
-    }
-}
-
-/// The mesh pyramid a per-vertex synthesis stage works on: its level
-/// entities (finest first), their meshes, the frames they carry and the
-/// frames of every level (completed by [`complete_frames`]).
-pub(crate) struct PyramidInput<'a> {
-    pub entities: Vec<Entity>,
-    pub meshes: Vec<&'a PolyMesh>,
-    pub given: Vec<Option<&'a [TangentFrame]>>,
-    pub frames: Vec<Vec<TangentFrame>>,
-}
-
-/// [`PyramidInput`] of the world: the levels `pyramid_entities` picks.
-pub(crate) fn pyramid_input<'a>(
-    levels: &LevelQuery,
-    data: &'a DataQuery,
-    active: Entity,
-) -> Result<PyramidInput<'a>, String> {
-    let entities = pyramid_entities(levels.iter().map(|(e, l, s)| (e, *l, s)))?;
-    let meshes: Vec<&PolyMesh> = entities
-        .iter()
-        .filter_map(|&e| data.get(e).ok().map(|d| &d.0.0))
-        .collect();
-    let given: Vec<Option<&[TangentFrame]>> = entities
-        .iter()
-        .map(|&e| data.get(e).ok().and_then(|d| d.1).map(|f| &f.0[..]))
-        .collect();
-    let frames = complete_frames(&meshes, &given, data, active)?;
-    Ok(PyramidInput {
-        entities,
-        meshes,
-        given,
-        frames,
-    })
-}
-
-pub(crate) fn frames_missing(given: &[Option<&[TangentFrame]>], l: usize) -> bool {
-    given[l].is_none()
-}
-
-/// Frames for every level: the given ones; levels without frames (or with the
-/// wrong count) take frames transferred from the nearest level that has them,
-/// else from the active mesh when it is outside the pyramid.
-fn complete_frames(
-    meshes: &[&PolyMesh],
-    given: &[Option<&[TangentFrame]>],
-    data: &DataQuery,
-    active: Entity,
-) -> Result<Vec<Vec<TangentFrame>>, String> {
-    let ok = |l: usize| given[l].filter(|f| f.len() == meshes[l].vertex_count());
-    let external = data
-        .get(active)
-        .ok()
-        .and_then(|(g, f, _, _)| f.map(|f| (&g.0, &f.0[..])))
-        .filter(|(g, f)| f.len() == g.vertex_count());
-    let mut out = Vec::with_capacity(meshes.len());
-    for l in 0..meshes.len() {
-        if let Some(f) = ok(l) {
-            out.push(f.to_vec());
-            continue;
-        }
-        let nearest = (0..meshes.len())
-            .filter(|&k| ok(k).is_some())
-            .min_by_key(|&k| k.abs_diff(l));
-        let (from_mesh, from_frames) = match (nearest, external) {
-            (Some(k), _) => (meshes[k], ok(k).unwrap_or(&[])),
-            (None, Some(e)) => e,
-            (None, None) => {
-                return Err(
-                    "needs tangent frames on the mesh: add `orientation` or `relax_orientation` before it"
-                        .into(),
-                );
-            }
+            Ok(())
         };
-        out.push(transfer_between(from_mesh, from_frames, meshes[l]));
+        ctx.fallible(Self::KIND, synthesize)
     }
-    Ok(out)
-}
-
-/// Frames of `to` interpolated from `from`'s (no symmetry assumed).
-fn transfer_between(from: &PolyMesh, frames: &[TangentFrame], to: &PolyMesh) -> Vec<TangentFrame> {
-    let level = |m: &PolyMesh| {
-        (
-            m.vertex_normals(),
-            Topology::build(m),
-            TriangleAdjacency::new(m),
-        )
-    };
-    let (fnorm, ftopo, fadj) = level(from);
-    let (tnorm, ttopo, tadj) = level(to);
-    transfer_frames(
-        &OrientationLevel {
-            positions: &from.positions,
-            normals: &fnorm,
-            topology: &ftopo,
-            adjacency: &fadj,
-        },
-        frames,
-        &OrientationLevel {
-            positions: &to.positions,
-            normals: &tnorm,
-            topology: &ttopo,
-            adjacency: &tadj,
-        },
-        1,
-    )
 }

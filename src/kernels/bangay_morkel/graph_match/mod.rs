@@ -29,7 +29,8 @@
 //! of step 4 finds imprints that agree with the surface and takes larger
 //! pieces (fewer seams).
 //!
-//! [`match_pass`] runs this over a vertex order. Vertices whose k-regions
+//! [`match_pass`] runs this over a vertex order; [`hierarchy`] runs the
+//! passes coarse to fine over a √2 hierarchy. Vertices whose k-regions
 //! are disjoint do not see each other's results, so batches of vertices
 //! with pairwise disjoint regions are matched in parallel (consecutive ones
 //! for a sweep order, [`BatchRule::Exact`]; any for a random order,
@@ -37,6 +38,7 @@
 //! order, whatever the thread count. A batch of one vertex is searched in
 //! parallel over candidate tiles.
 
+pub mod hierarchy;
 mod region;
 mod search;
 mod stack;

@@ -21,6 +21,12 @@
 //!   vertex budget, the hierarchy of §3.2.1.
 //! * [`adaptive_sqrt2`] (`adaptive.rs`): refines only faces larger than a
 //!   factor times the mean area, §3.2.2, with its transition rule.
+//! * `carry.rs`: per-vertex attributes carried through [`Parents`]
+//!   ([`carry_attribute`], rows, frames).
+//! * `on_input.rs`: levels kept on the input surface and its corners
+//!   ([`InputSurface`]), uniform steps to a vertex budget
+//!   ([`levels_towards`]), and a dense input remeshed coarse first
+//!   ([`coarsened_input`]).
 //! * `split.rs`: the connectivity shared by both: sides grouped by edge and
 //!   the faces each edge turns into.
 //!
@@ -31,12 +37,16 @@
 //! and weights that [`interpolate_attribute`] uses.
 
 mod adaptive;
+mod carry;
 mod hierarchy;
+mod on_input;
 mod split;
 mod uniform;
 
 pub use adaptive::{AdaptiveSqrt2, AreaStats, adaptive_sqrt2};
+pub use carry::{carry_attribute, carry_frames, carry_rows};
 pub use hierarchy::{MAX_HIERARCHY_LEVELS, MAX_HIERARCHY_VERTICES, subdivide_to};
+pub use on_input::{COARSEN_STEPS, InputSurface, UniformLevels, coarsened_input, levels_towards};
 pub use uniform::{Sqrt2Settings, sqrt2_subdivide, sqrt2_subdivide_with};
 
 use crate::mesh::PolyMesh;
@@ -213,21 +223,5 @@ where
         sub.source_vertex_count,
         "interpolate_attribute: one value per source vertex expected"
     );
-    let p = &sub.parents;
-    (0..p.len())
-        .map(|v| {
-            let (pv, pw) = p.of(v);
-            match (pv, pw) {
-                // Identity entries copy the value: bit-exact, no `* 1.0`.
-                ([s], [w]) if *w == 1.0 => old[*s as usize],
-                _ => {
-                    let mut acc = old[pv[0] as usize] * pw[0];
-                    for (&s, &w) in pv.iter().zip(pw).skip(1) {
-                        acc = acc + old[s as usize] * w;
-                    }
-                    acc
-                }
-            }
-        })
-        .collect()
+    carry_attribute(&sub.parents, old)
 }

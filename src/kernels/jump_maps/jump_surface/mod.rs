@@ -30,13 +30,16 @@
 //! centres (`(x + 0.5) / width` is the texture coordinate u).
 //!
 //! Files: this one (settings, the output, edge offsets, the paper's
-//! synthesis); [`matched`] (the matched choice and the seam band);
-//! [`uvs`] (per-corner texture coordinates and the 3-way blend layers).
+//! synthesis, per-vertex scales); [`matched`] (the matched choice and the
+//! seam band); [`seams`] (the seam refinement, an extension); [`uvs`]
+//! (per-corner texture coordinates and the 3-way blend layers).
 
 mod matched;
+mod seams;
 mod uvs;
 
 pub use matched::*;
+pub use seams::*;
 pub use uvs::*;
 
 use crate::kernels::jump_maps::vertex_order::VertexOrder;
@@ -204,6 +207,29 @@ impl JumpLookup for crate::kernels::jump_maps::jump_map::JumpMap {
             f(j.to.x, j.to.y, j.weight);
         }
     }
+}
+
+/// Per-vertex scale (exemplar pixels per world unit): `base` times a ramp
+/// from `factors[0]` at the lowest vertex along `axis` to `factors[1]` at
+/// the highest (`base` everywhere when both are 1).
+pub fn height_scales(positions: &[Vec3], base: f32, factors: [f32; 2], axis: Vec3) -> Vec<f32> {
+    let [lo_f, hi_f] = factors;
+    if (lo_f - 1.0).abs() < 1e-9 && (hi_f - 1.0).abs() < 1e-9 {
+        return vec![base; positions.len()];
+    }
+    let axis = axis.normalize_or_zero();
+    let (lo, hi) = positions.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| {
+        let h = p.dot(axis);
+        (lo.min(h), hi.max(h))
+    });
+    let span = (hi - lo).max(1e-12);
+    positions
+        .iter()
+        .map(|p| {
+            let t = (p.dot(axis) - lo) / span;
+            base * (lo_f + (hi_f - lo_f) * t)
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -522,3 +522,18 @@ fn splitmix(x: u64) -> u64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
+
+/// Edge-length coefficient of variation (std / mean) of a mesh: how evenly
+/// a level is tiled.
+pub fn edge_length_cv(mesh: &PolyMesh) -> f32 {
+    let topo = crate::mesh::Topology::build(mesh);
+    let lens: Vec<f64> = topo
+        .edges
+        .iter()
+        .map(|e| (mesh.positions[e[0] as usize] - mesh.positions[e[1] as usize]).length() as f64)
+        .collect();
+    let n = lens.len().max(1) as f64;
+    let mean = lens.iter().sum::<f64>() / n;
+    let var = lens.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / n;
+    (var.sqrt() / mean.max(1e-30)) as f32
+}
