@@ -135,6 +135,26 @@ pub fn read(dir: &Path, kind: &str, key: &[u8; 32]) -> Option<Vec<u8>> {
     Some(bytes)
 }
 
+/// Whether `dir` holds an entry of `kind` under `key` that starts with
+/// `header` (its magic, version and key): read from its first bytes only,
+/// and only from a regular file within the limit, as [`read`] would take
+/// it. The rest is checked when the entry is read.
+pub fn holds(dir: &Path, kind: &str, key: &[u8; 32], header: &[u8]) -> bool {
+    use std::io::Read;
+    let path = entry_path(dir, kind, key);
+    let Ok(meta) = std::fs::symlink_metadata(&path) else {
+        return false;
+    };
+    let limit = limit();
+    if !meta.file_type().is_file() || (limit > 0 && meta.len() > limit) {
+        return false;
+    }
+    let mut start = vec![0u8; header.len()];
+    std::fs::File::open(&path)
+        .and_then(|mut f| f.read_exact(&mut start))
+        .is_ok_and(|()| start == header)
+}
+
 /// Sets the last use of a cache file (its modification time), which
 /// eviction goes by. Opens it read-only: the owner may set its times.
 pub fn set_last_use(path: &Path, time: SystemTime) -> std::io::Result<()> {

@@ -37,6 +37,18 @@ pub struct InputSizes {
 }
 
 impl InputSizes {
+    /// These sizes with the active mesh replaced by a closed triangle mesh
+    /// of `vertices` vertices (about two triangles per vertex) over the same
+    /// surface: what the stages after a retiling or a subdivision see.
+    pub fn with_mesh(&self, vertices: u64) -> Self {
+        Self {
+            vertices,
+            faces: vertices.saturating_mul(2),
+            triangles: vertices.saturating_mul(2),
+            ..*self
+        }
+    }
+
     /// Exemplar pixels.
     pub fn exemplar_pixels(&self) -> u64 {
         u64::from(self.exemplar_width) * u64::from(self.exemplar_height)

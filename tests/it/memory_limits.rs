@@ -512,3 +512,74 @@ fn the_largest_value_named_fits_and_one_more_does_not() {
         },
     );
 }
+
+/// Issue 43: a jump map already in the analysis cache is read, not
+/// analysed, so a limit that refuses its analysis does not refuse the run
+/// (it was estimated as if analysed).
+#[test]
+fn a_cached_jump_map_is_not_refused_for_the_analysis_it_skips() {
+    let dir = tempfile::tempdir().unwrap();
+    let png = gradient_png(dir.path(), 384);
+    let config = jump_map(&png, "[9, 5, 3]").replace("cache = false\n", "");
+    let cache = dir.path().join("cache");
+    let cache = cache.to_str().unwrap();
+    let low: &[(&str, &str)] = &[(LIMIT_VAR, "64M"), ("SURFSYNTH_CACHE", cache)];
+    common::expect_refused_env(
+        &config,
+        &[],
+        low,
+        &[
+            "stage 1 (jump_map)",
+            "needs an estimated",
+            "largest that fits",
+        ],
+    );
+    let cfg = dir.path().join("j.toml");
+    std::fs::write(&cfg, &config).unwrap();
+    let run = |env: &[(&str, &str)], out: &str| {
+        let out = dir.path().join(out);
+        let (code, _, stderr) = common::run_cli_env(
+            &["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()],
+            env,
+        );
+        (code, stderr, out)
+    };
+    let (code, stderr, _) = run(&[("SURFSYNTH_CACHE", cache)], "first");
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stderr, out) = run(low, "second");
+    assert_eq!(
+        code, 0,
+        "the cached map is read under the low limit: {stderr}"
+    );
+    let metrics = std::fs::read_to_string(out.join("metrics.json")).unwrap();
+    assert!(metrics.contains("\"cache_hit\": true"), "{metrics}");
+}
+
+/// Issue 43: the stages after a retiling see the retiled mesh's size, not
+/// the input's, in their estimates.
+#[test]
+fn stages_after_a_retiling_are_estimated_on_the_retiled_mesh() {
+    let text = r#"
+seed = 1
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+[input.mesh_options]
+subdivisions = 1
+[[stage]]
+kind = "retile"
+vertices = 50000
+[[stage]]
+kind = "subdivide_sqrt2"
+levels = 2
+"#;
+    let p = Pipeline::from_source(ConfigSource::from_text("t.toml", text)).unwrap();
+    let input = load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+    let sizes = InputSizes::of(&input, &p.input);
+    let seen = surfsynth::pipeline::memory_budget::stage_sizes(&p.stages, &sizes);
+    assert_eq!(seen[0].vertices, sizes.vertices);
+    assert_eq!(seen[1].vertices, 50_000);
+    let input_only = p.stages[1].memory_estimate(&sizes)[0].bytes;
+    let after = p.stages[1].memory_estimate(&seen[1])[0].bytes;
+    assert!(after > 100 * input_only, "{after} vs {input_only}");
+}

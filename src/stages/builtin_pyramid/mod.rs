@@ -207,6 +207,14 @@ impl Stage for BuiltinPyramid {
             |a, b| (a * b).saturating_mul(BYTES_PER_MESH_VERTEX),
         )]
     }
+    /// The finest level's `resolution` grid.
+    fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
+        if !matches!(settings.mesh.as_str(), "plane" | "torus" | "uv_sphere") {
+            return *sizes;
+        }
+        let [u, v] = settings.resolution;
+        sizes.with_mesh(u64::from(u) * u64::from(v))
+    }
     fn plane_role(settings: &Self::Settings) -> crate::stage::PlaneRole {
         crate::stage::PlaneRole::ReplacesMesh {
             planar: settings.mesh == "plane",

@@ -10,7 +10,7 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::sample::Wrap;
 use crate::kernels::jump_maps::jump_map::analysis::analysis_bytes;
 use crate::kernels::jump_maps::jump_map::{
-    Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress,
+    Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress, map,
 };
 use crate::progress::Progress;
 use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};
@@ -317,6 +317,28 @@ impl Stage for JumpMapStage {
                 Fit::growing("an exemplar of", (1, long), exemplar, show_exemplar).separated(" "),
             ],
         }]
+    }
+    /// A jump map in the analysis cache for this exemplar and these
+    /// settings is read, not analysed: the analysis estimate does not
+    /// apply (issue 43). Only the entry's header is checked here; an entry
+    /// that then fails its checksum is analysed after all.
+    fn analysis_cached(
+        settings: &Self::Settings,
+        exemplar: &crate::image::Image,
+        wrap: Wrap,
+        seed: u64,
+        ctx: StageCtx,
+    ) -> bool {
+        if !settings.cache {
+            return false;
+        }
+        let Some(dir) = crate::cache::default_dir() else {
+            return false;
+        };
+        let ks = settings.kernel_settings(wrap, RunSeed(seed).derive(ctx.index, 0));
+        let key = ks.cache_key(exemplar);
+        let header = crate::cache_format::entry_header(&map::MAGIC, map::FORMAT_VERSION, &key);
+        crate::cache::holds(&dir, "jumpmap", &key, &header)
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let analyse = move |mut commands: Commands,

@@ -272,6 +272,20 @@ impl Stage for Retile {
         }
         vec![e]
     }
+    /// The finest level's vertices, as the estimate counts them.
+    fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
+        let vertices = if settings.edge_length > 0.0 {
+            let e = f64::from(settings.edge_length);
+            (sizes.loaded)
+                .then(|| (2.0 / 3f64.sqrt() * sizes.area / (e * e)).min(u64::MAX as f64) as u64)
+        } else if settings.vertices == 0 {
+            (sizes.loaded)
+                .then(|| sizes.vertices_for_area(sizes.area / settings.texels_per_vertex) as u64)
+        } else {
+            Some(u64::from(settings.vertices))
+        };
+        vertices.map_or(*sizes, |v| sizes.with_mesh(v))
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let retile = move |mut commands: Commands,
                            mut active: ResMut<ActiveMesh>,

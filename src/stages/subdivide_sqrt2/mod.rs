@@ -247,6 +247,21 @@ impl Stage for SubdivideSqrt2 {
         }
         vec![e]
     }
+    /// The finest level's vertices, as the estimate counts them.
+    fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
+        let vertices = match (settings.levels, settings.target_vertices) {
+            (_, t) if t > 0 => Some(t),
+            (0, _) => sizes
+                .loaded
+                .then(|| sizes.vertices_for_area(sizes.area) as u64),
+            (l, _) => sizes.loaded.then(|| {
+                sizes
+                    .vertices
+                    .saturating_mul(1u64 << l.min(MAX_HIERARCHY_LEVELS).min(40))
+            }),
+        };
+        vertices.map_or(*sizes, |v| sizes.with_mesh(v))
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let subdivide = move |mut commands: Commands,
                               mut active: ResMut<ActiveMesh>,
