@@ -1,7 +1,9 @@
 //! The world model: the components of mesh levels, image levels and
 //! patches, and the run-wide resources, shared by every stage, the writer
 //! (`output`) and the pipeline. It sits below the stages: it names only the
-//! stage contract, kernels' data types and the mesh and image layers.
+//! stage contract, the kernels (their data types, and a kernel function where
+//! a shared query completes its data: `Pyramid::input`) and the mesh and
+//! image layers.
 //! Everything is structure-of-arrays: a vertex is a row (`u32` id) in each
 //! per-vertex array.
 //!
