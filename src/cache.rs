@@ -115,17 +115,21 @@ fn is_entry_tmp(name: &str) -> bool {
         })
 }
 
+/// Whether `path` could be an entry this cache wrote: only a regular file,
+/// no larger than a non-zero limit; anything else (a symlink, a device such
+/// as /dev/zero) is a miss, decided before a byte is read.
+fn could_be_entry(path: &Path) -> bool {
+    let limit = limit();
+    std::fs::symlink_metadata(path)
+        .is_ok_and(|meta| meta.file_type().is_file() && (limit == 0 || meta.len() <= limit))
+}
+
 /// Reads an entry's bytes, if the file exists and is readable, and sets its
 /// modification time to now: the time is the entry's last use, which
 /// eviction goes by.
 pub fn read(dir: &Path, kind: &str, key: &[u8; 32]) -> Option<Vec<u8>> {
     let path = entry_path(dir, kind, key);
-    // Only a regular file, no larger than a non-zero limit, can be an
-    // entry this cache wrote; anything else (a symlink, a device such as
-    // /dev/zero) is a miss, decided before a byte is read.
-    let meta = std::fs::symlink_metadata(&path).ok()?;
-    let limit = limit();
-    if !meta.file_type().is_file() || (limit > 0 && meta.len() > limit) {
+    if !could_be_entry(&path) {
         return None;
     }
     let bytes = std::fs::read(&path).ok()?;
@@ -142,11 +146,7 @@ pub fn read(dir: &Path, kind: &str, key: &[u8; 32]) -> Option<Vec<u8>> {
 pub fn holds(dir: &Path, kind: &str, key: &[u8; 32], header: &[u8]) -> bool {
     use std::io::Read;
     let path = entry_path(dir, kind, key);
-    let Ok(meta) = std::fs::symlink_metadata(&path) else {
-        return false;
-    };
-    let limit = limit();
-    if !meta.file_type().is_file() || (limit > 0 && meta.len() > limit) {
+    if !could_be_entry(&path) {
         return false;
     }
     let mut start = vec![0u8; header.len()];
