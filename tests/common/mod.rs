@@ -29,12 +29,13 @@ pub fn run_cli(args: &[&str]) -> (i32, String, String) {
 pub fn run_cli_env(args: &[&str], env: &[(&str, &str)]) -> (i32, String, String) {
     let out = bin()
         .args(args)
-        .envs(env.iter().copied())
         .env("RUST_LOG", "warn")
         .env(
             "SURFSYNTH_CACHE",
             Path::new(env!("CARGO_TARGET_TMPDIR")).join("surfsynth-cache"),
         )
+        // The caller's variables last: they may name a cache of their own.
+        .envs(env.iter().copied())
         .output()
         .expect("the surfsynth binary runs");
     (
