@@ -200,6 +200,27 @@ fn spawn_levels(
     finest
 }
 
+/// Vertices per unit² of equilateral triangles of side 1: 2 / √3 (side e:
+/// divide by e²).
+const EQUILATERAL_VERTICES_PER_AREA: f64 = 1.154_700_538_379_251_7;
+
+/// The finest level's vertex count the settings ask for on an input of
+/// `sizes`: from `edge_length`, derived from the texture scale, or
+/// `vertices` as given; `None` when it depends on an input not yet loaded.
+fn finest_vertices(settings: &RetileStageSettings, sizes: &InputSizes) -> Option<u64> {
+    if settings.edge_length > 0.0 {
+        let e = f64::from(settings.edge_length);
+        let count = EQUILATERAL_VERTICES_PER_AREA * sizes.area / (e * e);
+        sizes.loaded.then(|| count.min(u64::MAX as f64) as u64)
+    } else if settings.vertices == 0 {
+        sizes
+            .loaded
+            .then(|| sizes.vertices_for_area(sizes.area / settings.texels_per_vertex) as u64)
+    } else {
+        Some(u64::from(settings.vertices))
+    }
+}
+
 /// The `retile` stage.
 pub struct Retile;
 
@@ -228,20 +249,14 @@ impl Stage for Retile {
             if !sizes.loaded {
                 return Vec::new();
             }
-            // Equilateral triangles of side e: 2 / (√3 e²) vertices per unit².
-            let per_area = 2.0 / 3f64.sqrt();
+            let per_area = EQUILATERAL_VERTICES_PER_AREA;
             let area = sizes.area;
-            let count = |e: f64| (per_area * area / (e * e)).min(u64::MAX as f64) as u64;
-            let e = f64::from(settings.edge_length);
+            let count = finest_vertices(settings, sizes).unwrap_or(0);
             return vec![MemoryEstimate {
                 param: "edge_length",
-                value: format!(
-                    "{} ({} vertices on this input)",
-                    settings.edge_length,
-                    count(e)
-                ),
+                value: format!("{} ({count} vertices on this input)", settings.edge_length),
                 what: what.into(),
-                bytes: bytes(count(e)),
+                bytes: bytes(count),
                 fits: vec![Fit::with("edge_length", move |budget| {
                     let v = budget.saturating_sub(input) / BYTES_PER_VERTEX;
                     (v > 0).then(|| format!("{:.6} or more", (per_area * area / v as f64).sqrt()))
@@ -249,13 +264,8 @@ impl Stage for Retile {
             }];
         }
         let derived = settings.vertices == 0;
-        if derived && !sizes.loaded {
+        let Some(vertices) = finest_vertices(settings, sizes) else {
             return Vec::new();
-        }
-        let vertices = if derived {
-            sizes.vertices_for_area(sizes.area / settings.texels_per_vertex) as u64
-        } else {
-            u64::from(settings.vertices)
         };
         let mut e = MemoryEstimate::growing(
             "vertices",
@@ -274,17 +284,7 @@ impl Stage for Retile {
     }
     /// The finest level's vertices, as the estimate counts them.
     fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
-        let vertices = if settings.edge_length > 0.0 {
-            let e = f64::from(settings.edge_length);
-            (sizes.loaded)
-                .then(|| (2.0 / 3f64.sqrt() * sizes.area / (e * e)).min(u64::MAX as f64) as u64)
-        } else if settings.vertices == 0 {
-            (sizes.loaded)
-                .then(|| sizes.vertices_for_area(sizes.area / settings.texels_per_vertex) as u64)
-        } else {
-            Some(u64::from(settings.vertices))
-        };
-        vertices.map_or(*sizes, |v| sizes.with_mesh(v))
+        finest_vertices(settings, sizes).map_or(*sizes, |v| sizes.with_mesh(v))
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let retile = move |mut commands: Commands,
