@@ -138,23 +138,32 @@ fn mib(bytes: u64) -> f64 {
 /// estimate of stage `stage` (0-based) within [0.5, 2] of its measured
 /// peak; returns the table rows.
 fn check(label: &str, stage: usize, config: &str, sizes: &[&str]) -> Vec<String> {
+    check_each(&[(stage, label)], config, sizes)
+}
+
+/// [`check`] for several stages of one pipeline (`(stage, label)`), each
+/// size run once.
+fn check_each(stages: &[(usize, &str)], config: &str, sizes: &[&str]) -> Vec<String> {
     let mut rows = Vec::new();
     let mut bad = Vec::new();
     for size in sizes {
         let text = config.replace("{}", size);
-        let estimate = estimates(&text)[stage];
-        let measured = measure(&text)[stage] as u64;
-        let ratio = estimate as f64 / measured.max(1) as f64;
-        let row = format!(
-            "| {label} | {size} | {:.1} MiB | {:.1} MiB | {ratio:.2} |",
-            mib(estimate),
-            mib(measured)
-        );
-        eprintln!("{row}");
-        if !(0.5..=2.0).contains(&ratio) {
-            bad.push(row.clone());
+        let estimates = estimates(&text);
+        let measured = measure(&text);
+        for &(stage, label) in stages {
+            let (estimate, measured) = (estimates[stage], measured[stage] as u64);
+            let ratio = estimate as f64 / measured.max(1) as f64;
+            let row = format!(
+                "| {label} | {size} | {:.1} MiB | {:.1} MiB | {ratio:.2} |",
+                mib(estimate),
+                mib(measured)
+            );
+            eprintln!("{row}");
+            if !(0.5..=2.0).contains(&ratio) {
+                bad.push(row.clone());
+            }
+            rows.push(row);
         }
-        rows.push(row);
     }
     assert!(
         bad.is_empty(),
@@ -366,3 +375,209 @@ plane_size = [{}, {}]
 "#;
     check("export plane_size", 2, plane, &["256", "512", "1024"]);
 }
+
+/// The per-vertex stages of every method: orientation fields, Wei–Levoy's
+/// match and map-back, the coherent synthesis, Bangay–Morkel's
+/// `graph_match`, jump_surface, displace, lapped's tangent field, each at
+/// three mesh sizes; the stages that hold the exemplar's analysis also at
+/// three exemplar sizes.
+#[test]
+fn per_vertex_stage_estimates_are_within_2x_of_their_measured_peaks() {
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    warm_up();
+    let mut rows = vec![
+        "| stage | size | estimate | measured peak | ratio |".to_string(),
+        "|---|---|---|---|---|".to_string(),
+    ];
+    let mesh = |config: &str| config.replace("{E}", "64");
+    let exemplar =
+        |config: &str, vertices: &str| config.replace("{}", vertices).replace("{E}", "{}");
+    rows.extend(check_each(
+        &[
+            (0, "orientation (icosphere subdivisions)"),
+            (2, "jump_surface"),
+            (3, "displace"),
+        ],
+        &mesh(JUMP_SURFACE),
+        &["4", "5", "6"],
+    ));
+    rows.extend(check_each(
+        &[
+            (1, "relax_orientation (pyramid subdivisions)"),
+            (2, "init_colours"),
+            (3, "match pca_kdtree"),
+            (4, "map_back"),
+        ],
+        &mesh(WEI_LEVOY),
+        &["4", "5", "6"],
+    ));
+    rows.extend(check_each(
+        &[(2, "init_colours (exemplar side)"), (3, "match pca_kdtree")],
+        &exemplar(WEI_LEVOY, "4"),
+        &["64", "128", "256"],
+    ));
+    let field = JUMP_SURFACE.replace(
+        "mode = \"global\"",
+        "mode = \"field\"\nanchors = [{ at_bbox = [0.5, 0.5, 1.0], up = [1.0, 0.0, 0.0] }]",
+    );
+    rows.extend(check(
+        "orientation field (icosphere subdivisions)",
+        0,
+        &mesh(&field),
+        &["4", "5", "6"],
+    ));
+    let exhaustive = WEI_LEVOY.replace("pca_kdtree", "exhaustive");
+    rows.extend(check(
+        "match exhaustive (exemplar side)",
+        3,
+        &exemplar(&exhaustive, "4"),
+        &["64", "128", "256"],
+    ));
+    let tsvq = WEI_LEVOY.replace("pca_kdtree", "tsvq");
+    rows.extend(check(
+        "match tsvq (exemplar side)",
+        3,
+        &exemplar(&tsvq, "4"),
+        &["64", "128", "256"],
+    ));
+    rows.extend(check(
+        "coherent (retile vertices)",
+        2,
+        &mesh(COHERENT),
+        &["4000", "16000", "64000"],
+    ));
+    rows.extend(check(
+        "coherent (exemplar side)",
+        2,
+        &exemplar(COHERENT, "4000"),
+        &["64", "128", "256"],
+    ));
+    rows.extend(check_each(
+        &[
+            (1, "diffuse_orientation (target_vertices)"),
+            (2, "graph_match"),
+        ],
+        &mesh(BANGAY_MORKEL),
+        &["2000", "8000", "32000"],
+    ));
+    rows.extend(check(
+        "graph_match (exemplar side)",
+        2,
+        &exemplar(BANGAY_MORKEL, "2000"),
+        &["64", "128", "256"],
+    ));
+    for mode in ["constraints", "global"] {
+        let config = mesh(TANGENT_FIELD).replace("constraints\"", &format!("{mode}\""));
+        let label = format!("tangent_field {mode} (icosphere subdivisions)");
+        rows.extend(check(&label, 0, &config, &["4", "5", "6"]));
+    }
+    eprintln!("{}", rows.join("\n"));
+}
+
+const JUMP_SURFACE: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+height_map = "derive:luminance"
+[input.exemplar_options]
+size = {E}
+[input.mesh_options]
+subdivisions = {}
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+[[stage]]
+kind = "jump_map"
+cache = false
+[[stage]]
+kind = "jump_surface"
+[[stage]]
+kind = "displace"
+amplitude = 1.0
+smoothing = 2
+"#;
+
+const WEI_LEVOY: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.exemplar_options]
+size = {E}
+[[stage]]
+kind = "builtin_pyramid"
+mesh = "icosphere"
+levels = 4
+subdivisions = {}
+[[stage]]
+kind = "relax_orientation"
+mode = "relax"
+symmetry = 4
+iterations = 30
+[[stage]]
+kind = "init_colours"
+[[stage]]
+kind = "match"
+search = "pca_kdtree"
+[[stage]]
+kind = "map_back"
+"#;
+
+const COHERENT: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.exemplar_options]
+size = {E}
+[input.mesh_options]
+subdivisions = 2
+[[stage]]
+kind = "retile"
+levels = 4
+vertices = {}
+[[stage]]
+kind = "orientation"
+mode = "global"
+up = [0.0, 1.0, 0.0]
+[[stage]]
+kind = "coherent"
+cache = false
+"#;
+
+const BANGAY_MORKEL: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.exemplar_options]
+size = {E}
+[input.mesh_options]
+subdivisions = 1
+[[stage]]
+kind = "subdivide_sqrt2"
+target_vertices = {}
+[[stage]]
+kind = "diffuse_orientation"
+keys = [{ at_bbox = [0.5, 0.5, 1.0], up = [0.0, 1.0, 0.0] }]
+[[stage]]
+kind = "graph_match"
+graph_cut = true
+"#;
+
+const TANGENT_FIELD: &str = r#"
+seed = 3
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:bricks"
+[input.mesh_options]
+subdivisions = {}
+[[stage]]
+kind = "tangent_field"
+mode = "constraints"
+up = [0.0, 1.0, 0.0]
+units = "diagonal"
+constraints = [{ at_bbox = [0.5, 0.5, 1.0], up = [1.0, 0.0, 0.0], radius = 0.3 }]
+"#;

@@ -231,6 +231,32 @@ impl MemoryEstimate {
         }
     }
 
+    /// The working memory of a stage that keeps a few arrays per vertex of
+    /// the mesh it works on (the input mesh, or the one a `retile`,
+    /// `subdivide_sqrt2` or `builtin_pyramid` stage before it makes):
+    /// `fixed + per_vertex · vertices` bytes, `fixed` being what the stage
+    /// holds of the exemplar. The way out is a mesh of fewer vertices.
+    /// Empty while the vertex count is unknown (validation without an
+    /// explicit count).
+    pub fn per_vertex(
+        what: impl Into<String>,
+        sizes: &InputSizes,
+        fixed: u64,
+        per_vertex: u64,
+    ) -> Vec<Self> {
+        if sizes.vertices == 0 {
+            return Vec::new();
+        }
+        vec![Self::growing(
+            "vertices",
+            what,
+            sizes.vertices,
+            (1, 1 << 40),
+            move |v| fixed.saturating_add(v.saturating_mul(per_vertex)),
+            |v| v.to_string(),
+        )]
+    }
+
     /// Another way out, tried after the parameter's own.
     pub fn or(mut self, fit: Fit) -> Self {
         self.fits.push(fit);

@@ -583,3 +583,34 @@ levels = 2
     let after = p.stages[1].memory_estimate(&seen[1])[0].bytes;
     assert!(after > 100 * input_only, "{after} vs {input_only}");
 }
+
+/// Issue 43: the per-vertex synthesis stages estimate their arrays from the
+/// vertices of the mesh they work on; over the limit, the run is refused
+/// after loading, before work, naming the vertex count that fits.
+#[test]
+fn a_per_vertex_stage_over_the_limit_is_refused_naming_the_vertices_that_fit() {
+    let text = r#"
+seed = 1
+[input]
+mesh = "builtin:icosphere"
+exemplar = "builtin:noise"
+[input.mesh_options]
+subdivisions = 6
+[[stage]]
+kind = "diffuse_orientation"
+keys = [{ at_bbox = [0.5, 0.5, 1.0], up = [0.0, 1.0, 0.0] }]
+"#;
+    let stderr = common::expect_refused_env(
+        text,
+        &[],
+        &[(LIMIT_VAR, "8M")],
+        &[
+            "stage 1 (diffuse_orientation): `vertices` = 40962",
+            "needs an estimated",
+            "the diffused orientation field",
+            "over the memory limit of 8.0 MiB (SURFSYNTH_MEMORY_LIMIT)",
+        ],
+    );
+    let fit: u64 = largest(&stderr, "vertices").parse().expect("a count");
+    assert!((1000..40962).contains(&fit), "{fit}: {stderr}");
+}

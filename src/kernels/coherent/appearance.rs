@@ -21,6 +21,21 @@ pub const APPEARANCE_DIMS: usize = TREE_DIMS;
 /// Rows the principal components are fitted on at most.
 const FIT_SAMPLE: usize = 4096;
 
+/// Bytes the appearance analysis of one level of an exemplar of `pixels`
+/// pixels of `channels` channels holds at its peak, for an appearance
+/// window of `window` points per side and `k` similar pixels: the fitted
+/// sample (`4·dim` bytes a row, at most 4096 rows) with the PCA fit, the
+/// appearance vectors (32 bytes a pixel), their kd-tree (about as much
+/// again) and the k-coherence sets (`4·k`).
+pub fn appearance_bytes(pixels: u64, channels: u32, window: u32, k: u32) -> u64 {
+    let window = u64::from(window.max(1) | 1);
+    let dim = window * window * u64::from(channels);
+    let sample = pixels.min(FIT_SAMPLE as u64);
+    sample * dim * 4
+        + crate::kernels::jump_maps::jump_map::pca::fit_bytes(sample as usize, dim as usize)
+        + pixels * (2 * 4 * APPEARANCE_DIMS as u64 + 4 * u64::from(k))
+}
+
 /// One level's appearance vectors and k-coherence sets.
 #[derive(Clone, Debug)]
 pub struct AppearanceLevel {

@@ -207,13 +207,10 @@ impl Stage for BuiltinPyramid {
             |a, b| (a * b).saturating_mul(BYTES_PER_MESH_VERTEX),
         )]
     }
-    /// The finest level's `resolution` grid.
+    /// The finest level: a `resolution` grid, or an icosphere or cube of
+    /// `subdivisions`.
     fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
-        if !matches!(settings.mesh.as_str(), "plane" | "torus" | "uv_sphere") {
-            return *sizes;
-        }
-        let [u, v] = settings.resolution;
-        sizes.with_mesh(u64::from(u) * u64::from(v))
+        finest_vertices(settings).map_or(*sizes, |v| sizes.with_mesh(v))
     }
     fn plane_role(settings: &Self::Settings) -> crate::stage::PlaneRole {
         crate::stage::PlaneRole::ReplacesMesh {
@@ -244,5 +241,21 @@ impl Stage for BuiltinPyramid {
             Ok(())
         };
         ctx.fallible(Self::KIND, build)
+    }
+}
+
+/// Vertices of the finest level: `u·v` for a grid of `resolution`,
+/// `10·4^s + 2` for an icosphere and `6·4^s + 2` for a cube of `s`
+/// subdivisions (`None`: an unknown mesh name, refused by validation).
+fn finest_vertices(settings: &BuiltinPyramidSettings) -> Option<u64> {
+    let quarters = 1u64 << (2 * settings.subdivisions.min(20));
+    match settings.mesh.as_str() {
+        "plane" | "torus" | "uv_sphere" => {
+            let [u, v] = settings.resolution;
+            Some(u64::from(u) * u64::from(v))
+        }
+        "icosphere" => Some(10 * quarters + 2),
+        "cube" => Some(6 * quarters + 2),
+        _ => None,
     }
 }

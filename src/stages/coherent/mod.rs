@@ -22,6 +22,7 @@ use crate::kernels::coherent::{
 };
 use crate::kernels::wei_levoy::wl_match::SynthesisLevel;
 use crate::progress::Progress;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -256,6 +257,31 @@ impl Stage for Coherent {
         "extension: Lefebvre & Hoppe 2005/2006, Tong et al. 2002 on the Wei & Levoy mesh pyramid";
     type Settings = CoherentStageSettings;
 
+    /// The appearance analysis of a level
+    /// ([`crate::kernels::coherent::appearance::appearance_bytes`]), the
+    /// Gaussian stack, about 16 bytes an exemplar pixel, and, per vertex of
+    /// the finest level, the coordinates, rings and candidates of every
+    /// level, about 800 bytes (measured: `tests/memory_estimates.rs`).
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 800;
+        let pixels = sizes.exemplar_pixels();
+        let exemplar = if pixels == 0 {
+            0
+        } else {
+            crate::kernels::coherent::appearance::appearance_bytes(
+                pixels,
+                sizes.exemplar_channels,
+                settings.window,
+                settings.k,
+            ) + pixels * 16
+        };
+        MemoryEstimate::per_vertex(
+            "the appearance analysis and the coordinates of every vertex",
+            sizes,
+            exemplar,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh, Datum::Frames]
     }

@@ -27,6 +27,7 @@ use crate::kernels::atlas::channels::{
     displace_progress_steps,
 };
 use crate::progress::Progress;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -146,6 +147,18 @@ impl Stage for Displace {
         "Bangay & Morkel 2006 §4, Fig. 10c,f; Wei & Levoy 2001 Fig. 9 (displacement)";
     type Settings = DisplaceSettings;
 
+    /// The sampled and smoothed heights, the normals and the displaced copy
+    /// of the geometry, about 240 bytes a vertex (measured:
+    /// `tests/memory_estimates.rs`).
+    fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 240;
+        MemoryEstimate::per_vertex(
+            "the heights, normals and displaced positions",
+            sizes,
+            0,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh]
     }

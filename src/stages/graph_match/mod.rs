@@ -57,6 +57,7 @@ use crate::kernels::bangay_morkel::graph_match::{
     Candidates, GraphMatchSettings, ImageLevels, MatchImages, PassStats,
 };
 use crate::progress::Progress;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -463,6 +464,19 @@ impl Stage for GraphMatch {
     const PAPER: &'static str = "Bangay & Morkel 2006 §3.3, §3.4";
     type Settings = GraphMatchStageSettings;
 
+    /// The exemplar's Gaussian stack and search planes, about 540 bytes an
+    /// exemplar pixel, and the per-vertex colours, texels, regions and
+    /// cut graphs, about 240 bytes a vertex (measured:
+    /// `tests/memory_estimates.rs`).
+    fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 240;
+        MemoryEstimate::per_vertex(
+            "the exemplar stack and the per-vertex synthesis state",
+            sizes,
+            sizes.exemplar_pixels() * 540,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh, Datum::Frames]
     }

@@ -10,6 +10,7 @@
 
 use crate::config::params::{ParamDoc, StageSettings};
 use crate::kernels::wei_levoy::random_texels::{random_texels, texels_to_level_zero};
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -50,6 +51,19 @@ impl Stage for InitColours {
     const PAPER: &'static str = "Wei & Levoy 2001 §3.1";
     type Settings = InitColoursSettings;
 
+    /// The colours and source texels of every level, about 28 bytes a
+    /// vertex of the finest level, and the exemplar's Gaussian pyramid,
+    /// about 32 bytes an exemplar pixel (measured:
+    /// `tests/memory_estimates.rs`).
+    fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 28;
+        MemoryEstimate::per_vertex(
+            "the colours of every level and the exemplar pyramid",
+            sizes,
+            sizes.exemplar_pixels() * 32,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh]
     }

@@ -17,6 +17,7 @@ use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::jump_maps::jump_surface::corner_side_offsets;
 use crate::kernels::jump_maps::vertex_order::VertexOrder;
 use crate::kernels::wei_levoy::wl_match::SynthesisLevel;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -169,6 +170,18 @@ impl Stage for JumpSurface {
     const PAPER: &'static str = "Zelinka & Garland 2004 §6";
     type Settings = JumpSurfaceSettings;
 
+    /// The per-vertex jumps, the per-corner texture coordinates and the
+    /// seam bookkeeping, about 400 bytes a vertex (measured:
+    /// `tests/memory_estimates.rs`).
+    fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 400;
+        MemoryEstimate::per_vertex(
+            "the per-vertex jumps and per-corner coordinates",
+            sizes,
+            0,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh, Datum::Frames, Datum::JumpMap]
     }

@@ -23,6 +23,7 @@ use crate::kernels::surface::frames::{
 };
 use crate::kernels::surface::orientation_field::{Anchor, Singularity, up_field_with_fallback};
 use crate::mesh::Topology;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::stages::position;
 use crate::world::*;
@@ -319,6 +320,16 @@ impl Stage for Orientation {
         "Wei & Levoy 2001 §3.1; Zelinka & Garland 2004 §6.1; Praun et al. 2000 §3.2";
     type Settings = OrientationSettings;
 
+    /// The tangent frames, about 48 bytes a vertex, and in field mode the
+    /// edge graph and the anchors' path distances over it, about 205
+    /// (measured: `tests/memory_estimates.rs`).
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        let per_vertex = match settings.mode {
+            OrientationMode::Field => 205,
+            OrientationMode::Global | OrientationMode::Random => 48,
+        };
+        MemoryEstimate::per_vertex("the tangent frames of every vertex", sizes, 0, per_vertex)
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh]
     }

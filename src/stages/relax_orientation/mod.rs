@@ -10,6 +10,7 @@ use crate::kernels::wei_levoy::relax_orientation::{
 };
 use crate::mesh::Topology;
 use crate::progress::Progress;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -110,6 +111,18 @@ impl Stage for RelaxOrientation {
     const PAPER: &'static str = "Wei & Levoy 2001 §3.1, Fig. 3";
     type Settings = RelaxOrientationSettings;
 
+    /// The frames of every pyramid level and the relaxation's per-vertex
+    /// arrays, about 600 bytes a vertex of the finest level (the coarser
+    /// levels add a third; measured: `tests/memory_estimates.rs`).
+    fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 600;
+        MemoryEstimate::per_vertex(
+            "the frames of every level and the relaxation arrays",
+            sizes,
+            0,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh]
     }

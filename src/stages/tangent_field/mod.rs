@@ -29,6 +29,7 @@ use crate::kernels::lapped::tangent_field::{
 };
 use crate::kernels::surface::component_fallback::{Components, unseeded_components};
 use crate::mesh::Topology;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::stages::position;
 use crate::world::*;
@@ -358,6 +359,16 @@ impl Stage for TangentField {
     const PAPER: &'static str = "Praun, Finkelstein & Hoppe 2000 §3.2";
     type Settings = TangentFieldSettings;
 
+    /// The per-face field, about 120 bytes a vertex (two faces a vertex),
+    /// and in constraints mode the edge graph and the Gaussians' distances
+    /// over it, about 290 (measured: `tests/memory_estimates.rs`).
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        let per_vertex = match settings.mode {
+            FieldMode::Constraints => 290,
+            FieldMode::Global | FieldMode::Frames => 120,
+        };
+        MemoryEstimate::per_vertex("the per-face tangent field", sizes, 0, per_vertex)
+    }
     fn requires(settings: &Self::Settings) -> Vec<Datum> {
         if settings.mode == FieldMode::Frames {
             vec![Datum::Mesh, Datum::Frames]

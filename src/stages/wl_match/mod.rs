@@ -19,6 +19,7 @@ use crate::kernels::wei_levoy::wl_match::{
     wei_levoy_synthesis_with_progress,
 };
 use crate::progress::Progress;
+use crate::stage::memory::{InputSizes, MemoryEstimate};
 use crate::stage::{Datum, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
@@ -248,6 +249,29 @@ impl Stage for Match {
     const PAPER: &'static str = "Wei & Levoy 2001 §3.2-3.3, Table 3";
     type Settings = MatchSettings;
 
+    /// The exemplar side of the finest level's search
+    /// ([`crate::kernels::wei_levoy::wl_match::search_bytes`]: its
+    /// neighbourhood vectors and search structure) and, per vertex of the
+    /// finest level, the flattened templates, queries and results of every
+    /// level, about 600 bytes (measured: `tests/memory_estimates.rs`).
+    fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
+        const PER_VERTEX: u64 = 600;
+        let ks = settings.kernel_settings(0, crate::image::sample::Wrap::Repeat);
+        let exemplar = ks.neighbourhoods.last().map_or(0, |&spec| {
+            crate::kernels::wei_levoy::wl_match::search_bytes(
+                sizes.exemplar_pixels(),
+                sizes.exemplar_channels,
+                spec,
+                &ks.search,
+            )
+        });
+        MemoryEstimate::per_vertex(
+            "the exemplar's neighbourhood search and the templates of every vertex",
+            sizes,
+            exemplar,
+            PER_VERTEX,
+        )
+    }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Mesh, Datum::Frames]
     }

@@ -251,6 +251,37 @@ pub fn neighbourhood_parts(spec: NeighbourhoodSpec, available_levels: usize) -> 
         .collect()
 }
 
+/// Bytes the exemplar side of the finest level's search holds for an
+/// exemplar of `pixels` pixels of `channels` channels: the neighbourhood
+/// vectors of every pixel (`4·dim` bytes, `dim` from the finest
+/// neighbourhood `spec`) and the search structure: the augmented copy
+/// (exhaustive, `4·(dim + 1)` a pixel), the tree's codewords (tsvq, about
+/// one more copy) or the PCA fit on at most 4096 rows with the projected
+/// points of the kd-tree (pca_kdtree). The coarser levels' are smaller
+/// and freed before it.
+pub fn search_bytes(
+    pixels: u64,
+    channels: u32,
+    spec: NeighbourhoodSpec,
+    search: &SearchKind,
+) -> u64 {
+    let dim: u64 = neighbourhood_parts(spec, spec.levels as usize)
+        .iter()
+        .map(|p| p.values(channels as usize) as u64)
+        .sum();
+    let vectors = pixels * dim * 4;
+    let structure = match search {
+        SearchKind::Exhaustive => pixels * (dim + 1) * 4,
+        SearchKind::Tsvq { .. } => pixels * dim * 4,
+        SearchKind::PcaKdTree { .. } => {
+            let sample = pixels.min(search::pca_kdtree::SAMPLE as u64);
+            crate::kernels::jump_maps::jump_map::pca::fit_bytes(sample as usize, dim as usize)
+                + pixels * (search::pca_kdtree::TREE_DIMS as u64 * 4 + 8)
+        }
+    };
+    vectors + structure
+}
+
 /// The neighbourhood of level `level` out of `levels`.
 fn spec_for(settings: &WlSettings, level: usize) -> NeighbourhoodSpec {
     let n = settings.neighbourhoods.len();

@@ -25,7 +25,7 @@ use crate::kernels::wei_levoy::wl_match::features::FeatureMatrix;
 /// Dimensions of the kd-tree (kept components, zero padded).
 pub(crate) const TREE_DIMS: usize = 8;
 /// Rows sampled for the PCA fit at most.
-const SAMPLE: usize = 4096;
+pub(crate) const SAMPLE: usize = 4096;
 
 /// PCA + kd-tree search.
 pub struct PcaKdTree {
