@@ -202,22 +202,13 @@ impl Stage for SubdivideSqrt2 {
     /// texture scale (0 with `levels = 0`), or about the input's vertices
     /// doubled per level.
     fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
-        let (param, vertices, derived) = match (settings.levels, settings.target_vertices) {
-            (_, t) if t > 0 => ("target_vertices", t, false),
-            (0, _) if sizes.loaded => (
-                "target_vertices",
-                sizes.vertices_for_area(sizes.area) as u64,
-                true,
-            ),
-            (0, _) => return Vec::new(),
-            (l, _) if sizes.loaded => (
-                "levels",
-                sizes
-                    .vertices
-                    .saturating_mul(1u64 << l.min(MAX_HIERARCHY_LEVELS).min(40)),
-                false,
-            ),
-            _ => return Vec::new(),
+        let Some(Finest {
+            param,
+            vertices,
+            derived,
+        }) = finest(settings, sizes)
+        else {
+            return Vec::new();
         };
         let bytes = |v: u64| v.saturating_mul(BYTES_PER_VERTEX);
         let what = "the √2 hierarchy's levels and parent links per finest vertex";
@@ -249,18 +240,7 @@ impl Stage for SubdivideSqrt2 {
     }
     /// The finest level's vertices, as the estimate counts them.
     fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
-        let vertices = match (settings.levels, settings.target_vertices) {
-            (_, t) if t > 0 => Some(t),
-            (0, _) => sizes
-                .loaded
-                .then(|| sizes.vertices_for_area(sizes.area) as u64),
-            (l, _) => sizes.loaded.then(|| {
-                sizes
-                    .vertices
-                    .saturating_mul(1u64 << l.min(MAX_HIERARCHY_LEVELS).min(40))
-            }),
-        };
-        vertices.map_or(*sizes, |v| sizes.with_mesh(v))
+        finest(settings, sizes).map_or(*sizes, |f| sizes.with_mesh(f.vertices))
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let subdivide = move |mut commands: Commands,
@@ -305,4 +285,39 @@ impl Stage for SubdivideSqrt2 {
         };
         ctx.fallible(Self::KIND, subdivide)
     }
+}
+/// The finest level's vertex count as the settings decide it.
+struct Finest {
+    /// The parameter that decides it.
+    param: &'static str,
+    vertices: u64,
+    /// Derived from the texture scale (`target_vertices = 0`).
+    derived: bool,
+}
+
+/// `target_vertices`, derived from the texture scale (`levels = 0`), or the
+/// input's vertices doubled per level; `None` while the input's sizes are
+/// unknown.
+fn finest(settings: &SubdivideSqrt2Settings, sizes: &InputSizes) -> Option<Finest> {
+    let (param, vertices, derived) = match (settings.levels, settings.target_vertices) {
+        (_, t) if t > 0 => ("target_vertices", t, false),
+        _ if !sizes.loaded => return None,
+        (0, _) => (
+            "target_vertices",
+            sizes.vertices_for_area(sizes.area) as u64,
+            true,
+        ),
+        (l, _) => (
+            "levels",
+            sizes
+                .vertices
+                .saturating_mul(1u64 << l.min(MAX_HIERARCHY_LEVELS).min(40)),
+            false,
+        ),
+    };
+    Some(Finest {
+        param,
+        vertices,
+        derived,
+    })
 }
