@@ -592,3 +592,98 @@ fn surface_sharpness_of_a_copy_is_one_at_any_turn_and_shift() {
         }
     }
 }
+
+/// The metrics' exact index ([`WindowIndex`]) against the exhaustive scan
+/// ([`ExemplarNeighbourhoods`]) on every shared photo, both ways the result
+/// metrics use it: a result's windows against the exemplar's (toroidal, the
+/// texture energy) and the exemplar's against the result's (inside it,
+/// completeness). Results: a crop of the exemplar's tiling (nearest at 0),
+/// its shuffled pixels (far), another photo, and the exemplar blurred by
+/// a box (near, but not equal). Equal within 10⁻⁵ relative (the sums run in
+/// another order).
+#[test]
+fn the_metrics_index_finds_the_exhaustive_minimum_on_the_shared_photos() {
+    use surfsynth::kernels::metrics::window_index::{IndexScratch, WindowIndex};
+    use surfsynth::kernels::metrics::{ExemplarNeighbourhoods, QueryScratch, completeness};
+    let n = 7u32;
+    let window = |img: &Image, x: i64, y: i64| -> Vec<f32> {
+        let mut q = Vec::new();
+        for dy in 0..n as i64 {
+            for dx in 0..n as i64 {
+                q.extend_from_slice(img.texel(x + dx, y + dy, Wrap::Clamp));
+            }
+        }
+        q
+    };
+    let box_blur = |img: &Image| -> Image {
+        let mut out = img.clone();
+        for y in 0..img.height {
+            for x in 0..img.width {
+                for c in 0..img.channels as usize {
+                    let mut s = 0.0;
+                    for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                        s += img.texel(x as i64 + dx, y as i64 + dy, Wrap::Clamp)[c];
+                    }
+                    out.pixel_mut(x, y)[c] = s / 4.0;
+                }
+            }
+        }
+        out
+    };
+    let mut scratch = (IndexScratch::default(), QueryScratch::default());
+    for (k, name) in TEXTURES.iter().enumerate() {
+        let ex = texture(name);
+        let other = texture(TEXTURES[(k + 1) % TEXTURES.len()]);
+        let results = [
+            ("tiling", crop(&ex, 37, 11, 96, 80)),
+            ("shuffled", shuffled(&crop(&ex, 0, 0, 96, 80), 5)),
+            ("other photo", crop(&other, 3, 0, 96, 80)),
+            ("blurred", box_blur(&crop(&ex, 20, 30, 96, 80))),
+        ];
+        let fast_ex = WindowIndex::toroidal(&ex, n, 0..128);
+        let slow_ex = ExemplarNeighbourhoods::new(&ex, n);
+        for (label, result) in &results {
+            let fast_out = WindowIndex::interior(result, n, 0..74);
+            let slow_out = ExemplarNeighbourhoods::interior(result, n);
+            for i in 0..40i64 {
+                let (x, y) = ((i * 37) % 90, (i * 53) % 74);
+                let q_out = window(result, x, y);
+                let q_ex = window(&ex, (i * 29) % 122, (i * 17) % 122);
+                for (what, fast, slow) in [
+                    (
+                        "energy",
+                        fast_ex.nearest_sq_distance(&q_out, &mut scratch.0),
+                        slow_ex.nearest_sq_distance(&q_out, None, &mut scratch.1),
+                    ),
+                    (
+                        "completeness",
+                        fast_out.nearest_sq_distance(&q_ex, &mut scratch.0),
+                        slow_out.nearest_sq_distance(&q_ex, None, &mut scratch.1),
+                    ),
+                ] {
+                    assert!(
+                        (fast - slow).abs() <= 1e-5 * slow.max(1e-3),
+                        "{name}, {label}, {what}, query {i}: index {fast}, exhaustive {slow}"
+                    );
+                }
+            }
+        }
+        // The whole measure, once per photo, against its exhaustive sum.
+        let result = &results[3].1;
+        let slow_out = ExemplarNeighbourhoods::interior(result, n);
+        let picks = surfsynth::kernels::metrics::quality::completeness_windows(128, 128, n);
+        let sum: f64 = picks
+            .iter()
+            .map(|&(x, y)| {
+                let q = window(&ex, x as i64, y as i64);
+                f64::from(slow_out.nearest_sq_distance(&q, None, &mut scratch.1))
+            })
+            .sum();
+        let exhaustive = (sum / picks.len() as f64 / f64::from(n * n * 3)) as f32;
+        let fast = completeness(result, &ex, n);
+        assert!(
+            (fast - exhaustive).abs() <= 1e-5 * exhaustive,
+            "{name}: completeness {fast} vs exhaustive {exhaustive}"
+        );
+    }
+}

@@ -7,11 +7,13 @@ use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 
 use super::nearest::{ExemplarNeighbourhoods, QueryScratch};
+use super::window_index::{BandedIndex, WindowIndex};
 use super::{EnergySettings, EnergyStats, SurfaceSignal};
 use crate::image::{Image, sample::Wrap};
 use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
+use std::ops::Range;
 
 /// Picks `samples` of `count` locations: all of them in order when
 /// `samples >= count`, else uniform draws (with replacement) from a PCG
@@ -34,8 +36,9 @@ pub(super) fn sample_indices(count: usize, samples: usize, seed: u64) -> Vec<usi
 /// distance divided by `n² · channels`. The result depends only on the inputs
 /// and the seed, not on the number of threads.
 ///
-/// Cost: `samples × exemplar pixels × n² × channels` multiply-adds, vectorised
-/// eight wide, pruned by partial distances, and parallel over samples.
+/// The search is exact ([`WindowIndex`], parallel over samples); its cost is
+/// a few dozen full window distances per sample rather than one per exemplar
+/// pixel.
 ///
 /// Preconditions: `settings` is valid ([`EnergySettings::validate`]); both
 /// images have pixels and the same channel count.
@@ -52,15 +55,18 @@ pub fn image_texture_energy(
     let n = settings.neighbourhood as usize;
     let ch = output.channels as usize;
     let r = (n / 2) as i64;
-    let search = ExemplarNeighbourhoods::new(exemplar, n as u32);
     let picks = sample_indices(output.pixel_count(), settings.samples, settings.seed);
     let width = output.width as usize;
-    let norm = (n * n * ch) as f32;
-    let values: Vec<f32> = picks
-        .par_iter()
-        .map_init(
-            || (vec![0.0f32; n * n * ch], QueryScratch::default()),
-            |(query, scratch), &p| {
+    let dim = n * n * ch;
+    let search = exemplar_windows(exemplar, n);
+    let mut queries = Vec::new();
+    let mut values = Vec::with_capacity(picks.len());
+    for chunk in picks.chunks(QUERY_CHUNK) {
+        queries.resize(chunk.len() * dim, 0.0);
+        queries
+            .par_chunks_exact_mut(dim)
+            .zip(chunk)
+            .for_each(|(query, &p)| {
                 let (x, y) = ((p % width) as i64, (p / width) as i64);
                 for dy in 0..n {
                     for dx in 0..n {
@@ -68,10 +74,14 @@ pub fn image_texture_energy(
                         query[(dy * n + dx) * ch..][..ch].copy_from_slice(px);
                     }
                 }
-                search.nearest_sq_distance(query, None, scratch) / norm
-            },
-        )
-        .collect();
+            });
+        values.extend(
+            search
+                .nearest(&queries, dim)
+                .into_iter()
+                .map(|d| d / dim as f32),
+        );
+    }
     EnergyStats::from_values(&values)
 }
 
@@ -109,48 +119,78 @@ pub fn surface_texture_energy(
     );
     assert_eq!(frames.len(), mesh.vertex_count(), "one frame per vertex");
     let n = settings.neighbourhood as usize;
-    let search = ExemplarNeighbourhoods::new(exemplar, n as u32);
+    let dim = n * n * ch;
+    let search = exemplar_windows(exemplar, n);
+    // Templates partly covered compare only their covered points: the
+    // exhaustive search, made when the first one comes.
+    let masked = std::sync::OnceLock::new();
     let default = exemplar.mean();
     let candidates: Vec<u32> = (0..mesh.vertex_count() as u32)
         .filter(|&v| !topo.vertex_faces(v).is_empty())
         .collect();
     let picks = sample_indices(candidates.len(), settings.samples, settings.seed);
     let min_covered = (settings.min_coverage * (n * n) as f32).ceil().max(1.0) as usize;
-    let values: Vec<Option<f32>> = picks
-        .par_iter()
-        .map_init(
-            || {
-                (
-                    vec![0.0f32; n * n * ch],
-                    ResampleScratch::new(),
-                    QueryScratch::default(),
-                )
-            },
-            |(query, resample, scratch), &k| {
-                let v = candidates[k];
-                let covered = resample_neighbourhood(
-                    mesh,
-                    topo,
-                    v,
-                    &frames[v as usize],
-                    spacing,
-                    n as u32,
-                    signal,
-                    &default,
-                    query,
-                    resample,
-                );
-                if covered < min_covered {
-                    return None;
-                }
-                let mask = Some(resample.coverage());
-                let d = search.nearest_sq_distance(query, mask, scratch);
-                Some(d / (covered * ch) as f32)
-            },
-        )
-        .collect();
-    let values: Vec<f32> = values.into_iter().flatten().collect();
+    let mut queries = Vec::new();
+    let mut values = Vec::with_capacity(picks.len());
+    for chunk in picks.chunks(QUERY_CHUNK) {
+        queries.resize(chunk.len() * dim, 0.0);
+        // Per sample: the covered points, and the distance when the template
+        // is only partly covered (else its query is searched below).
+        let taken: Vec<(usize, Option<f32>)> = queries
+            .par_chunks_exact_mut(dim)
+            .zip(chunk)
+            .map_init(
+                || (ResampleScratch::new(), QueryScratch::default()),
+                |(resample, scratch), (query, &k)| {
+                    let v = candidates[k];
+                    let covered = resample_neighbourhood(
+                        mesh,
+                        topo,
+                        v,
+                        &frames[v as usize],
+                        spacing,
+                        n as u32,
+                        signal,
+                        &default,
+                        query,
+                        resample,
+                    );
+                    let partial = (covered >= min_covered && covered < n * n).then(|| {
+                        masked
+                            .get_or_init(|| ExemplarNeighbourhoods::new(exemplar, n as u32))
+                            .nearest_sq_distance(query, Some(resample.coverage()), scratch)
+                    });
+                    (covered, partial)
+                },
+            )
+            .collect();
+        let full = search.nearest(&queries, dim);
+        values.extend(
+            taken
+                .iter()
+                .zip(full)
+                .filter(|((covered, _), _)| *covered >= min_covered)
+                .map(|(&(covered, partial), d)| partial.unwrap_or(d) / (covered * ch) as f32),
+        );
+    }
     EnergyStats::from_values(&values)
+}
+
+/// Samples whose queries are made and searched at once at most (their
+/// windows take `QUERY_CHUNK · n² · channels` values).
+const QUERY_CHUNK: usize = 1 << 16;
+
+/// Every `n`×`n` window of `exemplar`, toroidally, for exact nearest-window
+/// queries (one index, or bands of one for a large exemplar).
+fn exemplar_windows(
+    exemplar: &Image,
+    n: usize,
+) -> BandedIndex<impl Fn(Range<usize>) -> WindowIndex + '_> {
+    BandedIndex::new(
+        exemplar.height as usize,
+        exemplar.width as usize,
+        move |rows| WindowIndex::toroidal(exemplar, n as u32, rows),
+    )
 }
 
 #[cfg(test)]

@@ -20,6 +20,7 @@ mod nearest;
 pub mod quality;
 pub mod result;
 pub mod surface_quality;
+pub mod window_index;
 
 pub use crate::kernels::surface::surface_sample::SurfaceSignal;
 pub use energy::{image_texture_energy, surface_texture_energy};

@@ -203,7 +203,7 @@ impl ExemplarNeighbourhoods {
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     /// Straightforward scalar search, for comparison.
@@ -235,7 +235,8 @@ mod tests {
         best
     }
 
-    fn pseudo_random(len: usize, seed: u32) -> Vec<f32> {
+    /// Values in `[0, 1)` from a xorshift stream seeded with `seed`.
+    pub(in crate::kernels::metrics) fn pseudo_random(len: usize, seed: u32) -> Vec<f32> {
         let mut s = seed.wrapping_mul(2_654_435_761).wrapping_add(1);
         (0..len)
             .map(|_| {

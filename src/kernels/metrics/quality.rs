@@ -8,7 +8,7 @@
 
 use rayon::prelude::*;
 
-use super::nearest::{ExemplarNeighbourhoods, QueryScratch};
+use super::window_index::{BandedIndex, WindowIndex};
 use super::{EnergySettings, histogram_wasserstein_mean, image_texture_energy};
 use crate::image::pyramid::gaussian_pyramid;
 use crate::image::{Image, sample::Wrap};
@@ -142,34 +142,42 @@ pub fn image_quality(
 /// divided by `n² · channels` (the units of the texture energy).
 ///
 /// High when the exemplar's content is missing from the result: blur, flat
-/// or washed-out colour, one patch repeated. Exhaustive search (exact),
-/// parallel over exemplar windows; deterministic.
+/// or washed-out colour, one patch repeated. Exact nearest-window search
+/// ([`WindowIndex`]), parallel over exemplar windows; deterministic.
 ///
 /// Preconditions: same channel count; `n` odd and no larger than either
 /// image.
 pub fn completeness(output: &Image, exemplar: &Image, n: u32) -> f32 {
     assert_eq!(output.channels, exemplar.channels, "channel counts differ");
-    let search = ExemplarNeighbourhoods::interior(output, n);
     let (n, ch) = (n as usize, exemplar.channels as usize);
+    let columns = output.width as usize - n + 1;
+    let search = BandedIndex::new(output.height as usize - n + 1, columns, |rows| {
+        WindowIndex::interior(output, n as u32, rows)
+    });
+    let dim = n * n * ch;
+    let values = search.nearest(&completeness_queries(exemplar, n), dim);
+    let sum: f64 = values.iter().map(|&v| f64::from(v)).sum();
+    (sum / values.len().max(1) as f64 / dim as f64) as f32
+}
+
+/// The exemplar windows [`completeness`] compares
+/// ([`completeness_windows`]), one after another, `n·n·channels` values each
+/// (rows of `n · channels`).
+pub fn completeness_queries(exemplar: &Image, n: usize) -> Vec<f32> {
+    let ch = exemplar.channels as usize;
     let picks = completeness_windows(exemplar.width, exemplar.height, n as u32);
-    let norm = (n * n * ch) as f64;
-    let values: Vec<f32> = picks
-        .par_iter()
-        .map_init(
-            || (vec![0.0f32; n * n * ch], QueryScratch::default()),
-            |(query, scratch), &(x, y)| {
-                for dy in 0..n {
-                    for dx in 0..n {
-                        let px = exemplar.pixel((x + dx) as u32, (y + dy) as u32);
-                        query[(dy * n + dx) * ch..][..ch].copy_from_slice(px);
-                    }
-                }
-                search.nearest_sq_distance(query, None, scratch)
-            },
-        )
-        .collect();
-    let sum: f64 = values.iter().map(|&v| v as f64).sum();
-    (sum / values.len().max(1) as f64 / norm) as f32
+    let dim = n * n * ch;
+    let mut queries = vec![0.0f32; picks.len() * dim];
+    queries
+        .par_chunks_exact_mut(dim)
+        .zip(&picks)
+        .for_each(|(query, &(x, y))| {
+            for dy in 0..n {
+                let row = exemplar.offset(x as u32, (y + dy) as u32);
+                query[dy * n * ch..][..n * ch].copy_from_slice(&exemplar.data[row..][..n * ch]);
+            }
+        });
+    queries
 }
 
 /// Luma of every pixel: Rec. 601 weights of RGB for 3 or 4 channels, the

@@ -14,9 +14,10 @@ use rayon::prelude::*;
 
 use super::energy::sample_indices;
 use super::quality::{
-    VerbatimStats, completeness_windows, luma, mean_gradient, normalised_l1, structure_features,
+    VerbatimStats, completeness_queries, luma, mean_gradient, normalised_l1, structure_features,
     structure_scales,
 };
+use super::window_index::{IndexScratch, WindowIndex};
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
 use crate::kernels::surface::frames::TangentFrame;
@@ -292,44 +293,18 @@ pub fn surface_quality(
 
 /// Mean over the exemplar's `n`×`n` windows (stride [`super::quality::COMPLETENESS_STRIDE`])
 /// of the smallest squared distance per value to any of `templates` (each
-/// `n·n·channels` values, the exemplar's layout). Exhaustive with a partial
-/// distance exit per row; parallel over exemplar windows.
+/// `n·n·channels` values, the exemplar's layout). Exact nearest-window
+/// search ([`WindowIndex`]); parallel over exemplar windows.
 fn completeness_against(templates: &[f32], n: usize, exemplar: &Image) -> f32 {
     let ch = exemplar.channels as usize;
     let per = n * n * ch;
-    let count = templates.len() / per;
-    let origins = completeness_windows(exemplar.width, exemplar.height, n as u32);
-    let values: Vec<f64> = origins
-        .par_iter()
-        .map_init(
-            || vec![0.0f32; per],
-            |query, &(x0, y0)| {
-                for dy in 0..n {
-                    for dx in 0..n {
-                        let p = exemplar.pixel((x0 + dx) as u32, (y0 + dy) as u32);
-                        query[(dy * n + dx) * ch..][..ch].copy_from_slice(p);
-                    }
-                }
-                let row = n * ch;
-                let mut best = f32::INFINITY;
-                for t in 0..count {
-                    let cand = &templates[t * per..(t + 1) * per];
-                    let mut d = 0.0f32;
-                    for r in 0..n {
-                        let (a, b) = (
-                            &query[r * row..(r + 1) * row],
-                            &cand[r * row..(r + 1) * row],
-                        );
-                        d += a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum::<f32>();
-                        if d >= best {
-                            break;
-                        }
-                    }
-                    best = best.min(d);
-                }
-                best as f64
-            },
-        )
+    let search = WindowIndex::vectors(templates.to_vec(), n as u32, ch as u32);
+    let queries = completeness_queries(exemplar, n);
+    let values: Vec<f64> = queries
+        .par_chunks_exact(per)
+        .map_init(IndexScratch::default, |scratch, q| {
+            f64::from(search.nearest_sq_distance(q, scratch))
+        })
         .collect();
     (values.iter().sum::<f64>() / values.len().max(1) as f64 / per as f64) as f32
 }

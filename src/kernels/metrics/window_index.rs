@@ -1,0 +1,695 @@
+//! Exact nearest-window search for the result metrics, much faster than the
+//! exhaustive scan of [`super::nearest`] and giving the same minimum.
+//!
+//! Every window (an `n`×`n`×`channels` vector) is projected on the
+//! [`AXES`] leading principal axes of a sample of the windows. The axes are
+//! orthonormal, so the squared distance between two projections is a lower
+//! bound of the squared distance between the windows. The windows are
+//! grouped in leaves of at most [`LEAF`] by median splits on the leading
+//! [`BOX_AXES`] axes, each leaf with its bounding box there. A query visits
+//! the leaves in ascending order of the distance from its projection to
+//! their boxes, skips a window whose projected distance already reaches the
+//! best full distance found, computes the full distance of the others
+//! directly from the image (in the exhaustive search's order, with its
+//! partial-distance exit per window row), and stops at the first leaf whose
+//! box is at least that far. So the minimum is the exhaustive one: the
+//! bounds only decide which windows need not be computed, with a margin for
+//! the rounding of the projections ([`prunes`]).
+//!
+//! Texture windows hold most of their variance in a few axes, so a query
+//! computes the full distance of a few dozen windows instead of all of
+//! them.
+
+use std::ops::Range;
+
+use rayon::prelude::*;
+use wide::f32x8;
+
+use crate::image::Image;
+
+/// Principal axes the windows are projected on (fewer when a window has
+/// fewer values).
+pub const AXES: usize = 16;
+/// Leading axes of the leaves' bounding boxes.
+pub const BOX_AXES: usize = 8;
+/// Most windows per leaf.
+pub const LEAF: usize = 64;
+/// Windows sampled for the principal axes at most.
+const SAMPLE: usize = 4096;
+/// Projection of the padding lanes of a leaf's last block: far from any
+/// window with values in `[0, 1]`, so they are never computed.
+const FAR: f32 = 1.0e15;
+
+/// Windows of an image, indexed for exact nearest-window queries.
+#[derive(Clone, Debug)]
+pub struct WindowIndex {
+    /// Values the windows are read from: rows of `row_stride` values.
+    values: Vec<f32>,
+    row_stride: usize,
+    /// Window side and values per window row (`n · channels`).
+    n: usize,
+    row_len: usize,
+    /// Axes in use and their basis, `axes × dim`, row-major.
+    axes: usize,
+    basis: Vec<f32>,
+    /// Leaves in visiting order; their blocks of eight windows.
+    leaves: Vec<Leaf>,
+    /// Per block: `AXES` rows of eight projected values.
+    blocks: Vec<[f32x8; AXES]>,
+    /// Per block: the offset in `values` of each lane's window (`usize::MAX`
+    /// for padding).
+    origins: Vec<[usize; 8]>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Leaf {
+    first_block: u32,
+    blocks: u32,
+    lo: [f32; BOX_AXES],
+    hi: [f32; BOX_AXES],
+}
+
+/// Reusable buffers of a query, one per thread.
+#[derive(Clone, Debug, Default)]
+pub struct IndexScratch {
+    order: Vec<(f32, u32)>,
+}
+
+/// Most windows one index holds: an image with more is searched one band
+/// of window rows at a time ([`BandedIndex`]), so an index
+/// takes at most about 150 MB whatever the image's size.
+pub const BAND_WINDOWS: usize = 1 << 20;
+
+/// Bytes an index takes per window at its peak (the projections twice while
+/// the leaves are built, the window offsets, the order).
+pub const BYTES_PER_WINDOW: usize = 2 * AXES * 4 + 2 * 8 + 4;
+
+/// The bands of window rows `0..rows` (of `columns` windows each) that one
+/// index each searches: at most `per_band` windows a band, at least one
+/// row.
+pub fn bands(rows: usize, columns: usize, per_band: usize) -> Vec<Range<usize>> {
+    let per = (per_band / columns.max(1)).max(1);
+    (0..rows)
+        .step_by(per)
+        .map(|start| start..(start + per).min(rows))
+        .collect()
+}
+
+/// Windows searched band by band ([`bands`]): an image of at most
+/// [`BAND_WINDOWS`] windows is one index built once; a larger one is built
+/// again one band at a time for each call of [`Self::nearest`], so memory
+/// stays bounded whatever the image's size.
+pub struct BandedIndex<F: Fn(Range<usize>) -> WindowIndex> {
+    bands: Vec<Range<usize>>,
+    make: F,
+    single: Option<WindowIndex>,
+}
+
+impl<F: Fn(Range<usize>) -> WindowIndex> BandedIndex<F> {
+    /// The windows of `rows` rows of `columns`, each band's index made by
+    /// `make`, bands of at most [`BAND_WINDOWS`] windows.
+    pub fn new(rows: usize, columns: usize, make: F) -> Self {
+        Self::with_band_windows(rows, columns, BAND_WINDOWS, make)
+    }
+
+    /// As [`Self::new`] with bands of at most `per_band` windows.
+    pub fn with_band_windows(rows: usize, columns: usize, per_band: usize, make: F) -> Self {
+        let bands = bands(rows, columns, per_band);
+        let single = (bands.len() == 1).then(|| make(bands[0].clone()));
+        Self {
+            bands,
+            make,
+            single,
+        }
+    }
+
+    /// The smallest squared distance from each query (`dim` values each,
+    /// one after another in `queries`) to any window: every query's best so
+    /// far lowered by each band in turn (parallel over queries). Bands do
+    /// not change the values: each is the minimum over all windows.
+    pub fn nearest(&self, queries: &[f32], dim: usize) -> Vec<f32> {
+        let mut best = vec![f32::INFINITY; queries.len() / dim.max(1)];
+        let mut lower = |index: &WindowIndex| {
+            best.par_iter_mut()
+                .zip(queries.par_chunks_exact(dim.max(1)))
+                .for_each_init(IndexScratch::default, |scratch, (b, q)| {
+                    *b = index.nearest_below(q, *b, scratch);
+                });
+        };
+        match &self.single {
+            Some(index) => lower(index),
+            None => {
+                for band in &self.bands {
+                    lower(&(self.make)(band.clone()));
+                }
+            }
+        }
+        best
+    }
+}
+
+impl WindowIndex {
+    /// The `n`×`n` windows of `exemplar`, addressed toroidally, whose
+    /// top-left corner is in the pixel rows `rows` (one window per pixel).
+    ///
+    /// Preconditions: `n >= 1`; the exemplar has pixels; `rows` within its
+    /// height.
+    pub fn toroidal(exemplar: &Image, n: u32, rows: Range<usize>) -> Self {
+        let (n, (w, h, ch)) = (n.max(1) as usize, sizes(exemplar));
+        let pw = w + n - 1;
+        let band = rows.len();
+        let mut values = Vec::with_capacity(pw * (band + n - 1) * ch);
+        for y in rows.start..rows.end + n - 1 {
+            for x in 0..pw {
+                values.extend_from_slice(exemplar.pixel((x % w) as u32, (y % h) as u32));
+            }
+        }
+        let origins = (0..band).flat_map(|y| (0..w).map(move |x| (y * pw + x) * ch));
+        Self::build(values, pw * ch, n, ch, origins.collect())
+    }
+
+    /// The `n`×`n` windows wholly inside `image` (no wrap-around) whose
+    /// top-left corner is in the rows `rows` (of `0..=h − n`).
+    ///
+    /// Preconditions: `1 <= n <= min(width, height)`; `rows.end <= h − n + 1`.
+    pub fn interior(image: &Image, n: u32, rows: Range<usize>) -> Self {
+        let (n, (w, h, ch)) = (n.max(1) as usize, sizes(image));
+        assert!(n <= w && n <= h, "window larger than the image");
+        assert!(rows.end <= h - n + 1, "window rows beyond the image");
+        let values = image.data[rows.start * w * ch..(rows.end + n - 1) * w * ch].to_vec();
+        let origins = (0..rows.len()).flat_map(|y| (0..=w - n).map(move |x| (y * w + x) * ch));
+        Self::build(values, w * ch, n, ch, origins.collect())
+    }
+
+    /// Windows given as vectors, `n·n·channels` values each in the query
+    /// layout (rows of `n · channels` values).
+    ///
+    /// Preconditions: `vectors.len()` is a multiple of `n·n·channels > 0`.
+    pub fn vectors(vectors: Vec<f32>, n: u32, channels: u32) -> Self {
+        let (n, ch) = (n.max(1) as usize, channels.max(1) as usize);
+        let dim = n * n * ch;
+        let origins = (0..vectors.len() / dim).map(|i| i * dim).collect();
+        Self::build(vectors, n * ch, n, ch, origins)
+    }
+
+    fn build(
+        values: Vec<f32>,
+        row_stride: usize,
+        n: usize,
+        channels: usize,
+        origins: Vec<usize>,
+    ) -> Self {
+        let row_len = n * channels;
+        let dim = n * row_len;
+        let axes = AXES.min(dim);
+        let window = |o: usize, out: &mut Vec<f32>| {
+            out.clear();
+            for r in 0..n {
+                out.extend_from_slice(&values[o + r * row_stride..][..row_len]);
+            }
+        };
+        let basis = principal_axes(&origins, dim, axes, &window);
+        let points: Vec<[f32; AXES]> = origins
+            .par_iter()
+            .map_init(Vec::new, |buf, &o| {
+                window(o, buf);
+                project(buf, &basis, axes)
+            })
+            .collect();
+        let mut order: Vec<u32> = (0..origins.len() as u32).collect();
+        let mut leaves = Vec::new();
+        split(&points, &mut order, &mut leaves);
+        let mut blocks = Vec::new();
+        let mut block_origins = Vec::new();
+        let leaves = leaves
+            .into_iter()
+            .map(|(start, end)| {
+                let members = &order[start..end];
+                let first_block = blocks.len() as u32;
+                let mut lo = [f32::INFINITY; BOX_AXES];
+                let mut hi = [f32::NEG_INFINITY; BOX_AXES];
+                for chunk in members.chunks(8) {
+                    let mut lanes = [[FAR; 8]; AXES];
+                    let mut lane_origins = [usize::MAX; 8];
+                    for (l, &i) in chunk.iter().enumerate() {
+                        let p = &points[i as usize];
+                        for a in 0..AXES {
+                            lanes[a][l] = p[a];
+                        }
+                        for a in 0..BOX_AXES {
+                            lo[a] = lo[a].min(p[a]);
+                            hi[a] = hi[a].max(p[a]);
+                        }
+                        lane_origins[l] = origins[i as usize];
+                    }
+                    blocks.push(lanes.map(f32x8::new));
+                    block_origins.push(lane_origins);
+                }
+                Leaf {
+                    first_block,
+                    blocks: blocks.len() as u32 - first_block,
+                    lo,
+                    hi,
+                }
+            })
+            .collect();
+        Self {
+            values,
+            row_stride,
+            n,
+            row_len,
+            axes,
+            basis,
+            leaves,
+            blocks,
+            origins: block_origins,
+        }
+    }
+
+    /// Number of windows indexed.
+    pub fn len(&self) -> usize {
+        self.origins
+            .iter()
+            .map(|o| o.iter().filter(|&&x| x != usize::MAX).count())
+            .sum()
+    }
+
+    /// Whether no window is indexed.
+    pub fn is_empty(&self) -> bool {
+        self.leaves.is_empty()
+    }
+
+    /// Smallest sum of squared differences between `query` (`n·n·channels`
+    /// values, rows of `n · channels`) and any indexed window; infinity when
+    /// there is none. The same value as the exhaustive search
+    /// ([`super::ExemplarNeighbourhoods::nearest_sq_distance`]), up to the
+    /// rounding of the sums (which run in another order).
+    pub fn nearest_sq_distance(&self, query: &[f32], scratch: &mut IndexScratch) -> f32 {
+        self.nearest_below(query, f32::INFINITY, scratch)
+    }
+
+    /// The smaller of `best` and the smallest squared distance from `query`
+    /// to an indexed window (as [`Self::nearest_sq_distance`]).
+    pub fn nearest_below(&self, query: &[f32], best: f32, scratch: &mut IndexScratch) -> f32 {
+        assert_eq!(query.len(), self.n * self.row_len, "query size");
+        let q = project(query, &self.basis, self.axes);
+        scratch.order.clear();
+        scratch
+            .order
+            .extend(self.leaves.iter().enumerate().map(|(i, leaf)| {
+                let d: f32 = (leaf.lo.iter().zip(&leaf.hi).zip(&q))
+                    .map(|((lo, hi), x)| {
+                        let gap = (lo - x).max(x - hi).max(0.0);
+                        gap * gap
+                    })
+                    .sum();
+                (d, i as u32)
+            }));
+        let mut best = best;
+        // The nearest box first: its windows give a good bound to prune by.
+        if let Some(&(_, first)) = scratch.order.iter().min_by(|a, b| a.0.total_cmp(&b.0)) {
+            best = self.scan_leaf(first as usize, query, &q, best);
+        }
+        let kept = {
+            let order = &mut scratch.order;
+            order.retain(|&(bound, _)| !prunes(bound, best));
+            order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            &scratch.order[..]
+        };
+        for &(bound, leaf) in kept {
+            if prunes(bound, best) {
+                break;
+            }
+            best = self.scan_leaf(leaf as usize, query, &q, best);
+        }
+        best
+    }
+
+    /// `best` lowered by the windows of `leaf` nearer to `query`.
+    fn scan_leaf(&self, leaf: usize, query: &[f32], q: &[f32; AXES], mut best: f32) -> f32 {
+        let leaf = &self.leaves[leaf];
+        let qv: [f32x8; AXES] = q.map(f32x8::splat);
+        let range = leaf.first_block as usize..(leaf.first_block + leaf.blocks) as usize;
+        for (block, origins) in self.blocks[range.clone()].iter().zip(&self.origins[range]) {
+            let mut acc = f32x8::ZERO;
+            for a in 0..BOX_AXES {
+                let d = block[a] - qv[a];
+                acc += d * d;
+            }
+            if acc.simd_ge(f32x8::splat(threshold(best))).all() {
+                continue;
+            }
+            for a in BOX_AXES..AXES {
+                let d = block[a] - qv[a];
+                acc += d * d;
+            }
+            for (&bound, &o) in acc.to_array().iter().zip(origins) {
+                if o == usize::MAX || prunes(bound, best) {
+                    continue;
+                }
+                best = best.min(self.distance(o, query, best));
+            }
+        }
+        best
+    }
+
+    /// Squared distance from `query` to the window at `origin`, summed row
+    /// by row; stops (returning at least `best`) once a row's partial sum
+    /// reaches `best`.
+    fn distance(&self, origin: usize, query: &[f32], best: f32) -> f32 {
+        let mut d = 0.0f32;
+        for r in 0..self.n {
+            let w = &self.values[origin + r * self.row_stride..][..self.row_len];
+            let q = &query[r * self.row_len..][..self.row_len];
+            d += w.iter().zip(q).map(|(a, b)| (a - b) * (a - b)).sum::<f32>();
+            if d >= best {
+                return d;
+            }
+        }
+        d
+    }
+}
+
+/// Width, height and channels of `image`.
+fn sizes(image: &Image) -> (usize, usize, usize) {
+    (
+        image.width as usize,
+        image.height as usize,
+        image.channels as usize,
+    )
+}
+
+/// Whether a projected (lower-bound) squared distance `bound` proves a
+/// window no nearer than `best`.
+#[inline]
+fn prunes(bound: f32, best: f32) -> bool {
+    bound >= threshold(best)
+}
+
+/// The smallest projected squared distance that proves a window no nearer
+/// than `best`: `best` plus a margin for the rounding of the projections
+/// (relative 2·10⁻⁴ and absolute 10⁻⁴ for values in `[0, 1]`, where the
+/// rounding is about 10⁻⁶), so no window is skipped for it.
+#[inline]
+fn threshold(best: f32) -> f32 {
+    best * (1.0 + 2.0e-4) + 1.0e-4
+}
+
+/// The leading `axes` principal axes (`axes × dim`, row-major, orthonormal)
+/// of an evenly spaced sample of at most [`SAMPLE`] of the windows at
+/// `origins`, read by `window`. The covariance is eigen-decomposed in
+/// `f64`; without convergence the axes are the first coordinates (still
+/// orthonormal, so the bounds stay exact; only slower).
+fn principal_axes(
+    origins: &[usize],
+    dim: usize,
+    axes: usize,
+    window: &(dyn Fn(usize, &mut Vec<f32>) + Sync),
+) -> Vec<f32> {
+    let mut basis = vec![0.0f32; axes * dim];
+    let fallback = |basis: &mut Vec<f32>| {
+        for a in 0..axes {
+            basis[a * dim + a] = 1.0;
+        }
+    };
+    if origins.is_empty() {
+        fallback(&mut basis);
+        return basis;
+    }
+    let step = origins.len().div_ceil(SAMPLE);
+    let sample: Vec<usize> = origins.iter().step_by(step).copied().collect();
+    let mut buf = Vec::with_capacity(dim);
+    let mut rows = faer::Mat::<f64>::zeros(sample.len(), dim);
+    for (i, &o) in sample.iter().enumerate() {
+        window(o, &mut buf);
+        for (j, &v) in buf.iter().enumerate() {
+            rows[(i, j)] = f64::from(v);
+        }
+    }
+    let m = sample.len() as f64;
+    for j in 0..dim {
+        let mean = (0..sample.len()).map(|i| rows[(i, j)]).sum::<f64>() / m;
+        for i in 0..sample.len() {
+            rows[(i, j)] -= mean;
+        }
+    }
+    let mut cov = faer::Mat::<f64>::zeros(dim, dim);
+    faer::linalg::matmul::matmul(
+        cov.as_mut(),
+        faer::Accum::Replace,
+        rows.transpose(),
+        rows.as_ref(),
+        1.0 / m,
+        faer::Par::Seq,
+    );
+    let eigen = cov.self_adjoint_eigen(faer::Side::Lower);
+    crate::kernels::simd_state::after_faer();
+    match eigen {
+        Ok(e) => {
+            // Eigenvalues ascend: the leading axes are the last columns.
+            let u = e.U();
+            for a in 0..axes {
+                let col = dim - 1 - a;
+                for j in 0..dim {
+                    basis[a * dim + j] = u[(j, col)] as f32;
+                }
+            }
+        }
+        Err(_) => fallback(&mut basis),
+    }
+    basis
+}
+
+/// Coordinates of `v` on the first `axes` rows of `basis` (the rest zero).
+#[inline]
+fn project(v: &[f32], basis: &[f32], axes: usize) -> [f32; AXES] {
+    let dim = v.len();
+    let mut out = [0.0f32; AXES];
+    for (a, o) in out.iter_mut().enumerate().take(axes) {
+        let row = &basis[a * dim..(a + 1) * dim];
+        *o = row.iter().zip(v).map(|(b, x)| b * x).sum();
+    }
+    out
+}
+
+/// Splits `order[..]` into leaves of at most [`LEAF`] points by medians
+/// along the box axis of largest spread; pushes each leaf's range.
+fn split(points: &[[f32; AXES]], order: &mut [u32], leaves: &mut Vec<(usize, usize)>) {
+    // Explicit stack of (start, end), so depth is no concern.
+    let mut stack = vec![(0usize, order.len())];
+    let mut out = Vec::new();
+    while let Some((start, end)) = stack.pop() {
+        if end - start <= LEAF {
+            if end > start {
+                out.push((start, end));
+            }
+            continue;
+        }
+        let members = &mut order[start..end];
+        let mut lo = [f32::INFINITY; BOX_AXES];
+        let mut hi = [f32::NEG_INFINITY; BOX_AXES];
+        for &i in members.iter() {
+            for ((l, h), &v) in lo.iter_mut().zip(&mut hi).zip(&points[i as usize]) {
+                *l = l.min(v);
+                *h = h.max(v);
+            }
+        }
+        // The widest axis (the first of equals).
+        let mut axis = 0;
+        for a in 1..BOX_AXES {
+            if hi[a] - lo[a] > hi[axis] - lo[axis] {
+                axis = a;
+            }
+        }
+        let mid = members.len() / 2;
+        members.select_nth_unstable_by(mid, |&a, &b| {
+            points[a as usize][axis]
+                .total_cmp(&points[b as usize][axis])
+                .then(a.cmp(&b))
+        });
+        // Right half pushed first so leaves come out left to right.
+        stack.push((start + mid, end));
+        stack.push((start, start + mid));
+    }
+    leaves.extend(out);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::nearest::tests::pseudo_random;
+    use super::super::nearest::{ExemplarNeighbourhoods, QueryScratch};
+    use super::*;
+
+    /// A smooth image with structure (so the principal axes matter).
+    fn waves(w: u32, h: u32, ch: u32, seed: u32) -> Image {
+        let noise = pseudo_random((w * h * ch) as usize, seed);
+        let mut img = Image::new(w, h, ch);
+        for y in 0..h {
+            for x in 0..w {
+                for c in 0..ch {
+                    let i = ((y * w + x) * ch + c) as usize;
+                    let v = 0.5
+                        + 0.3 * ((x as f32 * 0.7 + c as f32).sin() * (y as f32 * 0.4).cos())
+                        + 0.2 * (noise[i] - 0.5);
+                    img.pixel_mut(x, y)[c as usize] = v;
+                }
+            }
+        }
+        img
+    }
+
+    fn query_at(img: &Image, x: i64, y: i64, n: usize) -> Vec<f32> {
+        let ch = img.channels as usize;
+        let mut q = vec![0.0; n * n * ch];
+        for dy in 0..n {
+            for dx in 0..n {
+                let p = img.texel(
+                    x + dx as i64,
+                    y + dy as i64,
+                    crate::image::sample::Wrap::Repeat,
+                );
+                q[(dy * n + dx) * ch..][..ch].copy_from_slice(p);
+            }
+        }
+        q
+    }
+
+    #[test]
+    fn toroidal_and_interior_equal_the_exhaustive_search() {
+        for (w, h, ch, n) in [
+            (37u32, 29u32, 3u32, 5u32),
+            (64, 64, 3, 7),
+            (20, 31, 1, 3),
+            (9, 9, 4, 9),
+        ] {
+            let ex = waves(w, h, ch, w + n);
+            let other = waves(w + 5, h + 3, ch, 7 * w);
+            let fast = WindowIndex::toroidal(&ex, n, 0..h as usize);
+            let slow = ExemplarNeighbourhoods::new(&ex, n);
+            let fast_in = WindowIndex::interior(&other, n, 0..(h + 3 - n + 1) as usize);
+            let slow_in = ExemplarNeighbourhoods::interior(&other, n);
+            assert_eq!(fast.len(), (w * h) as usize);
+            let (mut s1, mut s2) = (IndexScratch::default(), QueryScratch::default());
+            for k in 0..40u32 {
+                // Windows of another image, random vectors and exact copies.
+                let q = match k % 3 {
+                    0 => query_at(&other, k as i64 * 3, k as i64 * 5, n as usize),
+                    1 => pseudo_random((n * n * ch) as usize, 300 + k),
+                    _ => query_at(&ex, k as i64 * 7 - 4, k as i64, n as usize),
+                };
+                for (a, b) in [
+                    (
+                        fast.nearest_sq_distance(&q, &mut s1),
+                        slow.nearest_sq_distance(&q, None, &mut s2),
+                    ),
+                    (
+                        fast_in.nearest_sq_distance(&q, &mut s1),
+                        slow_in.nearest_sq_distance(&q, None, &mut s2),
+                    ),
+                ] {
+                    assert!(
+                        (a - b).abs() <= 1e-5 * b.max(1.0),
+                        "{w}x{h}x{ch} n{n} query {k}: {a} vs {b}"
+                    );
+                }
+                if k % 3 == 2 {
+                    assert_eq!(fast.nearest_sq_distance(&q, &mut s1), 0.0);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn vectors_equal_a_scan_of_them() {
+        let (n, ch) = (3usize, 3usize);
+        let dim = n * n * ch;
+        let data = pseudo_random(dim * 500, 9);
+        let index = WindowIndex::vectors(data.clone(), n as u32, ch as u32);
+        let mut s = IndexScratch::default();
+        for k in 0..30 {
+            let q = pseudo_random(dim, 1000 + k);
+            let brute = data
+                .chunks_exact(dim)
+                .map(|v| {
+                    v.iter()
+                        .zip(&q)
+                        .map(|(a, b)| (a - b) * (a - b))
+                        .sum::<f32>()
+                })
+                .fold(f32::INFINITY, f32::min);
+            let fast = index.nearest_sq_distance(&q, &mut s);
+            assert!(
+                (fast - brute).abs() <= 1e-5 * brute.max(1.0),
+                "{fast} vs {brute}"
+            );
+        }
+        let empty = WindowIndex::vectors(Vec::new(), n as u32, ch as u32);
+        assert!(empty.is_empty());
+        assert_eq!(
+            empty.nearest_sq_distance(&vec![0.5; dim], &mut s),
+            f32::INFINITY
+        );
+    }
+}
+
+#[cfg(test)]
+mod band_tests {
+    use super::*;
+
+    #[test]
+    fn bands_cover_the_rows_once_and_give_the_single_index_minimum() {
+        assert_eq!(
+            bands(10, BAND_WINDOWS, BAND_WINDOWS),
+            (0..10).map(|y| y..y + 1).collect::<Vec<_>>()
+        );
+        assert_eq!(bands(3, 7, BAND_WINDOWS), vec![0..3]);
+        let per = BAND_WINDOWS / 1000;
+        let b = bands(2500, 1000, BAND_WINDOWS);
+        assert_eq!(b.first(), Some(&(0..per)));
+        assert_eq!(b.last().map(|r| r.end), Some(2500));
+        assert!(b.windows(2).all(|p| p[0].end == p[1].start));
+
+        // Windows of a 40 x 30 image searched whole and in bands of 4 rows.
+        let (w, h, n, ch) = (40usize, 30usize, 5usize, 3usize);
+        let data: Vec<f32> = (0..w * h * ch)
+            .map(|i| ((i * 7919) % 1000) as f32 / 1000.0)
+            .collect();
+        let img = Image::from_data(w as u32, h as u32, ch as u32, data).unwrap();
+        let dim = n * n * ch;
+        let queries: Vec<f32> = (0..20 * dim)
+            .map(|i| ((i * 104_729) % 997) as f32 / 997.0)
+            .collect();
+        let rows = h - n + 1;
+        let search = |bands: &[Range<usize>], torus: bool| {
+            let mut best = vec![f32::INFINITY; 20];
+            let mut scratch = IndexScratch::default();
+            for band in bands {
+                let index = if torus {
+                    WindowIndex::toroidal(&img, n as u32, band.clone())
+                } else {
+                    WindowIndex::interior(&img, n as u32, band.clone())
+                };
+                for (b, q) in best.iter_mut().zip(queries.chunks_exact(dim)) {
+                    *b = index.nearest_below(q, *b, &mut scratch);
+                }
+            }
+            best
+        };
+        let banded: Vec<Range<usize>> =
+            (0..rows).step_by(4).map(|y| y..(y + 4).min(rows)).collect();
+        let whole = search(std::slice::from_ref(&(0..rows)), false);
+        assert_eq!(whole, search(&banded, false));
+        let one = BandedIndex::new(rows, w - n + 1, |r| {
+            WindowIndex::interior(&img, n as u32, r)
+        });
+        assert_eq!(whole, one.nearest(&queries, dim));
+        let four = BandedIndex::with_band_windows(rows, w - n + 1, 4 * (w - n + 1), |r| {
+            WindowIndex::interior(&img, n as u32, r)
+        });
+        assert_eq!(four.bands.len(), rows.div_ceil(4));
+        assert_eq!(whole, four.nearest(&queries, dim));
+        let torus = search(std::slice::from_ref(&(0..h)), true);
+        assert_eq!(torus, search(&[0..7, 7..h], true));
+        assert!(torus.iter().zip(&whole).all(|(t, i)| t <= i));
+    }
+}
