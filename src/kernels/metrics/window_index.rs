@@ -49,9 +49,9 @@ pub struct WindowIndex {
     /// Window side and values per window row (`n · channels`).
     n: usize,
     row_len: usize,
-    /// Axes in use and their basis, `axes × dim`, row-major.
-    axes: usize,
-    basis: Vec<f32>,
+    /// The basis by window value: per value, its weight on each axis (zero
+    /// beyond the axes in use).
+    basis: Vec<[f32x8; 2]>,
     /// Leaves in visiting order; their blocks of eight windows.
     leaves: Vec<Leaf>,
     /// Per block: `AXES` rows of eight projected values.
@@ -213,7 +213,7 @@ impl WindowIndex {
             .par_iter()
             .map_init(Vec::new, |buf, &o| {
                 window(o, buf);
-                project(buf, &basis, axes)
+                project(buf, &basis)
             })
             .collect();
         let mut order: Vec<u32> = (0..origins.len() as u32).collect();
@@ -258,7 +258,6 @@ impl WindowIndex {
             row_stride,
             n,
             row_len,
-            axes,
             basis,
             leaves,
             blocks,
@@ -292,7 +291,7 @@ impl WindowIndex {
     /// to an indexed window (as [`Self::nearest_sq_distance`]).
     pub fn nearest_below(&self, query: &[f32], best: f32, scratch: &mut IndexScratch) -> f32 {
         assert_eq!(query.len(), self.n * self.row_len, "query size");
-        let q = project(query, &self.basis, self.axes);
+        let q = project(query, &self.basis);
         scratch.order.clear();
         scratch
             .order
@@ -361,13 +360,30 @@ impl WindowIndex {
         for r in 0..self.n {
             let w = &self.values[origin + r * self.row_stride..][..self.row_len];
             let q = &query[r * self.row_len..][..self.row_len];
-            d += w.iter().zip(q).map(|(a, b)| (a - b) * (a - b)).sum::<f32>();
+            d += row_distance(w, q);
             if d >= best {
                 return d;
             }
         }
         d
     }
+}
+
+/// Squared distance of two rows of equal length: eight values at a time,
+/// the rest one by one.
+#[inline]
+fn row_distance(a: &[f32], b: &[f32]) -> f32 {
+    let mut acc = f32x8::ZERO;
+    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f32 = (ca.remainder().iter().zip(cb.remainder()))
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum();
+    for (x, y) in ca.zip(cb) {
+        let d = f32x8::new(x.try_into().expect("8 values"))
+            - f32x8::new(y.try_into().expect("8 values"));
+        acc = d.mul_add(d, acc);
+    }
+    acc.reduce_add() + tail
 }
 
 /// Width, height and channels of `image`.
@@ -395,28 +411,25 @@ fn threshold(best: f32) -> f32 {
     best * (1.0 + 2.0e-4) + 1.0e-4
 }
 
-/// The leading `axes` principal axes (`axes × dim`, row-major, orthonormal)
-/// of an evenly spaced sample of at most [`SAMPLE`] of the windows at
-/// `origins`, read by `window`. The covariance is eigen-decomposed in
-/// `f64`; without convergence the axes are the first coordinates (still
+/// The leading `axes` principal axes (orthonormal) of an evenly spaced
+/// sample of at most [`SAMPLE`] of the windows at `origins`, read by
+/// `window`, by window value: entry `j` holds value `j`'s weight on each
+/// axis (zero beyond `axes`). The covariance is eigen-decomposed in `f64`;
+/// without convergence the axes are the first coordinates (still
 /// orthonormal, so the bounds stay exact; only slower).
 fn principal_axes(
     origins: &[usize],
     dim: usize,
     axes: usize,
     window: &(dyn Fn(usize, &mut Vec<f32>) + Sync),
-) -> Vec<f32> {
-    let mut basis = vec![0.0f32; axes * dim];
-    let fallback = |basis: &mut Vec<f32>| {
-        for a in 0..axes {
-            basis[a * dim + a] = 1.0;
+) -> Vec<[f32x8; 2]> {
+    let mut basis = vec![[0.0f32; AXES]; dim];
+    let fallback = |basis: &mut Vec<[f32; AXES]>| {
+        for (a, b) in basis.iter_mut().enumerate().take(axes) {
+            b[a] = 1.0;
         }
     };
-    if origins.is_empty() {
-        fallback(&mut basis);
-        return basis;
-    }
-    let step = origins.len().div_ceil(SAMPLE);
+    let step = origins.len().div_ceil(SAMPLE).max(1);
     let sample: Vec<usize> = origins.iter().step_by(step).copied().collect();
     let mut buf = Vec::with_capacity(dim);
     let mut rows = faer::Mat::<f64>::zeros(sample.len(), dim);
@@ -426,7 +439,7 @@ fn principal_axes(
             rows[(i, j)] = f64::from(v);
         }
     }
-    let m = sample.len() as f64;
+    let m = sample.len().max(1) as f64;
     for j in 0..dim {
         let mean = (0..sample.len()).map(|i| rows[(i, j)]).sum::<f64>() / m;
         for i in 0..sample.len() {
@@ -445,30 +458,41 @@ fn principal_axes(
     let eigen = cov.self_adjoint_eigen(faer::Side::Lower);
     crate::kernels::simd_state::after_faer();
     match eigen {
-        Ok(e) => {
-            // Eigenvalues ascend: the leading axes are the last columns.
+        // Eigenvalues ascend: the leading axes are the last columns.
+        Ok(e) if !sample.is_empty() => {
             let u = e.U();
-            for a in 0..axes {
-                let col = dim - 1 - a;
-                for j in 0..dim {
-                    basis[a * dim + j] = u[(j, col)] as f32;
+            for (j, b) in basis.iter_mut().enumerate() {
+                for (a, w) in b.iter_mut().enumerate().take(axes) {
+                    *w = u[(j, dim - 1 - a)] as f32;
                 }
             }
         }
-        Err(_) => fallback(&mut basis),
+        _ => fallback(&mut basis),
     }
     basis
+        .into_iter()
+        .map(|b| {
+            let (lo, hi) = b.split_at(8);
+            [
+                f32x8::new(lo.try_into().expect("8 axes")),
+                f32x8::new(hi.try_into().expect("8 axes")),
+            ]
+        })
+        .collect()
 }
 
-/// Coordinates of `v` on the first `axes` rows of `basis` (the rest zero).
+/// Coordinates of `v` on the axes of `basis` ([`principal_axes`]).
 #[inline]
-fn project(v: &[f32], basis: &[f32], axes: usize) -> [f32; AXES] {
-    let dim = v.len();
-    let mut out = [0.0f32; AXES];
-    for (a, o) in out.iter_mut().enumerate().take(axes) {
-        let row = &basis[a * dim..(a + 1) * dim];
-        *o = row.iter().zip(v).map(|(b, x)| b * x).sum();
+fn project(v: &[f32], basis: &[[f32x8; 2]]) -> [f32; AXES] {
+    let (mut lo, mut hi) = (f32x8::ZERO, f32x8::ZERO);
+    for (&x, b) in v.iter().zip(basis) {
+        let x = f32x8::splat(x);
+        lo = x.mul_add(b[0], lo);
+        hi = x.mul_add(b[1], hi);
     }
+    let mut out = [0.0f32; AXES];
+    out[..8].copy_from_slice(&lo.to_array());
+    out[8..].copy_from_slice(&hi.to_array());
     out
 }
 
