@@ -14,7 +14,8 @@
 //! depend on the thread count. Ties go to the lower exemplar index.
 
 mod exhaustive;
-pub(crate) mod pca_kdtree;
+#[doc(hidden)] // `fit` and `project` are benchmarked (benches/roofline.rs).
+pub mod pca_kdtree;
 mod tsvq;
 
 pub use exhaustive::Exhaustive;

@@ -70,7 +70,8 @@ impl PcaKdTree {
 
 /// Mean and the leading `components` right singular vectors of a centred
 /// sample (rows of the basis, each `dim` long).
-pub(crate) fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
+#[doc(hidden)]
+pub fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Vec<f32>, Vec<f32>) {
     let (dim, rows) = (features.dim, features.rows());
     let mut basis = vec![0.0f32; components * dim];
     if rows == 0 || dim == 0 {
@@ -136,12 +137,8 @@ pub(crate) fn fit(features: &FeatureMatrix, components: usize, seed: u64) -> (Ve
 /// `Iterator::sum`), the components side by side so their sums run in
 /// parallel rather than one dependent chain after another.
 #[inline]
-pub(crate) fn project(
-    row: &[f32],
-    mean: &[f32],
-    basis: &[f32],
-    components: usize,
-) -> [f32; TREE_DIMS] {
+#[doc(hidden)]
+pub fn project(row: &[f32], mean: &[f32], basis: &[f32], components: usize) -> [f32; TREE_DIMS] {
     let dim = row.len();
     let mut out = [-0.0f32; TREE_DIMS];
     let kept = &mut out[..components.min(TREE_DIMS)];
