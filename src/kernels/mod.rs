@@ -10,6 +10,7 @@ pub mod atlas;
 pub mod bangay_morkel;
 pub mod coherent;
 pub mod jump_maps;
+pub mod knn;
 pub mod lapped;
 pub mod metrics;
 pub mod simd_state;

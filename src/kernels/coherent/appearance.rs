@@ -6,9 +6,8 @@
 //! (k-coherence, Tong et al. 2002): the jumps a coherent synthesis may take
 //! when shifting a neighbour's source is not good enough.
 
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
+use crate::kernels::knn::{Knn, KnnScratch};
 use rayon::prelude::*;
-use std::num::NonZeroUsize;
 
 use crate::cache_format::AnalysisStore;
 use crate::image::{Image, sample::Wrap};
@@ -287,37 +286,29 @@ fn similar_sets(
     if k == 0 || vectors.is_empty() {
         return Vec::new();
     }
-    let Ok(tree) = ImmutableKdTree::<f32, APPEARANCE_DIMS>::new_from_slice(vectors) else {
-        return (0..vectors.len() as u32)
-            .flat_map(|p| std::iter::repeat_n(p, k))
-            .collect();
-    };
+    let index = Knn::new(vectors);
     // Near pixels look alike; ask for enough to skip the pixel's own surroundings.
     let ask = (4 * k + 8).min(vectors.len());
-    let ask = NonZeroUsize::new(ask).unwrap_or(NonZeroUsize::MIN);
     let sep = min_separation.ceil() as i64;
     let mut out = vec![0u32; vectors.len() * k];
-    out.par_chunks_mut(k).enumerate().for_each(|(p, slot)| {
-        let (px, py) = ((p as u32 % width) as i64, (p as u32 / width) as i64);
-        let found = tree
-            .query(&vectors[p])
-            .nearest_n::<SquaredEuclidean<f32>>(ask)
-            .execute();
-        let mut n = 0;
-        for c in found.iter() {
-            let q = c.item;
-            let (qx, qy) = ((q % width) as i64, (q / width) as i64);
-            if (qx - px).abs().max((qy - py).abs()) < sep {
-                continue;
+    out.par_chunks_mut(k)
+        .enumerate()
+        .for_each_init(KnnScratch::default, |scratch, (p, slot)| {
+            let (px, py) = ((p as u32 % width) as i64, (p as u32 / width) as i64);
+            let mut n = 0;
+            for &(_, q) in index.nearest(&vectors[p], ask, scratch) {
+                let (qx, qy) = ((q % width) as i64, (q / width) as i64);
+                if (qx - px).abs().max((qy - py).abs()) < sep {
+                    continue;
+                }
+                slot[n] = q;
+                n += 1;
+                if n == k {
+                    break;
+                }
             }
-            slot[n] = q;
-            n += 1;
-            if n == k {
-                break;
-            }
-        }
-        slot[n..].fill(p as u32);
-    });
+            slot[n..].fill(p as u32);
+        });
     out
 }
 

@@ -1,5 +1,5 @@
 //! Approximate search: principal components of the exemplar neighbourhoods
-//! (faer thin SVD of a centred sample, sequential), an exact kiddo kd-tree
+//! (faer thin SVD of a centred sample, sequential), an exact kd-tree
 //! over the leading components, and the nearest candidates in that space
 //! re-ranked by the exact distance in the full space.
 //!
@@ -8,18 +8,16 @@
 //! it is not guaranteed (the leading-component distance is only a lower
 //! bound of the full one).
 
-use std::num::NonZeroUsize;
-
 use faer::Mat;
 use faer::Par;
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::svd::{self, ComputeSvdVectors};
-use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use rayon::prelude::*;
 
 use super::{Match, NeighbourhoodSearch, rerank};
+use crate::kernels::knn::{Knn, KnnScratch};
 use crate::kernels::wei_levoy::wl_match::features::FeatureMatrix;
 
 /// Dimensions of the kd-tree (kept components, zero padded).
@@ -34,8 +32,8 @@ pub struct PcaKdTree {
     /// Kept components, `components × dim`, row-major.
     basis: Vec<f32>,
     components: usize,
-    /// `None` when the tree could not be built (every row is then a candidate).
-    tree: Option<ImmutableKdTree<f32, TREE_DIMS>>,
+    /// `None` without rows or values (every row is then a candidate).
+    tree: Option<Knn<TREE_DIMS>>,
     candidates: usize,
 }
 
@@ -52,11 +50,7 @@ impl PcaKdTree {
             .into_par_iter()
             .map(|i| project_row(features.row(i)))
             .collect();
-        let tree = if rows > 0 && dim > 0 {
-            ImmutableKdTree::new_from_slice(&points).ok()
-        } else {
-            None
-        };
+        let tree = (rows > 0 && dim > 0).then(|| Knn::new(&points));
         Self {
             features,
             mean,
@@ -165,17 +159,14 @@ impl NeighbourhoodSearch for PcaKdTree {
             });
             return;
         }
-        let k = NonZeroUsize::new(self.candidates.min(rows as usize).max(1))
-            .unwrap_or(NonZeroUsize::MIN);
+        let k = self.candidates.min(rows as usize).max(1);
+        let mut scratch = KnnScratch::default();
         for (q, o) in queries.chunks_exact(dim).zip(out.iter_mut()) {
             *o = match &self.tree {
                 Some(tree) => {
                     let p = project(q, &self.mean, &self.basis, self.components);
-                    let found = tree
-                        .query(&p)
-                        .nearest_n::<SquaredEuclidean<f32>>(k)
-                        .execute();
-                    rerank(&self.features, q, found.iter().map(|c| c.item))
+                    let found = tree.nearest(&p, k, &mut scratch);
+                    rerank(&self.features, q, found.iter().map(|&(_, i)| i))
                 }
                 None => rerank(&self.features, q, 0..rows),
             };
