@@ -114,19 +114,7 @@ impl<const D: usize> Knn<D> {
             });
             return at;
         }
-        // Split at the median of the widest dimension (the first of equals).
-        let mut axis = 0;
-        for a in 1..D {
-            if hi[a] - lo[a] > hi[axis] - lo[axis] {
-                axis = a;
-            }
-        }
-        let mid = order.len() / 2;
-        order.select_nth_unstable_by(mid, |&a, &b| {
-            points[a as usize][axis]
-                .total_cmp(&points[b as usize][axis])
-                .then(a.cmp(&b))
-        });
+        let mid = split_widest(points, order, &lo, &hi);
         self.nodes.push(Node {
             lo,
             hi,
@@ -215,6 +203,30 @@ impl<const D: usize> Knn<D> {
         }
         d
     }
+}
+
+/// Splits `order` at the median of the widest of the first `lo.len()`
+/// coordinates (the first of equals; ties by index), the smaller half
+/// first; returns the median's position.
+pub(crate) fn split_widest<const D: usize>(
+    points: &[[f32; D]],
+    order: &mut [u32],
+    lo: &[f32],
+    hi: &[f32],
+) -> usize {
+    let mut axis = 0;
+    for a in 1..lo.len().min(D) {
+        if hi[a] - lo[a] > hi[axis] - lo[axis] {
+            axis = a;
+        }
+    }
+    let mid = order.len() / 2;
+    order.select_nth_unstable_by(mid, |&a, &b| {
+        points[a as usize][axis]
+            .total_cmp(&points[b as usize][axis])
+            .then(a.cmp(&b))
+    });
+    mid
 }
 
 /// Inserts `c` into `best` (ascending by distance then index), keeping at

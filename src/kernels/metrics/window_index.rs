@@ -26,6 +26,7 @@ use rayon::prelude::*;
 use wide::f32x8;
 
 use crate::image::Image;
+use crate::kernels::knn::split_widest;
 
 /// Principal axes the windows are projected on (fewer when a window has
 /// fewer values).
@@ -518,19 +519,7 @@ fn split(points: &[[f32; AXES]], order: &mut [u32], leaves: &mut Vec<(usize, usi
                 *h = h.max(v);
             }
         }
-        // The widest axis (the first of equals).
-        let mut axis = 0;
-        for a in 1..BOX_AXES {
-            if hi[a] - lo[a] > hi[axis] - lo[axis] {
-                axis = a;
-            }
-        }
-        let mid = members.len() / 2;
-        members.select_nth_unstable_by(mid, |&a, &b| {
-            points[a as usize][axis]
-                .total_cmp(&points[b as usize][axis])
-                .then(a.cmp(&b))
-        });
+        let mid = split_widest(points, members, &lo, &hi);
         // Right half pushed first so leaves come out left to right.
         stack.push((start + mid, end));
         stack.push((start, start + mid));
