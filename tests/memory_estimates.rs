@@ -77,20 +77,14 @@ struct StagePeaks {
 
 impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for StagePeaks {
     fn on_enter(&self, id: &Id, ctx: Context<'_, S>) {
-        if ctx
-            .span(id)
-            .is_some_and(|s| s.name() == surfsynth::telemetry::STAGE_SPAN)
-        {
+        if ctx.span(id).is_some_and(|s| measured_span(s.name())) {
             let now = CURRENT.load(Ordering::SeqCst);
             self.start.store(now, Ordering::SeqCst);
             PEAK.store(now, Ordering::SeqCst);
         }
     }
     fn on_exit(&self, id: &Id, ctx: Context<'_, S>) {
-        if ctx
-            .span(id)
-            .is_some_and(|s| s.name() == surfsynth::telemetry::STAGE_SPAN)
-        {
+        if ctx.span(id).is_some_and(|s| measured_span(s.name())) {
             let peak = PEAK.load(Ordering::SeqCst);
             let start = self.start.load(Ordering::SeqCst);
             self.peaks.lock().unwrap().push(peak.saturating_sub(start));
@@ -98,7 +92,14 @@ impl<S: Subscriber + for<'a> LookupSpan<'a>> Layer<S> for StagePeaks {
     }
 }
 
-/// Runs `config` in-process and returns each stage's measured peak.
+/// The spans whose peaks are measured: every stage's, then the result
+/// metrics' (last).
+fn measured_span(name: &str) -> bool {
+    name == surfsynth::telemetry::STAGE_SPAN || name == "result_metrics"
+}
+
+/// Runs `config` in-process and returns each stage's measured peak, then
+/// the result metrics'.
 fn measure(config: &str) -> Vec<usize> {
     let layer = StagePeaks::default();
     let subscriber = tracing_subscriber::registry().with(layer.clone());
@@ -151,15 +152,8 @@ fn check_each(stages: &[(usize, &str)], config: &str, sizes: &[&str]) -> Vec<Str
         let estimates = estimates(&text);
         let measured = measure(&text);
         for &(stage, label) in stages {
-            let (estimate, measured) = (estimates[stage], measured[stage] as u64);
-            let ratio = estimate as f64 / measured.max(1) as f64;
-            let row = format!(
-                "| {label} | {size} | {:.1} MiB | {:.1} MiB | {ratio:.2} |",
-                mib(estimate),
-                mib(measured)
-            );
-            eprintln!("{row}");
-            if !(0.5..=2.0).contains(&ratio) {
+            let (row, within) = compare(label, size, estimates[stage], measured[stage] as u64);
+            if !within {
                 bad.push(row.clone());
             }
             rows.push(row);
@@ -171,6 +165,19 @@ fn check_each(stages: &[(usize, &str)], config: &str, sizes: &[&str]) -> Vec<Str
         bad.join("\n")
     );
     rows
+}
+
+/// The table row of an estimate against its measured peak, and whether
+/// their ratio is within [0.5, 2].
+fn compare(label: &str, size: &str, estimate: u64, measured: u64) -> (String, bool) {
+    let ratio = estimate as f64 / measured.max(1) as f64;
+    let row = format!(
+        "| {label} | {size} | {:.1} MiB | {:.1} MiB | {ratio:.2} |",
+        mib(estimate),
+        mib(measured)
+    );
+    eprintln!("{row}");
+    (row, (0.5..=2.0).contains(&ratio))
 }
 
 /// One-time allocations (the thread pool, lazily built tables) happen in
@@ -581,3 +588,44 @@ up = [0.0, 1.0, 0.0]
 units = "diagonal"
 constraints = [{ at_bbox = [0.5, 0.5, 1.0], up = [1.0, 0.0, 0.0], radius = 0.3 }]
 "#;
+
+/// The result metrics' estimate (`output.metric_samples`) against their
+/// measured peak, on a displaced jump_surface result (templates, surface energy,
+/// completeness against the templates), at three sample counts and three
+/// mesh sizes.
+#[test]
+fn result_metrics_estimate_is_within_2x_of_its_measured_peak() {
+    use surfsynth::pipeline::Pipeline;
+    use surfsynth::pipeline::memory_budget::{metrics_estimate, stage_sizes};
+    use surfsynth::stage::memory::InputSizes;
+    let _one = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    warm_up();
+    let mut bad = Vec::new();
+    for (subdivisions, samples) in [(5, 1000), (5, 10000), (5, 50000), (4, 2000), (6, 2000)] {
+        let text = format!(
+            "{}\n[output]\nmetric_samples = {samples}\n",
+            JUMP_SURFACE
+                .replace("{}", &subdivisions.to_string())
+                .replace("{E}", "128")
+        );
+        let p = Pipeline::from_source(surfsynth::config::ConfigSource::from_text("t.toml", &text))
+            .unwrap_or_else(|e| panic!("{e}"));
+        let input =
+            surfsynth::pipeline::load_input(&p.input, &p.source.base_dir, &p.source.file).unwrap();
+        let sizes = InputSizes::of(&input, &p.input);
+        let seen = stage_sizes(&p.stages, &sizes);
+        let last = p.stages.last().unwrap().sizes_after(seen.last().unwrap());
+        let estimate = metrics_estimate(&p.output, &last).bytes;
+        let measured = *measure(&text).last().unwrap() as u64;
+        let size = format!("subdivisions {subdivisions}, {samples} samples");
+        let (row, within) = compare("result metrics", &size, estimate, measured);
+        if !within {
+            bad.push(row);
+        }
+    }
+    assert!(
+        bad.is_empty(),
+        "estimates off by more than 2x:\n{}",
+        bad.join("\n")
+    );
+}

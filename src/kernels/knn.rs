@@ -287,14 +287,24 @@ mod tests {
 
     #[test]
     fn equals_a_sorted_scan_bit_for_bit_with_and_without_ties() {
-        for (n, grid) in [(1usize, false), (7, false), (300, false), (5000, false), (2000, true)] {
+        for (n, grid) in [
+            (1usize, false),
+            (7, false),
+            (300, false),
+            (5000, false),
+            (2000, true),
+        ] {
             let pts = points::<8>(n, n as u64, grid);
             let index = Knn::new(&pts);
             let mut scratch = KnnScratch::default();
             for (qi, q) in points::<8>(25, 99, grid).iter().enumerate() {
                 for k in [1usize, 5, 24, 40] {
                     let fast = index.nearest(q, k, &mut scratch).to_vec();
-                    assert_eq!(fast, brute(&pts, q, k), "n {n} grid {grid} query {qi} k {k}");
+                    assert_eq!(
+                        fast,
+                        brute(&pts, q, k),
+                        "n {n} grid {grid} query {qi} k {k}"
+                    );
                 }
             }
         }
@@ -306,7 +316,10 @@ mod tests {
         let index = Knn::new(&pts);
         let mut scratch = KnnScratch::default();
         let q = [0.5f32, 0.25, 0.75];
-        assert_eq!(index.nearest(&q, 10, &mut scratch).to_vec(), brute(&pts, &q, 10));
+        assert_eq!(
+            index.nearest(&q, 10, &mut scratch).to_vec(),
+            brute(&pts, &q, 10)
+        );
         let empty = Knn::<4>::new(&[]);
         assert!(empty.is_empty());
         assert!(empty.nearest(&[0.0; 4], 3, &mut scratch).is_empty());

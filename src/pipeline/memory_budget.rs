@@ -23,7 +23,7 @@
 //! the measured peak at three sizes).
 
 use super::memory_limit::{LIMIT_VAR, MemoryLimit};
-use crate::config::{ConfigError, RawInput};
+use crate::config::{ConfigError, RawInput, RawOutput};
 use crate::stage::StagePlan;
 use crate::stage::memory::{BYTES_PER_MESH_VERTEX, InputSizes, MemoryEstimate, show_bytes};
 
@@ -158,6 +158,79 @@ pub fn check_stages(
         }
     }
     Ok(all)
+}
+
+/// Bytes the result metrics hold per vertex of the mesh they measure (the
+/// edges and vertex faces they build, the per-vertex signal), measured.
+pub const METRICS_BYTES_PER_VERTEX: u64 = 96;
+
+/// The result metrics' working memory (they follow every pipeline, on the
+/// mesh the last stage leaves): per sampled location its windows (query,
+/// template, index entry) and its dense sharpness template, the exact index
+/// of the exemplar's windows (one band at most,
+/// [`crate::kernels::metrics::window_index::BAND_WINDOWS`]) and a few
+/// arrays per vertex. Grows with `output.metric_samples` (locations are
+/// vertices, each sampled at most once, once the mesh is known); the
+/// channels are taken as 4 until the exemplar is loaded.
+pub fn metrics_estimate(output: &RawOutput, sizes: &InputSizes) -> MemoryEstimate {
+    use crate::kernels::metrics::surface_quality::SHARPNESS_OVERSAMPLING;
+    use crate::kernels::metrics::window_index::{BAND_WINDOWS, BYTES_PER_WINDOW};
+    let n = u64::from(output.metric_neighbourhood.max(1));
+    let ch = if sizes.loaded {
+        u64::from(sizes.exemplar_channels.max(1))
+    } else {
+        4
+    };
+    let side = (n - 1) * u64::from(SHARPNESS_OVERSAMPLING) + 1;
+    // The templates twice (one per location, then side by side), the query.
+    let per_sample = 4 * ch * (2 * (n * n + side * side) + n * n) + BYTES_PER_WINDOW as u64 + 64;
+    // Locations are vertices (each at most once) when the mesh is known.
+    let vertices = sizes.vertices;
+    let locations = move |samples: u64| {
+        if vertices > 0 {
+            samples.min(vertices)
+        } else {
+            samples
+        }
+    };
+    let windows = (u64::from(sizes.exemplar_width) * u64::from(sizes.exemplar_height))
+        .min(BAND_WINDOWS as u64);
+    let fixed =
+        windows * (BYTES_PER_WINDOW as u64 + 4 * ch) + sizes.vertices * METRICS_BYTES_PER_VERTEX;
+    MemoryEstimate::growing(
+        "output.metric_samples",
+        "the result metrics' sampled windows, the exemplar's window index and per-vertex arrays",
+        output.metric_samples as u64,
+        (10, 100_000),
+        move |samples| fixed + locations(samples) * per_sample,
+        |samples| samples.to_string(),
+    )
+}
+
+/// Checks [`metrics_estimate`] on the mesh the last of `stages` leaves
+/// against `limit`; returns the estimate's bytes.
+///
+/// # Errors
+/// [`ConfigError::Value`] for `output.metric_samples`, naming the estimate,
+/// the limit and the largest value that fits.
+pub fn check_metrics(
+    output: &RawOutput,
+    stages: &[Box<dyn StagePlan>],
+    sizes: &InputSizes,
+    limit: &MemoryLimit,
+    file: &str,
+) -> Result<u64, ConfigError> {
+    let last = stages.iter().fold(*sizes, |s, stage| stage.sizes_after(&s));
+    let e = metrics_estimate(output, &last);
+    let resident = sizes.resident_bytes();
+    if e.bytes.saturating_add(resident) > limit.bytes {
+        return Err(ConfigError::Value {
+            file: file.into(),
+            key: "output.metric_samples".into(),
+            message: over_limit_message(&e, limit, resident),
+        });
+    }
+    Ok(e.bytes)
 }
 
 /// The sizes each stage sees: the input's, then what each stage before it

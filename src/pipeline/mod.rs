@@ -287,6 +287,13 @@ impl Pipeline {
                 message: r.message,
             },
         )?;
+        memory_budget::check_metrics(
+            &raw.output,
+            &stages,
+            &Default::default(),
+            &memory_limit,
+            &file,
+        )?;
         Ok(Self {
             seed: raw.seed,
             input: raw.input,

@@ -210,6 +210,13 @@ fn run_schedule(
         kind: r.kind.into(),
         message: r.message,
     })?;
+    super::memory_budget::check_metrics(
+        &pipeline.output,
+        &pipeline.stages,
+        &sizes,
+        &pipeline.memory_limit,
+        &pipeline.source.file,
+    )?;
     setup_world(pipeline, world, input);
     let mut metrics = world.resource_mut::<Metrics>();
     for e in estimates {
@@ -222,6 +229,7 @@ fn run_schedule(
         all.insert(e.param.into(), e.bytes.into());
         metrics.record(e.index - 1, "memory_estimate_bytes", all);
     }
+
     let mut schedule = build_schedule(pipeline);
     if keep == Keep::Read {
         let n = pipeline.stages.len();

@@ -614,3 +614,37 @@ keys = [{ at_bbox = [0.5, 0.5, 1.0], up = [0.0, 1.0, 0.0] }]
     let fit: u64 = largest(&stderr, "vertices").parse().expect("a count");
     assert!((1000..40962).contains(&fit), "{fit}: {stderr}");
 }
+
+/// The result metrics follow every pipeline; their sampled windows grow
+/// with `output.metric_samples` (up to 100,000 of 15×15 windows with their
+/// dense sharpness templates: about 3 GB). Over the limit, the config is
+/// refused at validation, before loading, naming the samples that fit.
+#[test]
+fn result_metrics_over_the_limit_are_refused_naming_the_samples_that_fit() {
+    let text = r#"
+seed = 1
+[input]
+mesh = "builtin:plane"
+exemplar = "builtin:noise"
+[[stage]]
+kind = "orientation"
+[output]
+metric_samples = 100000
+metric_neighbourhood = 15
+"#;
+    let stderr = common::expect_refused_env(
+        text,
+        &[],
+        &[(LIMIT_VAR, "256M")],
+        &[
+            "output.metric_samples",
+            "`output.metric_samples` = 100000 needs an estimated",
+            "the result metrics",
+            "over the memory limit of 256.0 MiB (SURFSYNTH_MEMORY_LIMIT)",
+        ],
+    );
+    let fit: u64 = largest(&stderr, "output.metric_samples")
+        .parse()
+        .expect("a count");
+    assert!((10..100_000).contains(&fit), "{fit}: {stderr}");
+}
