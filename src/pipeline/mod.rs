@@ -13,6 +13,7 @@ pub mod memory_limit;
 pub mod plane_check;
 mod report;
 mod run;
+pub mod stage_check;
 
 use crate::stage::{Datum, PlaneRole, StagePlan};
 use crate::stages::registry;
@@ -57,14 +58,18 @@ impl std::fmt::Debug for Pipeline {
     }
 }
 
-/// Stage parameters that name a file, by stage kind: resolved by the path
-/// rule of [`ConfigSource`] before the stage parses its settings.
 /// Most `[[stage]]` entries a config may have: far above any real
 /// pipeline (the shipped ones have at most 7), far below the thousands at
 /// which the schedule's memory became gigabytes (issue 43: 800 stages took
 /// 0.78 GB, 3,000 took 11.4 GB).
 pub const MAX_STAGES: usize = 256;
 
+/// What `[input] height_map` may be, for messages.
+const HEIGHT_MAP_ALLOWED: &str =
+    "a file the exemplar's size, \"derive:luminance\" or \"derive:builtin\"";
+
+/// Stage parameters that name a file, by stage kind: resolved by the path
+/// rule of [`ConfigSource`] before the stage parses its settings.
 const STAGE_PATH_PARAMS: &[(&str, &str)] =
     &[("lapped_paste", "mask_image"), ("triplanar", "image")];
 
@@ -222,6 +227,8 @@ fn check_order(
                 needs: need.describe().to_string(),
                 hint: if need == Datum::Mesh {
                     "set `mesh` in [input]".to_string()
+                } else if need == Datum::HeightMap {
+                    format!("set input.height_map ({HEIGHT_MAP_ALLOWED})")
                 } else {
                     format!(
                         "add {} before it",
@@ -265,6 +272,9 @@ impl Pipeline {
         let mut available: HashSet<Datum> = HashSet::new();
         if raw.input.mesh.is_some() {
             available.insert(Datum::Mesh);
+        }
+        if raw.input.height_map.is_some() {
+            available.insert(Datum::HeightMap);
         }
         for (i, spanned) in raw.stage.iter().enumerate() {
             let (plan, kind_line) = parse_stage_table(&source, &all, i + 1, spanned)?;

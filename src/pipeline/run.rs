@@ -184,6 +184,7 @@ fn run_schedule(
     keep: Keep,
 ) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
+    super::stage_check::check_stage_inputs(pipeline, &input)?;
     // Every stage's memory estimate for the loaded input, before any work.
     let sizes = crate::stage::memory::InputSizes::of(&input, &pipeline.input);
     let cached: Vec<bool> = pipeline
