@@ -397,8 +397,9 @@ fn marked_files(dir: &Path) -> Option<Vec<String>> {
     })
 }
 
-/// Whether `dir`'s `run.json` is a sweep's record of a run.
-fn holds_sweep_record(dir: &Path) -> bool {
+/// Whether `dir`'s `run.json` is a sweep's record of a run (the folder is
+/// then the sweep's, which empties it before the run).
+pub fn holds_sweep_record(dir: &Path) -> bool {
     std::fs::read_to_string(dir.join(SWEEP_FILES[0]))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())

@@ -18,7 +18,9 @@ pub mod stage_check;
 use crate::stage::{Datum, PlaneRole, StagePlan};
 use crate::stages::registry;
 pub use error::PipelineError;
-pub use input::{LoadedInput, check_input_files, input_file, load_input, load_input_from};
+pub use input::{
+    INPUT_FILE_KEYS, LoadedInput, check_input_files, input_file, load_input, load_input_from,
+};
 pub use report::{describe_stages, format_report};
 pub use run::{
     RunOptions, RunReport, StageSet, build_schedule, peak_rss_bytes, run, run_in_world, setup_world,
