@@ -291,12 +291,32 @@ impl Pipeline {
                 message,
             })?;
         memory_budget::check_input(&raw.input, &memory_limit, &file)?;
-        // Before loading: what the settings alone decide.
+        // Before loading: what the settings alone decide. The estimates are
+        // lower bounds, so a refusal stands; but the largest value it
+        // offers must leave room for the input, which only loading it
+        // tells (issue 43: an offer was refused once the input was
+        // loaded). So a refusal loads the input and says what the check
+        // before the first stage will say.
         memory_budget::check_stages(&stages, &Default::default(), &memory_limit, &[]).map_err(
-            |r| ConfigError::Value {
-                file: file.clone(),
-                key: format!("stage {} ({}) {}", r.index, r.kind, r.param),
-                message: r.message,
+            |r| {
+                let r = load_input_from(&raw.input, &source)
+                    .ok()
+                    .and_then(|input| {
+                        memory_budget::check_loaded(
+                            &stages,
+                            &input,
+                            &raw.input,
+                            raw.seed,
+                            &memory_limit,
+                        )
+                        .err()
+                    })
+                    .unwrap_or(r);
+                ConfigError::Value {
+                    file: file.clone(),
+                    key: format!("stage {} ({}) {}", r.index, r.kind, r.param),
+                    message: r.message,
+                }
             },
         )?;
         Ok(Self {
