@@ -258,3 +258,21 @@ fn a_key_after_a_retiling_is_checked_when_its_stage_runs() {
     );
     assert!(!made_out);
 }
+
+/// With `subdivide_sqrt2`'s target derived from the texture scale (its
+/// defaults) a coarse input stays the coarsest level: its ids are checked
+/// up front too.
+#[test]
+fn a_key_before_a_derived_subdivision_is_refused_before_any_stage() {
+    let derived = stages(&[
+        "orientation",
+        "subdivide_sqrt2",
+        "diffuse_orientation\nkeys = [{ vertex = 300, up = [0.0, 1.0, 0.0] }]",
+        "graph_match\npasses = [1, 1, 1]",
+    ]);
+    refused_before_any_stage(
+        &config("exemplar = \"builtin:bricks\"", &derived),
+        &[],
+        &["`keys`: key 1: vertex 300 does not exist", "288 vertices"],
+    );
+}

@@ -244,9 +244,10 @@ impl Stage for SubdivideSqrt2 {
     }
     /// The coarsest level is the input itself, ids and all, unless
     /// adaptive passes refine it or a dense input is remeshed
-    /// (`levels::coarsen_dense`: more than twice the target's vertices);
-    /// a target derived from the texture scale is not known exactly before
-    /// the run, so then the ids count as not kept.
+    /// (`levels::coarsen_dense`: more than twice the target's vertices).
+    /// A target derived from the texture scale is computed in `f32` when
+    /// the stage runs: within 1 % of the threshold the ids count as not
+    /// kept.
     fn keeps_vertex_ids(settings: &Self::Settings, sizes: &InputSizes) -> bool {
         if settings.adaptive_passes > 0 {
             return false;
@@ -254,7 +255,7 @@ impl Stage for SubdivideSqrt2 {
         match (settings.levels, settings.target_vertices) {
             _ if !settings.coarsen_dense_input => true,
             (_, t) if t > 0 => sizes.vertices <= t.saturating_mul(2),
-            (0, _) => false,
+            (0, _) => (sizes.vertices as f64) < 1.98 * sizes.vertices_for_area(sizes.area),
             _ => true,
         }
     }
