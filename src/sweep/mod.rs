@@ -308,7 +308,8 @@ fn check_options(opts: &SweepOptions) -> Result<(Option<Duration>, Shard), Sweep
 }
 
 /// Every planned run's config, validated as `run` would (settings, order,
-/// input files), with its resolved config's hash; and the distinct
+/// input files, each distinct input loaded once), with its resolved
+/// config's hash; and the distinct
 /// exemplars of the grid (key, report file name, options) with an input
 /// that names each.
 struct Validated {
