@@ -88,7 +88,7 @@ impl BadFace {
 }
 
 /// What the loader changed in a mesh. All counts are zero for a clean mesh.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct LoadReport {
     /// Vertices in the file (after STL welding, before repairs).
     pub input_vertices: usize,
@@ -107,6 +107,60 @@ pub struct LoadReport {
     pub triangulated_faces: usize,
     /// Non-convex faces cut into triangles (ear clipping in their plane).
     pub triangulated_non_convex_faces: usize,
+    /// When every face was dropped for zero area because one vertex lies
+    /// far from all the others (its distance makes the bounding box, and
+    /// with it the zero-area threshold, huge): that vertex.
+    pub far_vertex: Option<FarVertex>,
+}
+
+/// A vertex far from every other one of its mesh ([`far_vertex`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FarVertex {
+    /// 0-based, among the vertices as read.
+    pub index: usize,
+    /// Its position.
+    pub position: Vec3,
+    /// The bounding-box diagonal with it.
+    pub diagonal: f64,
+    /// The bounding-box diagonal of the other vertices.
+    pub others_diagonal: f64,
+}
+
+/// How many times the bounding-box diagonal a vertex must stretch to count
+/// as far from the others.
+const FAR_FACTOR: f64 = 1e3;
+
+/// The vertex farthest from the per-axis median of `positions`, when the
+/// bounding box with it is more than [`FAR_FACTOR`] times the one without
+/// it (a stray coordinate such as 1e30 in a mesh of unit size).
+pub fn far_vertex(positions: &[Vec3]) -> Option<FarVertex> {
+    if positions.len() < 2 {
+        return None;
+    }
+    let median = |axis: usize| {
+        let mut v: Vec<f32> = positions.iter().map(|p| p[axis]).collect();
+        let mid = v.len() / 2;
+        *v.select_nth_unstable_by(mid, f32::total_cmp).1
+    };
+    let m = Vec3::new(median(0), median(1), median(2));
+    let (index, &position) = positions.iter().enumerate().max_by(|(_, a), (_, b)| {
+        let d = |p: &Vec3| (p.as_dvec3() - m.as_dvec3()).abs().max_element();
+        d(a).total_cmp(&d(b))
+    })?;
+    let others: Vec<Vec3> = positions
+        .iter()
+        .enumerate()
+        .filter(|&(i, _)| i != index)
+        .map(|(_, &p)| p)
+        .collect();
+    let diagonal = bounding_box_diagonal(positions);
+    let others_diagonal = bounding_box_diagonal(&others);
+    (diagonal > FAR_FACTOR * others_diagonal).then_some(FarVertex {
+        index,
+        position,
+        diagonal,
+        others_diagonal,
+    })
 }
 
 impl LoadReport {
@@ -240,6 +294,9 @@ pub fn repair_mesh(mesh: &mut PolyMesh, options: &LoadOptions) -> Result<LoadRep
         }
         keep
     });
+    if mesh.face_count() == 0 && report.dropped_zero_area_faces > 0 && !options.merge_duplicates {
+        report.far_vertex = far_vertex(&positions);
+    }
     mesh.positions = positions;
     origin = kept;
     let counts =

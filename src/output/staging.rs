@@ -50,6 +50,30 @@ static SEQUENCE: AtomicU64 = AtomicU64::new(0);
 const TMP_TAG: &str = ".tmp-";
 const OLD_TAG: &str = ".old-";
 
+/// Longest folder name whose hidden siblings keep it whole: `.` + the
+/// name + a tag, a PID (at most 10 digits) and a sequence number (at most
+/// 20) stay within NAME_MAX (255 bytes) up to 218 bytes.
+const MAX_WHOLE_STEM: usize = 200;
+
+/// The part of a hidden sibling's name that stands for the folder name
+/// `name` (`.STEM.tmp-PID.N`): the name itself up to [`MAX_WHOLE_STEM`]
+/// bytes; a longer one (file systems allow 255) is cut at a character
+/// boundary and followed by `~` and 16 hex digits of its BLAKE3 hash, so
+/// that the sibling's name fits and still belongs to that folder alone
+/// (issue 43: a 250-byte `--out` failed "File name too long", exit 1).
+fn sibling_stem(name: &std::ffi::OsStr) -> OsString {
+    if name.len() <= MAX_WHOLE_STEM {
+        return name.to_os_string();
+    }
+    let lossy = name.to_string_lossy();
+    let mut keep = MAX_WHOLE_STEM - 17;
+    while !lossy.is_char_boundary(keep) {
+        keep -= 1;
+    }
+    let hash = blake3::hash(name.as_encoded_bytes()).to_hex();
+    OsString::from(format!("{}~{}", &lossy[..keep], &hash[..16]))
+}
+
 /// The output folder of one run while it is being written.
 #[derive(Debug)]
 pub struct RunFolder {
@@ -74,7 +98,7 @@ impl RunFolder {
         let pid = std::process::id();
         let seq = SEQUENCE.fetch_add(1, Ordering::Relaxed);
         let mut tmp_name = OsString::from(".");
-        tmp_name.push(&name);
+        tmp_name.push(sibling_stem(&name));
         tmp_name.push(format!("{TMP_TAG}{pid}.{seq}"));
         let tmp_dir = parent.join(tmp_name);
         // Under the lock: an interrupt either comes first (nothing is
@@ -163,7 +187,7 @@ impl RunFolder {
     fn set_aside_and_rename(&self) -> std::io::Result<PathBuf> {
         let (parent, name) = split(&self.final_dir).map_err(std::io::Error::other)?;
         let mut old_name = OsString::from(".");
-        old_name.push(&name);
+        old_name.push(sibling_stem(&name));
         old_name.push(format!(
             "{OLD_TAG}{}.{}",
             std::process::id(),
@@ -373,8 +397,9 @@ fn marked_files(dir: &Path) -> Option<Vec<String>> {
     })
 }
 
-/// Whether `dir`'s `run.json` is a sweep's record of a run.
-fn holds_sweep_record(dir: &Path) -> bool {
+/// Whether `dir`'s `run.json` is a sweep's record of a run (the folder is
+/// then the sweep's, which empties it before the run).
+pub fn holds_sweep_record(dir: &Path) -> bool {
     std::fs::read_to_string(dir.join(SWEEP_FILES[0]))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
@@ -501,7 +526,7 @@ fn clean_stale(parent: &Path, name: &std::ffi::OsStr, dir: &Path) {
     let Ok(entries) = std::fs::read_dir(parent) else {
         return;
     };
-    let prefix = format!(".{}", name.to_string_lossy());
+    let prefix = format!(".{}", sibling_stem(name).to_string_lossy());
     let mut stale_old = Vec::new();
     for entry in entries.flatten() {
         let file_name = entry.file_name().to_string_lossy().into_owned();
@@ -588,6 +613,23 @@ fn process_start(pid: u32) -> Option<std::time::SystemTime> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sibling_names_fit_and_stay_apart_for_names_of_any_legal_length() {
+        assert_eq!(sibling_stem("out".as_ref()), "out");
+        let long = |c: &str| "é".repeat(100) + c + &"n".repeat(54);
+        let (a, b) = (long("a"), long("b"));
+        assert_eq!(a.len(), 255);
+        let (sa, sb) = (sibling_stem(a.as_ref()), sibling_stem(b.as_ref()));
+        assert_ne!(sa, sb, "two long names sharing a prefix");
+        let worst = format!(
+            ".{}{TMP_TAG}{}.{}",
+            sa.to_string_lossy(),
+            u32::MAX,
+            u64::MAX
+        );
+        assert!(worst.len() <= 255, "{}", worst.len());
+    }
 
     #[test]
     fn this_process_started_before_now_and_after_boot() {

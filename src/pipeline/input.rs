@@ -77,6 +77,15 @@ pub fn input_file(source: &ConfigSource, key: &str, spec: &str) -> Result<PathBu
     })
 }
 
+/// The keys of `[input]` that may name a file.
+pub const INPUT_FILE_KEYS: [&str; 5] = [
+    "input.mesh",
+    "input.exemplar",
+    "input.height_map",
+    "input.normal_map",
+    "input.roughness_map",
+];
+
 /// Checks that every file `[input]` names exists (builtins and derivations
 /// need none); returns the resolved paths. [`load_input_from`] does the same
 /// checks before loading.
@@ -86,17 +95,13 @@ pub fn check_input_files(
 ) -> Result<Vec<PathBuf>, ConfigError> {
     let mut files = Vec::new();
     let entries = [
-        ("input.mesh", input.mesh.as_deref(), "builtin:"),
-        ("input.exemplar", Some(input.exemplar.as_str()), "builtin:"),
-        ("input.height_map", input.height_map.as_deref(), "derive:"),
-        ("input.normal_map", input.normal_map.as_deref(), "derive:"),
-        (
-            "input.roughness_map",
-            input.roughness_map.as_deref(),
-            "derive:",
-        ),
+        (input.mesh.as_deref(), "builtin:"),
+        (Some(input.exemplar.as_str()), "builtin:"),
+        (input.height_map.as_deref(), "derive:"),
+        (input.normal_map.as_deref(), "derive:"),
+        (input.roughness_map.as_deref(), "derive:"),
     ];
-    for (key, spec, special) in entries {
+    for (key, (spec, special)) in INPUT_FILE_KEYS.into_iter().zip(entries) {
         if let Some(spec) = spec.map(str::trim).filter(|s| !s.starts_with(special)) {
             files.push(input_file(source, key, spec)?);
         }

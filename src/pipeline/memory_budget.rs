@@ -233,6 +233,35 @@ pub fn check_metrics(
     Ok(e.bytes)
 }
 
+/// [`check_stages`] for the loaded `input` of a run of `seed`: its sizes
+/// under `raw`'s texture scale, a stage whose analysis of the exemplar is
+/// cached already not checked. What a run checks before its first stage.
+///
+/// # Errors
+/// As [`check_stages`].
+pub fn check_loaded(
+    stages: &[Box<dyn StagePlan>],
+    input: &super::LoadedInput,
+    raw: &RawInput,
+    seed: u64,
+    limit: &MemoryLimit,
+) -> Result<Vec<StageEstimate>, Refusal> {
+    let sizes = InputSizes::of(input, raw);
+    let cached: Vec<bool> = stages
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            s.analysis_cached(
+                &input.exemplar,
+                raw.exemplar_wrap,
+                seed,
+                crate::stage::StageCtx { index: i },
+            )
+        })
+        .collect();
+    check_stages(stages, &sizes, limit, &cached)
+}
+
 /// The sizes each stage sees: the input's, then what each stage before it
 /// leaves ([`StagePlan::sizes_after`]: a retiled or subdivided mesh).
 pub fn stage_sizes(stages: &[Box<dyn StagePlan>], input: &InputSizes) -> Vec<InputSizes> {

@@ -13,11 +13,14 @@ pub mod memory_limit;
 pub mod plane_check;
 mod report;
 mod run;
+pub mod stage_check;
 
 use crate::stage::{Datum, PlaneRole, StagePlan};
 use crate::stages::registry;
 pub use error::PipelineError;
-pub use input::{LoadedInput, check_input_files, input_file, load_input, load_input_from};
+pub use input::{
+    INPUT_FILE_KEYS, LoadedInput, check_input_files, input_file, load_input, load_input_from,
+};
 pub use report::{describe_stages, format_report};
 pub use run::{
     RunOptions, RunReport, StageSet, build_schedule, peak_rss_bytes, run, run_in_world, setup_world,
@@ -57,14 +60,18 @@ impl std::fmt::Debug for Pipeline {
     }
 }
 
-/// Stage parameters that name a file, by stage kind: resolved by the path
-/// rule of [`ConfigSource`] before the stage parses its settings.
 /// Most `[[stage]]` entries a config may have: far above any real
 /// pipeline (the shipped ones have at most 7), far below the thousands at
 /// which the schedule's memory became gigabytes (issue 43: 800 stages took
 /// 0.78 GB, 3,000 took 11.4 GB).
 pub const MAX_STAGES: usize = 256;
 
+/// What `[input] height_map` may be, for messages.
+const HEIGHT_MAP_ALLOWED: &str =
+    "a file the exemplar's size, \"derive:luminance\" or \"derive:builtin\"";
+
+/// Stage parameters that name a file, by stage kind: resolved by the path
+/// rule of [`ConfigSource`] before the stage parses its settings.
 const STAGE_PATH_PARAMS: &[(&str, &str)] =
     &[("lapped_paste", "mask_image"), ("triplanar", "image")];
 
@@ -222,6 +229,8 @@ fn check_order(
                 needs: need.describe().to_string(),
                 hint: if need == Datum::Mesh {
                     "set `mesh` in [input]".to_string()
+                } else if need == Datum::HeightMap {
+                    format!("set input.height_map ({HEIGHT_MAP_ALLOWED})")
                 } else {
                     format!(
                         "add {} before it",
@@ -266,6 +275,9 @@ impl Pipeline {
         if raw.input.mesh.is_some() {
             available.insert(Datum::Mesh);
         }
+        if raw.input.height_map.is_some() {
+            available.insert(Datum::HeightMap);
+        }
         for (i, spanned) in raw.stage.iter().enumerate() {
             let (plan, kind_line) = parse_stage_table(&source, &all, i + 1, spanned)?;
             check_order(&*plan, &available, &file, kind_line, i + 1)?;
@@ -279,12 +291,32 @@ impl Pipeline {
                 message,
             })?;
         memory_budget::check_input(&raw.input, &memory_limit, &file)?;
-        // Before loading: what the settings alone decide.
+        // Before loading: what the settings alone decide. The estimates are
+        // lower bounds, so a refusal stands; but the largest value it
+        // offers must leave room for the input, which only loading it
+        // tells (issue 43: an offer was refused once the input was
+        // loaded). So a refusal loads the input and says what the check
+        // before the first stage will say.
         memory_budget::check_stages(&stages, &Default::default(), &memory_limit, &[]).map_err(
-            |r| ConfigError::Value {
-                file: file.clone(),
-                key: format!("stage {} ({}) {}", r.index, r.kind, r.param),
-                message: r.message,
+            |r| {
+                let r = load_input_from(&raw.input, &source)
+                    .ok()
+                    .and_then(|input| {
+                        memory_budget::check_loaded(
+                            &stages,
+                            &input,
+                            &raw.input,
+                            raw.seed,
+                            &memory_limit,
+                        )
+                        .err()
+                    })
+                    .unwrap_or(r);
+                ConfigError::Value {
+                    file: file.clone(),
+                    key: format!("stage {} ({}) {}", r.index, r.kind, r.param),
+                    message: r.message,
+                }
             },
         )?;
         memory_budget::check_metrics(

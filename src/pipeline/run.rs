@@ -184,26 +184,14 @@ fn run_schedule(
     keep: Keep,
 ) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
+    super::stage_check::check_stage_inputs(pipeline, &input)?;
     // Every stage's memory estimate for the loaded input, before any work.
-    let sizes = crate::stage::memory::InputSizes::of(&input, &pipeline.input);
-    let cached: Vec<bool> = pipeline
-        .stages
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            s.analysis_cached(
-                &input.exemplar,
-                pipeline.input.exemplar_wrap,
-                pipeline.seed,
-                StageCtx { index: i },
-            )
-        })
-        .collect();
-    let estimates = super::memory_budget::check_stages(
+    let estimates = super::memory_budget::check_loaded(
         &pipeline.stages,
-        &sizes,
+        &input,
+        &pipeline.input,
+        pipeline.seed,
         &pipeline.memory_limit,
-        &cached,
     )
     .map_err(|r| StageError {
         index: r.index,
@@ -213,7 +201,7 @@ fn run_schedule(
     super::memory_budget::check_metrics(
         &pipeline.output,
         &pipeline.stages,
-        &sizes,
+        &crate::stage::memory::InputSizes::of(&input, &pipeline.input),
         &pipeline.memory_limit,
         &pipeline.source.file,
     )?;

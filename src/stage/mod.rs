@@ -41,6 +41,8 @@ pub enum Datum {
     /// A triplanar projection of an image (`triplanar`), evaluated per
     /// texel by `bake`.
     Triplanar,
+    /// A height map of the exemplar (`[input] height_map`).
+    HeightMap,
 }
 
 impl Datum {
@@ -57,6 +59,7 @@ impl Datum {
             Datum::FaceField => "a per-face tangent field",
             Datum::Image => "a synthesised image",
             Datum::Triplanar => "a triplanar projection",
+            Datum::HeightMap => "a height map",
             Datum::BakedAtlas => "the `bake` stage's atlas (export formats `glb`, `baked_obj`)",
         }
     }
@@ -162,6 +165,25 @@ pub trait Stage: 'static {
     fn sizes_after(_settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
         *sizes
     }
+    /// Checks its settings against the loaded input, as this stage will
+    /// see it (`input.sizes`: the exemplar's size and wrap, the mesh's
+    /// vertex ids), once the input is loaded and before any stage runs
+    /// (default: nothing to check). `Err` is what is wrong, naming the
+    /// parameter, the input and what is allowed; the run is refused with
+    /// exit 2 before the first stage (issue 43: a neighbourhood wider than
+    /// the exemplar, a key on a vertex that does not exist).
+    fn check_input(_settings: &Self::Settings, _input: &InputView) -> Result<(), String> {
+        Ok(())
+    }
+    /// Whether the mesh whose vertex ids later stages' settings name (the
+    /// active mesh, or the coarsest level of a √2 hierarchy) is still the
+    /// one this stage saw, with the same vertices and ids, for an input of
+    /// `sizes` (default: yes). A stage that makes another mesh (a
+    /// retiling, a builtin pyramid, a remeshed or refined coarsest level)
+    /// says no, so a later key vertex is then checked when its stage runs.
+    fn keeps_vertex_ids(_settings: &Self::Settings, _sizes: &InputSizes) -> bool {
+        true
+    }
     /// Whether the analysis this stage would make of `exemplar` (addressed
     /// with `wrap`, in a run of seed `seed`, at position `ctx`) is in the
     /// analysis cache already: its estimates are then not checked, since
@@ -197,6 +219,26 @@ pub trait StagePlan: Send + Sync {
     fn sizes_after(&self, sizes: &InputSizes) -> InputSizes;
     /// Whether its analysis of `exemplar` is cached already.
     fn analysis_cached(&self, exemplar: &Image, wrap: Wrap, seed: u64, ctx: StageCtx) -> bool;
+    /// Its settings checked against the loaded input.
+    fn check_input(&self, input: &InputView) -> Result<(), String>;
+    /// Whether it keeps the mesh whose vertex ids later settings name.
+    fn keeps_vertex_ids(&self, sizes: &InputSizes) -> bool;
+}
+
+/// What [`Stage::check_input`] sees of the loaded input.
+#[derive(Clone, Copy, Debug)]
+pub struct InputView<'a> {
+    /// The sizes this stage sees: the input's, or those of the mesh a
+    /// stage before it makes (`pipeline::memory_budget::stage_sizes`).
+    pub sizes: &'a InputSizes,
+    /// The exemplar's display name (its file as written, or `builtin:NAME`).
+    pub exemplar: &'a str,
+    /// Vertices of the mesh whose ids this stage's settings name (the
+    /// coarsest level of a √2 hierarchy, else the active mesh), when known
+    /// before the run: the input mesh's, while every stage before keeps
+    /// that mesh's vertices ([`Stage::keeps_vertex_ids`]); `None` after a
+    /// stage that makes another mesh.
+    pub key_vertices: Option<u64>,
 }
 
 struct Plan<S: Stage>(S::Settings);
@@ -228,6 +270,12 @@ impl<S: Stage> StagePlan for Plan<S> {
     }
     fn analysis_cached(&self, exemplar: &Image, wrap: Wrap, seed: u64, ctx: StageCtx) -> bool {
         S::analysis_cached(&self.0, exemplar, wrap, seed, ctx)
+    }
+    fn check_input(&self, input: &InputView) -> Result<(), String> {
+        S::check_input(&self.0, input)
+    }
+    fn keeps_vertex_ids(&self, sizes: &InputSizes) -> bool {
+        S::keeps_vertex_ids(&self.0, sizes)
     }
 }
 

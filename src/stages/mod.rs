@@ -61,8 +61,10 @@ pub fn find(kind: &str) -> Option<StageInfo> {
 /// Which stages produce `datum` (for a mesh: the `[input]` section), for
 /// hints.
 pub fn producers(datum: Datum) -> Vec<&'static str> {
-    if datum == Datum::Mesh {
-        return vec!["input.mesh"];
+    match datum {
+        Datum::Mesh => return vec!["input.mesh"],
+        Datum::HeightMap => return vec!["input.height_map"],
+        _ => {}
     }
     registry()
         .iter()

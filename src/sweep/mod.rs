@@ -66,6 +66,16 @@ pub enum SweepError {
         #[source]
         source: Box<ConfigError>,
     },
+    /// One combination's input (mesh, exemplar, maps) cannot be loaded,
+    /// or its run folder is taken by someone else's files (exit 2); no run
+    /// was started.
+    #[error("run {run} (--set {assignments}): {source}")]
+    InvalidInput {
+        run: String,
+        assignments: String,
+        #[source]
+        source: Box<crate::pipeline::PipelineError>,
+    },
     /// A sweep file could not be read or written (exit 1).
     #[error(transparent)]
     Output(#[from] OutputError),
@@ -91,6 +101,7 @@ impl SweepError {
             | SweepError::Option { .. }
             | SweepError::Config(_)
             | SweepError::InvalidRun { .. } => 2,
+            SweepError::InvalidInput { source, .. } => source.exit_code(),
             SweepError::Output(_) | SweepError::Io { .. } | SweepError::RunsFailed { .. } => 1,
         }
     }
@@ -297,24 +308,30 @@ fn check_options(opts: &SweepOptions) -> Result<(Option<Duration>, Shard), Sweep
 }
 
 /// Every planned run's config, validated as `run` would (settings, order,
-/// input files), with its resolved config's hash; and the distinct
+/// input files, each distinct input loaded once), with its resolved
+/// config's hash; and the distinct
 /// exemplars of the grid (key, report file name, options) with an input
 /// that names each.
 struct Validated {
     runs: Vec<ValidRun>,
     exemplars: Vec<(String, String, String)>,
-    exemplar_inputs: Vec<crate::config::RawInput>,
-    fixed_source: ConfigSource,
+    /// An `[input]` naming each exemplar, and the folder its path
+    /// resolves against.
+    exemplar_inputs: Vec<(crate::config::RawInput, PathBuf)>,
 }
 
 /// [`Validated`] for the `planned` runs of `opts`.
 fn validate(opts: &SweepOptions, planned: Vec<plan::PlannedRun>) -> Result<Validated, SweepError> {
     let base = ConfigSource::from_file(&opts.config)?;
-    let mut fixed_source = base.clone();
-    fixed_source.apply_overrides(&opts.fixed)?;
+    // The fixed overrides alone, so that a bad one is named as such.
+    base.clone().apply_overrides(&opts.fixed)?;
     let mut runs = Vec::with_capacity(planned.len());
     let mut exemplars: Vec<(String, String, String)> = Vec::new();
     let mut exemplar_inputs = Vec::new();
+    // Each distinct input is loaded once, as its runs will load it, so
+    // that a file that is not a mesh or an image is refused before any
+    // run (issue 43: a garbage grid exemplar ran the other runs first).
+    let mut loaded_inputs: Vec<String> = Vec::new();
     for run in planned {
         let mut source = base.clone();
         let mut assignments = opts.fixed.clone();
@@ -329,6 +346,17 @@ fn validate(opts: &SweepOptions, planned: Vec<plan::PlannedRun>) -> Result<Valid
         // Input files too (a grid over exemplars or meshes), as `run` checks
         // them before it loads anything.
         crate::pipeline::check_input_files(&pipeline.input, &pipeline.source).map_err(invalid)?;
+        let input_key = input_key(&pipeline);
+        if !loaded_inputs.contains(&input_key) {
+            crate::pipeline::load_input_from(&pipeline.input, &pipeline.source).map_err(|e| {
+                SweepError::InvalidInput {
+                    run: run.name.clone(),
+                    assignments: run.assignments().join(" --set "),
+                    source: Box::new(e),
+                }
+            })?;
+            loaded_inputs.push(input_key);
+        }
         let config_hash = blake3::hash(pipeline.resolved_toml().as_bytes())
             .to_hex()
             .to_string();
@@ -344,7 +372,10 @@ fn validate(opts: &SweepOptions, planned: Vec<plan::PlannedRun>) -> Result<Valid
                 &blake3::hash(key.as_bytes()).to_hex()[..8]
             );
             exemplars.push((key, file, options));
-            exemplar_inputs.push(pipeline.input.clone());
+            exemplar_inputs.push((
+                pipeline.input.clone(),
+                pipeline.source.base_dir_for("input.exemplar").to_path_buf(),
+            ));
         }
         runs.push(ValidRun { run, config_hash });
     }
@@ -352,8 +383,45 @@ fn validate(opts: &SweepOptions, planned: Vec<plan::PlannedRun>) -> Result<Valid
         runs,
         exemplars,
         exemplar_inputs,
-        fixed_source,
     })
+}
+
+/// What decides how a run loads its input: `[input]` and the folders its
+/// paths resolve against (the config's, or the current one for `--set`).
+fn input_key(pipeline: &Pipeline) -> String {
+    let table = crate::config::params::to_table(&pipeline.input);
+    let dirs: Vec<&Path> = crate::pipeline::INPUT_FILE_KEYS
+        .iter()
+        .map(|key| pipeline.source.base_dir_for(key))
+        .collect();
+    format!("{table}{dirs:?}")
+}
+
+/// Refuses a selected run whose folder is not the sweep's (no sweep record
+/// `run.json`) and holds files that are not a run's (a user's file or
+/// folder of that name): its run would fail, or the folder be emptied,
+/// after the runs before it.
+fn check_run_folders(out: &Path, runs: &[ValidRun], selected: &[usize]) -> Result<(), SweepError> {
+    use crate::output::staging::{check_replaceable, holds_sweep_record};
+    for r in selected.iter().map(|&i| &runs[i].run) {
+        let dir = out.join(&r.name);
+        if dir.is_dir() && holds_sweep_record(&dir) {
+            continue;
+        }
+        check_replaceable(&dir).map_err(|message| SweepError::InvalidInput {
+            run: r.name.clone(),
+            assignments: r.assignments().join(" --set "),
+            source: Box::new(
+                ConfigError::Value {
+                    file: "command line".into(),
+                    key: "--out".into(),
+                    message: format!("the run's folder: {message}"),
+                }
+                .into(),
+            ),
+        })?;
+    }
+    Ok(())
 }
 
 /// The timing of this invocation's runs, for `sweep.json` and the report.
@@ -413,7 +481,6 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         runs,
         exemplars,
         exemplar_inputs,
-        fixed_source,
     } = validate(opts, planned)?;
     let validate_seconds = started.elapsed().as_secs_f64();
     let selected: Vec<usize> = (0..runs.len()).filter(|&i| shard.contains(i)).collect();
@@ -427,6 +494,7 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         });
     }
 
+    check_run_folders(&opts.out, &runs, &selected)?;
     std::fs::create_dir_all(&opts.out).map_err(io_err(&opts.out))?;
     let mut record = SweepRecord {
         config: opts.config.display().to_string(),
@@ -436,12 +504,8 @@ pub fn run_sweep(opts: &SweepOptions) -> Result<SweepReport, SweepError> {
         exemplars: Vec::new(),
         last_invocation: read_record(&opts.out).and_then(|r| r.last_invocation),
     };
-    for ((_, file, options), input) in exemplars.iter().zip(&exemplar_inputs) {
-        match write_exemplar(
-            &opts.out.join(file),
-            input,
-            fixed_source.base_dir_for("input.exemplar"),
-        ) {
+    for ((_, file, options), (input, base_dir)) in exemplars.iter().zip(&exemplar_inputs) {
+        match write_exemplar(&opts.out.join(file), input, base_dir) {
             Ok(()) => record.exemplars.push(ExemplarRecord {
                 file: file.clone(),
                 spec: input.exemplar.clone(),

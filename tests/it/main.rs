@@ -53,5 +53,6 @@ mod run_atomicity;
 mod subdivision;
 mod sweep;
 mod texture_scale;
+mod up_front;
 mod viewer;
 mod wei_levoy;

@@ -617,7 +617,7 @@ keys = [{ at_bbox = [0.5, 0.5, 1.0], up = [0.0, 1.0, 0.0] }]
 
 /// The result metrics follow every pipeline; their sampled windows grow
 /// with `output.metric_samples` (up to 100,000 of 15×15 windows with their
-/// dense sharpness templates: about 3 GB). Over the limit, the config is
+/// dense sharpness templates: about 7 GB). Over the limit, the config is
 /// refused at validation, before loading, naming the samples that fit.
 #[test]
 fn result_metrics_over_the_limit_are_refused_naming_the_samples_that_fit() {
@@ -647,4 +647,30 @@ metric_neighbourhood = 15
         .parse()
         .expect("a count");
     assert!((10..100_000).contains(&fit), "{fit}: {stderr}");
+}
+
+/// Issue 43: the largest value a validation-time refusal offers is one the
+/// run then accepts: it allows for the loaded input (the exemplar, the
+/// mesh, the texture patches cut from the exemplar), which validation
+/// alone does not know. (`atlas_size` = 16384 was refused offering a
+/// value that was refused in turn once the input was loaded, 24 KiB over.)
+#[test]
+fn the_atlas_size_a_refusal_offers_is_accepted() {
+    let env: &[(&str, &str)] = &[(LIMIT_VAR, "64M")];
+    let stderr =
+        common::expect_refused_env(LAPPED, &[], env, &["stage 2 (lapped_paste) atlas_size"]);
+    let offer = largest(&stderr, "atlas_size");
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("lapped.toml");
+    std::fs::write(
+        &cfg,
+        LAPPED.replace("atlas_size = 16384", &format!("atlas_size = {offer}")),
+    )
+    .unwrap();
+    let out = dir.path().join("out");
+    let (code, _, stderr) = common::run_cli_env(
+        &["run", cfg.to_str().unwrap(), "--out", out.to_str().unwrap()],
+        env,
+    );
+    assert_eq!(code, 0, "atlas_size = {offer}: {stderr}");
 }

@@ -757,3 +757,25 @@ fn out_as_a_symlink_to_another_file_system_is_written_there() {
         assert!(siblings(&link).is_empty(), "{round}: {:?}", siblings(&link));
     }
 }
+
+/// Issue 43: an `--out` name of up to NAME_MAX (255) bytes runs, also over
+/// an earlier result: the hidden staging folder beside it gets a name that
+/// fits (it failed "File name too long", exit 1, from 239 bytes on).
+#[test]
+fn an_out_name_of_any_legal_length_runs_and_reruns() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = quick_config(dir.path());
+    for len in [250, 255] {
+        let out = dir.path().join("n".repeat(len));
+        for round in 0..2 {
+            let (code, _, stderr) = run_cli(&["run", s(&cfg), "--out", s(&out)]);
+            assert_eq!(code, 0, "{len} bytes, round {round}: {stderr}");
+            assert!(out.join("metrics.json").is_file(), "{len}");
+            assert!(
+                hidden_entries(dir.path()).is_empty(),
+                "{len}: {:?}",
+                hidden_entries(dir.path())
+            );
+        }
+    }
+}

@@ -314,27 +314,24 @@ fn shards_one_and_two_of_two_cover_the_grid_exactly_once_and_merge_their_summary
 #[test]
 fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
     let s = Sweep::new();
-    // [2, 12] is valid TOML and a valid config, but the torus needs at least
-    // 3 vertices around: that run fails when it loads its mesh (exit 2).
-    let (code, _stdout, stderr) = s.run(&[
-        "--grid",
-        "seed=1,2",
-        "--grid",
-        "input.mesh_options.resolution=[24,12],[2,12]",
-        "--jobs",
-        "2",
-    ]);
+    // A key on vertex 100000000 is a valid config, but after a retiling the
+    // ids are the retiled mesh's, known only when the key's stage runs:
+    // that run fails then (exit 2). (A bad input, such as a torus of 2
+    // vertices around, is refused before any run since issue 43.)
+    std::fs::write(&s.config, retiled_keys()).unwrap();
+    let keys = "stage.2.keys=[{vertex=0,up=[0,0,1]}],[{vertex=100000000,up=[0,0,1]}]";
+    let (code, _stdout, stderr) = s.run(&["--grid", "seed=1,2", "--grid", keys, "--jobs", "2"]);
     assert_eq!(code, 1, "{stderr}");
     assert!(stderr.contains("2 of 4 runs failed"), "{stderr}");
     assert!(
-        stderr.contains("FAILED") && stderr.contains("resolution[0]"),
+        stderr.contains("FAILED") && stderr.contains("does not exist"),
         "{stderr}"
     );
     let folders = s.run_folders();
     assert_eq!(folders.len(), 4);
     for name in &folders {
         let dir = s.out.join(name);
-        if name.contains("2_12") {
+        if name.contains("100000000") {
             assert!(!dir.join("done.json").exists(), "{name}");
             let failed: serde_json::Value =
                 serde_json::from_str(&std::fs::read_to_string(dir.join("failed.json")).unwrap())
@@ -342,7 +339,7 @@ fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
             assert_eq!(failed["exit_code"], 2, "{failed}");
             let log = std::fs::read_to_string(dir.join("log.txt")).unwrap();
             assert!(
-                log.contains("resolution[0]") && log.contains("exit 2"),
+                log.contains("does not exist") && log.contains("exit 2"),
                 "{log}"
             );
         } else {
@@ -354,14 +351,14 @@ fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
     assert_eq!(csv.len(), 5);
     let status = column(&csv, "status");
     let codes = column(&csv, "exit_code");
-    let res = column(&csv, "input.mesh_options.resolution");
+    let key = column(&csv, "stage.2.keys");
     let errors = column(&csv, "error");
     for i in 0..4 {
-        let bad = res[i].contains("[2,12]");
+        let bad = key[i].contains("100000000");
         assert_eq!(status[i], if bad { "failed" } else { "ok" });
         assert_eq!(codes[i], if bad { "2" } else { "0" });
         assert_eq!(
-            errors[i].contains("resolution[0] = 2 is out of range"),
+            errors[i].contains("key vertex 100000000 does not exist"),
             bad,
             "{}",
             errors[i]
@@ -370,15 +367,21 @@ fn a_failing_run_leaves_the_others_complete_and_is_in_the_summary() {
     let html = std::fs::read_to_string(s.out.join("index.html")).unwrap();
     assert_eq!(html.matches("<tr class=\"failed\"").count(), 2);
     // Re-running retries only the failed runs.
-    let (code, _, stderr) = s.run(&[
-        "--grid",
-        "seed=1,2",
-        "--grid",
-        "input.mesh_options.resolution=[24,12],[2,12]",
-    ]);
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2", "--grid", keys]);
     assert_eq!(code, 1);
     assert_eq!(stderr.matches("skip ").count(), 2, "{stderr}");
     assert_eq!(stderr.matches("FAILED").count(), 2, "{stderr}");
+}
+
+/// [`TINY`] with its orientation from keys diffused over a retiled mesh.
+fn retiled_keys() -> String {
+    let orientation = "kind = \"orientation\"\nmode = \"global\"\nup = [0.0, 0.0, 1.0]\n";
+    assert!(TINY.contains(orientation));
+    TINY.replace(
+        orientation,
+        "kind = \"retile\"\nvertices = 300\nlevels = 1\niterations = 1\n\n[[stage]]\n\
+         kind = \"diffuse_orientation\"\nkeys = [{ vertex = 0, up = [0.0, 0.0, 1.0] }]\n",
+    )
 }
 
 #[test]
@@ -453,6 +456,14 @@ fn bad_arguments_exit_2_naming_the_problem_before_any_run() {
             &["no_such_photo.png", "does not exist", "input.exemplar"],
         ),
         (&["--grid", "stage.2.bogus=1,2"], &["bogus"]),
+        // Issue 43: an input that does not load, before any run.
+        (
+            &["--grid", "input.mesh_options.resolution=[24,12],[2,12]"],
+            &[
+                "--set input.mesh_options.resolution=[2,12]",
+                "resolution[0] = 2",
+            ],
+        ),
     ];
     for (args, needles) in cases {
         let (code, _, stderr) = s.run(args);
@@ -556,4 +567,49 @@ fn a_folder_holding_someone_elses_summary_files_is_refused_and_untouched() {
         std::fs::read_to_string(s.out.join("notes.txt")).unwrap(),
         "notes"
     );
+}
+
+/// Issue 43: a grid exemplar that is not an image, and a run folder whose
+/// name is taken by a user's file or folder, are refused before any run
+/// (exit 2, naming the run, the key or the folder, and the path); nothing
+/// is written and the user's files are untouched. (The garbage exemplar
+/// ran the other runs and exited 1; the taken name failed its run, and a
+/// user's folder of that name was emptied by the sweep.)
+#[test]
+fn a_garbage_grid_exemplar_or_a_taken_run_folder_is_refused_before_any_run() {
+    let s = Sweep::new();
+    std::fs::write(
+        &s.config,
+        TINY.replace("[input.exemplar_options]\nsize = 32\n", ""),
+    )
+    .unwrap();
+    let junk = s.config.with_file_name("junk.png");
+    std::fs::write(&junk, "this is not a PNG").unwrap();
+    let grid = format!("input.exemplar=builtin:bricks,{}", junk.display());
+    let (code, _, stderr) = s.run(&["--grid", &grid]);
+    assert_eq!(code, 2, "{stderr}");
+    for n in ["run input.exemplar=", "junk.png", "input.exemplar"] {
+        assert!(stderr.contains(n), "want {n:?} in {stderr}");
+    }
+    assert!(files_under(&s.out).is_empty(), "{:?}", files_under(&s.out));
+
+    std::fs::create_dir_all(&s.out).unwrap();
+    std::fs::write(s.out.join("seed=2"), "mine").unwrap();
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2"]);
+    assert_eq!(code, 2, "{stderr}");
+    for n in ["run seed=2", "seed=2", "is a file", "allowed"] {
+        assert!(stderr.contains(n), "want {n:?} in {stderr}");
+    }
+    assert_eq!(files_under(&s.out), vec![s.out.join("seed=2")]);
+    std::fs::remove_file(s.out.join("seed=2")).unwrap();
+    std::fs::create_dir(s.out.join("seed=2")).unwrap();
+    std::fs::write(s.out.join("seed=2/thesis.tex"), "mine").unwrap();
+    let (code, _, stderr) = s.run(&["--grid", "seed=1,2"]);
+    assert_eq!(code, 2, "{stderr}");
+    assert!(stderr.contains("thesis.tex"), "{stderr}");
+    assert_eq!(
+        std::fs::read_to_string(s.out.join("seed=2/thesis.tex")).unwrap(),
+        "mine"
+    );
+    assert_eq!(files_under(&s.out).len(), 1, "{:?}", files_under(&s.out));
 }

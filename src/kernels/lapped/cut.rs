@@ -11,6 +11,11 @@ use crate::kernels::mix;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+/// The smallest side of the square exemplar region a predefined patch
+/// shape is cut from, pixels: a splotch or circle needs a few pixels to
+/// have a shape at all.
+pub const MIN_PATCH_PIXELS: u32 = 8;
+
 /// The shape of the texture patches.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -78,9 +83,9 @@ pub fn texture_patches(
             w.min(h)
         ));
     }
-    if side < 8 {
+    if side < MIN_PATCH_PIXELS {
         return Err(format!(
-            "patch_pixels = {side} is too small; use at least 8"
+            "patch_pixels = {side} is too small; use at least {MIN_PATCH_PIXELS}"
         ));
     }
     // Each patch from its own seed stream: cut in parallel, in order.

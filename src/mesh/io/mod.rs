@@ -215,14 +215,39 @@ fn load_mesh_from_bytes_with_progress(
     drop(face_lines);
     progress.inc(1);
     if mesh.face_count() == 0 {
-        return Err(MeshError::NoFaces {
-            path: path.to_path_buf(),
-            detail: format!(
+        let detail = match report.far_vertex {
+            Some(far) => {
+                let [x, y, z] = far.position.to_array().map(show_coordinate);
+                format!(
+                    " left after repairs: vertex {} at ({x}, {y}, {z}) lies far from the others, making the bounding-box diagonal {:.3e} where the other vertices span {:.3e}, so all {file_faces} faces count as zero-area (at most {:e} × the diagonal squared); allowed: coordinates of one object, within a million face sizes of each other (fix or remove vertex {})",
+                    far.index,
+                    far.diagonal,
+                    far.others_diagonal,
+                    crate::mesh::repair::ZERO_AREA_FACTOR,
+                    far.index
+                )
+            }
+            None => format!(
                 " left after repairs (all {file_faces} faces were degenerate or had zero area)"
             ),
+        };
+        return Err(MeshError::NoFaces {
+            path: path.to_path_buf(),
+            detail,
         });
     }
     Ok((mesh, report))
+}
+
+/// A coordinate for a message: as written for everyday magnitudes, in
+/// exponent form (`1e30`) for huge and tiny ones.
+fn show_coordinate(v: f32) -> String {
+    let a = v.abs();
+    if a != 0.0 && !(1e-3..1e6).contains(&a) {
+        format!("{v:e}")
+    } else {
+        format!("{v}")
+    }
 }
 
 /// Parses and validates a mesh without repairing it: indices are in range and
@@ -499,6 +524,35 @@ mod tests {
         let err = load("v 0 0 0\nv 1 0 0\nf 1 2 1\n", MeshFormat::Obj).unwrap_err();
         assert!(matches!(err, MeshError::NoFaces { .. }), "{err}");
         assert!(err.to_string().contains("degenerate"), "{err}");
+    }
+
+    /// Issue 43: one vertex a million million times farther out than the
+    /// rest makes every face "zero-area" against the bounding box; the
+    /// message names that vertex, its coordinates and what is allowed
+    /// instead of only "all faces were degenerate".
+    #[test]
+    fn a_far_vertex_that_leaves_no_face_is_named() {
+        let mut text = String::new();
+        for j in 0..4 {
+            for i in 0..4 {
+                let (x, y) = if (i, j) == (3, 0) {
+                    (1e30, 1e30)
+                } else {
+                    (i as f32, j as f32)
+                };
+                text += &format!("v {x:e} {y:e} 0\n");
+            }
+        }
+        for j in 0..3 {
+            for i in 0..3 {
+                let a = j * 4 + i + 1;
+                text += &format!("f {a} {} {}\nf {a} {} {}\n", a + 1, a + 5, a + 5, a + 4);
+            }
+        }
+        let err = load(&text, MeshFormat::Obj).unwrap_err().to_string();
+        for needle in ["vertex 3", "1e30", "allowed"] {
+            assert!(err.contains(needle), "{needle}: {err}");
+        }
     }
 
     #[test]

@@ -129,6 +129,15 @@ pub(super) fn parse_off(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
                 format!("face {f}: bad corner count {:?}", show_token(degree_tok)),
             )
         })?;
+        if degree < 3 {
+            return Err(parse_error(
+                path,
+                at(n),
+                format!(
+                    "face {f}: a face needs at least 3 corners, this one has {degree} (a line cut short? OFF has no polylines)"
+                ),
+            ));
+        }
         for c in 0..degree {
             let Some(tok) = toks.next() else {
                 return Err(parse_error(
@@ -177,6 +186,21 @@ mod tests {
         let m =
             parse("COFF\n3 1 0\n0 0 0 1 1 1 1\n1 0 0 1 1 1 1\n0 1 0 1 1 1 1\n3 0 1 2\n").unwrap();
         assert_eq!(m.face_count(), 1);
+    }
+
+    /// Issue 43: a face of fewer than 3 corners is an error naming its
+    /// line, as in OBJ, not a face dropped as degenerate.
+    #[test]
+    fn a_face_of_fewer_than_three_corners_names_its_line() {
+        for (face, found) in [("2 0 1", 2), ("1 0", 1), ("0", 0)] {
+            let text = format!("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n{face}\n");
+            let e = parse(&text).expect_err(face).to_string();
+            assert!(e.contains("line 7"), "{face}: {e}");
+            assert!(
+                e.contains("at least 3") && e.contains(&format!("has {found}")),
+                "{face}: {e}"
+            );
+        }
     }
 
     #[test]

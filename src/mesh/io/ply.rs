@@ -312,6 +312,21 @@ pub(super) fn parse_ply(bytes: &[u8], path: &Path) -> Result<RawMesh, MeshError>
             match role {
                 Role::Vertex => raw.push_vertex(element.xyz.map(|v| v as f32)),
                 Role::Face => {
+                    let mut corners = 0usize;
+                    element.indices.for_each(|_| corners += 1);
+                    if corners < 3 {
+                        let location = match header.encoding {
+                            Encoding::Ascii => format!("line {line_no} ({} {k})", def.name),
+                            _ => format!("{} {k}", def.name),
+                        };
+                        return Err(parse_error(
+                            path,
+                            location,
+                            format!(
+                                "a face needs at least 3 corners, this one has {corners} (cut short? a polyline is an edge element)"
+                            ),
+                        ));
+                    }
                     element.indices.for_each(|i| raw.push_corner(i));
                     if header.encoding == Encoding::Ascii {
                         raw.end_face_at(line_no);
@@ -404,6 +419,18 @@ mod tests {
             assert_eq!(m.face(0), &[0, 1, 2]);
             assert_eq!(m.positions[1], glam::Vec3::X);
         }
+    }
+
+    /// Issue 43: a face of fewer than 3 corners is an error naming its
+    /// line, as in OBJ and OFF, not a face dropped as degenerate.
+    #[test]
+    fn a_face_of_fewer_than_three_corners_names_its_line() {
+        let bad = ASCII.replace("4 0 1 2 3 7", "2 0 1 7");
+        let err = parse(bad.as_bytes()).unwrap_err().to_string();
+        assert!(
+            err.contains("line 17") && err.contains("at least 3") && err.contains("has 2"),
+            "{err}"
+        );
     }
 
     #[test]

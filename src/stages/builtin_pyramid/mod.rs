@@ -212,6 +212,10 @@ impl Stage for BuiltinPyramid {
     fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
         finest_vertices(settings).map_or(*sizes, |v| sizes.with_mesh(v))
     }
+    /// The builtin mesh replaces the input.
+    fn keeps_vertex_ids(_: &Self::Settings, _: &InputSizes) -> bool {
+        false
+    }
     fn plane_role(settings: &Self::Settings) -> crate::stage::PlaneRole {
         crate::stage::PlaneRole::ReplacesMesh {
             planar: settings.mesh == "plane",

@@ -29,7 +29,7 @@ use crate::kernels::surface::geodesic::nearest_vertex;
 use crate::mesh::Topology;
 use crate::progress::{Progress, level_label};
 use crate::stage::memory::{InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx, SystemResult};
+use crate::stage::{Datum, InputView, Stage, StageCtx, SystemResult};
 use crate::stages::position;
 use crate::stages::subdivide_sqrt2::carry_attribute;
 use crate::world::*;
@@ -249,6 +249,29 @@ impl Stage for DiffuseOrientation {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Frames]
+    }
+    /// A key or sweep anchor on a vertex id past the input mesh's is
+    /// refused before any stage when the ids name the input's vertices
+    /// (no stage before remeshes it); otherwise when this stage runs.
+    fn check_input(settings: &Self::Settings, input: &InputView) -> Result<(), String> {
+        let Some(n) = input.key_vertices else {
+            return Ok(());
+        };
+        let missing = |v: u32| {
+            format!(
+                "vertex {v} does not exist: the input mesh has {n} vertices (ids 0..={}); allowed: an id of the input mesh, or a position (`at`, `at_bbox`)",
+                n.saturating_sub(1)
+            )
+        };
+        for (i, key) in settings.keys.iter().enumerate() {
+            if let Some(v) = key.vertex.filter(|&v| u64::from(v) >= n) {
+                return Err(format!("`keys`: key {}: {}", i + 1, missing(v)));
+            }
+        }
+        match settings.sweep_anchor.as_ref().and_then(|a| a.vertex) {
+            Some(v) if u64::from(v) >= n => Err(format!("`sweep_anchor`: {}", missing(v))),
+            _ => Ok(()),
+        }
     }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let diffuse = move |mut commands: Commands,

@@ -160,7 +160,7 @@ impl Stage for Displace {
         )
     }
     fn requires(_: &Self::Settings) -> Vec<Datum> {
-        vec![Datum::Mesh]
+        vec![Datum::Mesh, Datum::HeightMap]
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         Vec::new()

@@ -9,12 +9,13 @@
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::image::sample::Wrap;
 use crate::kernels::jump_maps::jump_map::analysis::analysis_bytes;
+use crate::kernels::jump_maps::jump_map::neighbourhoods::source_region;
 use crate::kernels::jump_maps::jump_map::{
-    Boundary, JumpMap, JumpMapSettings, analysis::analyse_with_progress, map,
+    Boundary, JumpMap, JumpMapError, JumpMapSettings, analysis::analyse_with_progress, map,
 };
 use crate::progress::Progress;
 use crate::stage::memory::{Fit, InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx, SystemResult};
+use crate::stage::{Datum, InputView, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -138,6 +139,31 @@ impl StageSettings for JumpMapStageSettings {
             doc: "read and write the jump-map cache ($SURFSYNTH_CACHE, else $XDG_CACHE_HOME/surfsynth, else ~/.cache/surfsynth)",
         },
     ];
+
+    /// What the analysis checks of its settings, at validation and under
+    /// this stage's parameter names (an empty `neighbourhoods` was refused
+    /// only once the stage ran, as the kernel's `neighbourhood_widths`).
+    fn check(&self) -> Result<(), (String, String)> {
+        let Err(JumpMapError::InvalidSetting {
+            name,
+            value,
+            expected,
+        }) = self.kernel_settings(Wrap::Clamp, 0).validate()
+        else {
+            return Ok(());
+        };
+        let param = match name {
+            "neighbourhood_widths" => "neighbourhoods",
+            "pca_sample_fraction" => "pca_sample",
+            "jumps_per_pixel" => "jumps",
+            "candidate_factor" => "candidates",
+            other => other,
+        };
+        Err((
+            param.to_string(),
+            format!("{value} is not allowed; allowed: {expected}"),
+        ))
+    }
 }
 
 impl JumpMapStageSettings {
@@ -213,6 +239,15 @@ pub fn load_or_analyse(
 /// The `jump_map` stage.
 pub struct JumpMapStage;
 
+/// How the exemplar of `sizes` is addressed.
+fn wrap_of(sizes: &InputSizes) -> Wrap {
+    if sizes.exemplar_repeats {
+        Wrap::Repeat
+    } else {
+        Wrap::Clamp
+    }
+}
+
 impl Stage for JumpMapStage {
     const KIND: &'static str = "jump_map";
     const SUMMARY: &'static str =
@@ -235,12 +270,7 @@ impl Stage for JumpMapStage {
         if sizes.exemplar_pixels() == 0 {
             return Vec::new();
         }
-        let wrap = if sizes.exemplar_repeats {
-            Wrap::Repeat
-        } else {
-            Wrap::Clamp
-        };
-        let ks = settings.kernel_settings(wrap, 0);
+        let ks = settings.kernel_settings(wrap_of(sizes), 0);
         let (w, h, c) = (
             sizes.exemplar_width,
             sizes.exemplar_height,
@@ -317,6 +347,32 @@ impl Stage for JumpMapStage {
                 Fit::growing("an exemplar of", (1, long), exemplar, show_exemplar).separated(" "),
             ],
         }]
+    }
+    /// An inset analysis needs the exemplar to leave its neighbourhoods a
+    /// source region: refused before any stage, naming the exemplar and
+    /// the smallest size allowed.
+    fn check_input(settings: &Self::Settings, input: &InputView) -> Result<(), String> {
+        let s = input.sizes;
+        if s.exemplar_pixels() == 0 {
+            return Ok(());
+        }
+        let ks = settings.kernel_settings(wrap_of(s), 0);
+        source_region(
+            s.exemplar_width,
+            s.exemplar_height,
+            &ks.neighbourhood_widths,
+            ks.boundary,
+        )
+        .map(|_| ())
+        .map_err(|e| {
+            format!(
+                "`neighbourhoods` = {:?} (inset: `boundary` = {:?}, input.exemplar_wrap = {:?}) on the exemplar {}: {e}",
+                settings.neighbourhoods,
+                settings.boundary,
+                if s.exemplar_repeats { "repeat" } else { "clamp" },
+                input.exemplar
+            )
+        })
     }
     /// A jump map in the analysis cache for this exemplar and these
     /// settings is read, not analysed: the analysis estimate does not

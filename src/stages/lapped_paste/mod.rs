@@ -42,13 +42,13 @@ pub use sizes::{
 use crate::config::params::{ParamDoc, ParamRange, StageSettings};
 use crate::kernels::lapped::atlas::{AtlasSettings, atlas_layout};
 use crate::kernels::lapped::coverage::CoverageSettings;
-use crate::kernels::lapped::cut::CutSettings;
+use crate::kernels::lapped::cut::{CutSettings, MIN_PATCH_PIXELS};
 use crate::kernels::lapped::grow::GrowSettings;
 use crate::kernels::lapped::param::SolveSettings;
 use crate::kernels::lapped::paste::PasteSettings;
 use crate::progress::Progress;
 use crate::stage::memory::{InputSizes, MemoryEstimate};
-use crate::stage::{Datum, Stage, StageCtx, SystemResult};
+use crate::stage::{Datum, InputView, Stage, StageCtx, SystemResult};
 use crate::world::*;
 use bevy_ecs::prelude::*;
 use bevy_ecs::schedule::ScheduleConfigs;
@@ -294,6 +294,15 @@ impl StageSettings for LappedPasteSettings {
                 "only used with mask = \"image\"".into(),
             ));
         }
+        if (1..MIN_PATCH_PIXELS).contains(&self.patch_pixels) {
+            return Err((
+                "patch_pixels".into(),
+                format!(
+                    "{} is too small; allowed: 0 (automatic) or {MIN_PATCH_PIXELS}..=4096",
+                    self.patch_pixels
+                ),
+            ));
+        }
         Ok(())
     }
 }
@@ -360,6 +369,30 @@ impl Stage for LappedPaste {
     }
     fn produces(_: &Self::Settings) -> Vec<Datum> {
         vec![Datum::Patches]
+    }
+    /// A predefined patch shape is cut from a square of the exemplar: its
+    /// side (`patch_pixels`, or at most the exemplar's smaller side when
+    /// automatic) must fit the exemplar and be at least
+    /// [`MIN_PATCH_PIXELS`].
+    fn check_input(settings: &Self::Settings, input: &InputView) -> Result<(), String> {
+        let s = input.sizes;
+        if settings.mask == MaskKind::Image || s.exemplar_pixels() == 0 {
+            return Ok(());
+        }
+        let (w, h, name) = (s.exemplar_width, s.exemplar_height, input.exemplar);
+        let side = w.min(h);
+        if settings.patch_pixels > side && !s.exemplar_repeats {
+            return Err(format!(
+                "`patch_pixels` = {} exceeds the smaller side of the exemplar {name} ({w}x{h} pixels); allowed: at most {side}, or input.exemplar_wrap = \"repeat\" (a tileable exemplar)",
+                settings.patch_pixels
+            ));
+        }
+        if settings.patch_pixels == 0 && side < MIN_PATCH_PIXELS {
+            return Err(format!(
+                "the exemplar {name} is {w}x{h} pixels, too small for a texture patch (`patch_pixels` = 0 takes at most its smaller side, and a patch needs at least {MIN_PATCH_PIXELS}x{MIN_PATCH_PIXELS}); allowed: an exemplar of at least {MIN_PATCH_PIXELS}x{MIN_PATCH_PIXELS} pixels, or `patch_pixels` >= {MIN_PATCH_PIXELS} with input.exemplar_wrap = \"repeat\""
+            ));
+        }
+        Ok(())
     }
     /// The texture patches, then the larger of the pasting (the layer
     /// pool and per-face state) and the atlas (`atlas_size`: RGBA per

@@ -3,6 +3,7 @@
 //! from them: its progress parts, the pastes expected, its memory.
 
 use super::LappedPasteSettings;
+use crate::kernels::lapped::cut::MIN_PATCH_PIXELS;
 use crate::mesh::PolyMesh;
 use crate::stage::memory::InputSizes;
 use crate::world::{FaceField, Metrics};
@@ -151,7 +152,11 @@ pub fn auto_patches(
     let pixels = if settings.patch_pixels > 0 {
         settings.patch_pixels
     } else {
-        let cap = ((AUTO_PATCH_SIDE_FRACTION * side as f32).floor() as u32).max(1);
+        // Never below the smallest patch the cutter takes (an exemplar of
+        // 8 to 10 pixels a side would otherwise get a patch it refuses).
+        let cap = ((AUTO_PATCH_SIDE_FRACTION * side as f32).floor() as u32)
+            .max(MIN_PATCH_PIXELS.min(side))
+            .max(1);
         let fit = (AUTO_PATCH_DIAGONAL * diagonal * pixels_per_unit).round();
         (fit.clamp(0.0, cap as f32) as u32).clamp(AUTO_PATCH_MIN_PIXELS.min(cap), cap)
     };

@@ -286,6 +286,10 @@ impl Stage for Retile {
     fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
         finest_vertices(settings, sizes).map_or(*sizes, |v| sizes.with_mesh(v))
     }
+    /// The retiled mesh has vertices of its own.
+    fn keeps_vertex_ids(_: &Self::Settings, _: &InputSizes) -> bool {
+        false
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let retile = move |mut commands: Commands,
                            mut active: ResMut<ActiveMesh>,

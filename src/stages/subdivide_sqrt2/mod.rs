@@ -242,6 +242,23 @@ impl Stage for SubdivideSqrt2 {
     fn sizes_after(settings: &Self::Settings, sizes: &InputSizes) -> InputSizes {
         finest(settings, sizes).map_or(*sizes, |f| sizes.with_mesh(f.vertices))
     }
+    /// The coarsest level is the input itself, ids and all, unless
+    /// adaptive passes refine it or a dense input is remeshed
+    /// (`levels::coarsen_dense`: more than twice the target's vertices).
+    /// A target derived from the texture scale is computed in `f32` when
+    /// the stage runs: within 1 % of the threshold the ids count as not
+    /// kept.
+    fn keeps_vertex_ids(settings: &Self::Settings, sizes: &InputSizes) -> bool {
+        if settings.adaptive_passes > 0 {
+            return false;
+        }
+        match (settings.levels, settings.target_vertices) {
+            _ if !settings.coarsen_dense_input => true,
+            (_, t) if t > 0 => sizes.vertices <= t.saturating_mul(2),
+            (0, _) => (sizes.vertices as f64) < 1.98 * sizes.vertices_for_area(sizes.area),
+            _ => true,
+        }
+    }
     fn systems(settings: Self::Settings, ctx: StageCtx) -> ScheduleConfigs<ScheduleSystem> {
         let subdivide = move |mut commands: Commands,
                               mut active: ResMut<ActiveMesh>,

@@ -29,7 +29,7 @@ pub enum JumpMapError {
     },
     /// The exemplar is too small for the neighbourhoods when inset (§4.2).
     #[error(
-        "exemplar is {width}x{height} pixels, too small for inset neighbourhoods that need a border of {margin} pixels on every side; use a larger exemplar, smaller neighbourhoods or toroidal boundaries"
+        "exemplar is {width}x{height} pixels, too small for inset neighbourhoods that need a border of {margin} pixels on every side; allowed: an exemplar of at least {min_side}x{min_side} pixels, smaller neighbourhoods or toroidal boundaries"
     )]
     ExemplarTooSmall {
         /// Width in pixels.
@@ -38,6 +38,8 @@ pub enum JumpMapError {
         height: u32,
         /// The inset border (pixels) the neighbourhoods need.
         margin: u32,
+        /// The smallest side that leaves the neighbourhoods room.
+        min_side: u32,
     },
     /// The exemplar is larger than the 65535×65535 pixels addresses are packed into.
     #[error("exemplar is {width}x{height} pixels; jump maps support at most 65535 pixels per side")]

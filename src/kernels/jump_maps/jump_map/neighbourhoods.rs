@@ -57,6 +57,25 @@ fn axis_interval(size: u32, widths: &[u32]) -> (u32, u32) {
     }
 }
 
+/// Pixels the inset region needs along each axis, so that destinations
+/// (the region shrunk by one pixel) are not empty.
+const MIN_INSET_REGION: u32 = 3;
+
+/// The largest exemplar side a jump map addresses.
+const LARGEST_SIDE: u32 = 1 << 16;
+
+/// The smallest exemplar side (along either axis) whose inset region for
+/// neighbourhoods of `widths` is wide enough ([`source_region`]).
+pub fn min_inset_side(widths: &[u32]) -> u32 {
+    let (border, _) = axis_interval(LARGEST_SIDE, widths);
+    (2 * border + MIN_INSET_REGION..=LARGEST_SIDE)
+        .find(|&side| {
+            let (lo, hi) = axis_interval(side, widths);
+            hi.saturating_sub(lo) >= MIN_INSET_REGION
+        })
+        .unwrap_or(LARGEST_SIDE)
+}
+
 /// The pixels that get neighbourhood vectors and jump lists: the whole
 /// exemplar when toroidal; when inset, the pixels whose neighbourhoods at all
 /// levels lie fully inside the pyramid (§4.2).
@@ -82,13 +101,13 @@ pub fn source_region(
             let r = TexelRect { x0, y0, x1, y1 };
             // Two pixels wide at least, so that destinations (the region shrunk
             // by one pixel) are not empty.
-            if r.width() < 3 || r.height() < 3 {
-                let big = 1u32 << 16;
-                let (mx, _) = axis_interval(big, widths);
+            if r.width() < MIN_INSET_REGION || r.height() < MIN_INSET_REGION {
+                let (mx, _) = axis_interval(LARGEST_SIDE, widths);
                 return Err(JumpMapError::ExemplarTooSmall {
                     width,
                     height,
                     margin: mx + 1,
+                    min_side: min_inset_side(widths),
                 });
             }
             Ok(r)
@@ -225,4 +244,24 @@ pub fn neighbourhood_vectors(
         return Vec::new();
     }
     Neighbourhoods::new(pyramid, widths, wrap).rows(region, 0, n)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_smallest_inset_side_fits_and_one_less_does_not() {
+        for widths in [vec![9, 5, 3], vec![3], vec![31, 31, 31], vec![1]] {
+            let side = min_inset_side(&widths);
+            assert!(
+                source_region(side, side, &widths, Boundary::Inset).is_ok(),
+                "{widths:?}: {side}"
+            );
+            let e = source_region(side - 1, side, &widths, Boundary::Inset)
+                .expect_err("one pixel less")
+                .to_string();
+            assert!(e.contains(&format!("at least {side}x{side}")), "{e}");
+        }
+    }
 }
