@@ -171,7 +171,8 @@ pub const METRICS_BYTES_PER_VERTEX: u64 = 96;
 /// [`crate::kernels::metrics::window_index::BAND_WINDOWS`]) and a few
 /// arrays per vertex. Grows with `output.metric_samples` (locations are
 /// vertices, each sampled at most once, once the mesh is known); the
-/// channels are taken as 4 until the exemplar is loaded.
+/// channels are taken as 4 until the exemplar is loaded. Checked once the
+/// input is loaded ([`check_metrics`]).
 pub fn metrics_estimate(output: &RawOutput, sizes: &InputSizes) -> MemoryEstimate {
     use crate::kernels::metrics::surface_quality::SHARPNESS_OVERSAMPLING;
     use crate::kernels::metrics::window_index::{BAND_WINDOWS, BYTES_PER_WINDOW};

@@ -319,13 +319,6 @@ impl Pipeline {
                 }
             },
         )?;
-        memory_budget::check_metrics(
-            &raw.output,
-            &stages,
-            &Default::default(),
-            &memory_limit,
-            &file,
-        )?;
         Ok(Self {
             seed: raw.seed,
             input: raw.input,

@@ -617,15 +617,18 @@ keys = [{ at_bbox = [0.5, 0.5, 1.0], up = [0.0, 1.0, 0.0] }]
 
 /// The result metrics follow every pipeline; their sampled windows grow
 /// with `output.metric_samples` (up to 100,000 of 15×15 windows with their
-/// dense sharpness templates: about 7 GB). Over the limit, the config is
-/// refused at validation, before loading, naming the samples that fit.
+/// dense sharpness templates: about 7 GB). Over the limit, the run is
+/// refused once the input is loaded (the metrics sample vertices, each at
+/// most once), before the first stage, naming the samples that fit.
 #[test]
 fn result_metrics_over_the_limit_are_refused_naming_the_samples_that_fit() {
     let text = r#"
 seed = 1
 [input]
-mesh = "builtin:plane"
+mesh = "builtin:icosphere"
 exemplar = "builtin:noise"
+[input.mesh_options]
+subdivisions = 6
 [[stage]]
 kind = "orientation"
 [output]
