@@ -6,15 +6,15 @@
 //! orthonormal, so the squared distance between two projections is a lower
 //! bound of the squared distance between the windows. The windows are
 //! grouped in leaves of at most [`LEAF`] by median splits on the leading
-//! [`BOX_AXES`] axes, each leaf with its bounding box there. A query visits
-//! the leaves in ascending order of the distance from its projection to
-//! their boxes, skips a window whose projected distance already reaches the
-//! best full distance found, computes the full distance of the others
-//! directly from the image (in the exhaustive search's order, with its
-//! partial-distance exit per window row), and stops at the first leaf whose
-//! box is at least that far. So the minimum is the exhaustive one: the
-//! bounds only decide which windows need not be computed, with a margin for
-//! the rounding of the projections ([`prunes`]).
+//! [`BOX_AXES`] axes, each leaf with its bounding box there, and pairs of
+//! consecutive boxes are bounded again up to one box over all. A query
+//! descends that hierarchy depth first, the nearer box of each pair first,
+//! and skips a box, or a window, whose projected distance already reaches
+//! the best full distance found; it computes the full distance of the
+//! other windows directly from the image (with a partial-distance exit per
+//! window row). So the minimum is the exhaustive one: the bounds only
+//! decide which windows need not be computed, with a margin for the
+//! rounding of the projections ([`threshold`]).
 //!
 //! Texture windows hold most of their variance in a few axes, so a query
 //! computes the full distance of a few dozen windows instead of all of
@@ -53,13 +53,46 @@ pub struct WindowIndex {
     /// The basis by window value: per value, its weight on each axis (zero
     /// beyond the axes in use).
     basis: Vec<[f32x8; 2]>,
-    /// Leaves in visiting order; their blocks of eight windows.
+    /// Leaves in splitting order; their blocks of eight windows.
     leaves: Vec<Leaf>,
+    /// Boxes over consecutive leaves: level `k + 1` box `i` bounds level
+    /// `k` boxes `2i` and `2i + 1` (level 0: the leaves'); the last level
+    /// holds one box.
+    levels: Vec<Vec<Bounds>>,
     /// Per block: `AXES` rows of eight projected values.
     blocks: Vec<[f32x8; AXES]>,
     /// Per block: the offset in `values` of each lane's window (`usize::MAX`
     /// for padding).
     origins: Vec<[usize; 8]>,
+}
+
+/// A box on the leading [`BOX_AXES`] axes.
+#[derive(Clone, Copy, Debug)]
+struct Bounds {
+    lo: [f32; BOX_AXES],
+    hi: [f32; BOX_AXES],
+}
+
+impl Bounds {
+    /// Squared distance from `q` to the box: a lower bound of every
+    /// projected window's in it.
+    #[inline]
+    fn distance(&self, q: &[f32; AXES]) -> f32 {
+        (self.lo.iter().zip(&self.hi).zip(q))
+            .map(|((lo, hi), x)| {
+                let gap = (lo - x).max(x - hi).max(0.0);
+                gap * gap
+            })
+            .sum()
+    }
+
+    /// The smallest box holding both.
+    fn union(&self, other: &Bounds) -> Bounds {
+        Bounds {
+            lo: std::array::from_fn(|a| self.lo[a].min(other.lo[a])),
+            hi: std::array::from_fn(|a| self.hi[a].max(other.hi[a])),
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -73,7 +106,8 @@ struct Leaf {
 /// Reusable buffers of a query, one per thread.
 #[derive(Clone, Debug, Default)]
 pub struct IndexScratch {
-    order: Vec<(f32, u32)>,
+    /// Boxes to visit: (bound, level, index).
+    stack: Vec<(f32, u32, u32)>,
 }
 
 /// Most windows one index holds: an image with more is searched one band
@@ -222,7 +256,7 @@ impl WindowIndex {
         split(&points, &mut order, &mut leaves);
         let mut blocks = Vec::new();
         let mut block_origins = Vec::new();
-        let leaves = leaves
+        let leaves: Vec<Leaf> = leaves
             .into_iter()
             .map(|(start, end)| {
                 let members = &order[start..end];
@@ -254,6 +288,20 @@ impl WindowIndex {
                 }
             })
             .collect();
+        let mut levels: Vec<Vec<Bounds>> = vec![
+            leaves
+                .iter()
+                .map(|l: &Leaf| Bounds { lo: l.lo, hi: l.hi })
+                .collect(),
+        ];
+        while levels.last().is_some_and(|l| l.len() > 1) {
+            let below = levels.last().expect("a level");
+            let up = below
+                .chunks(2)
+                .map(|pair| pair.iter().skip(1).fold(pair[0], |b, o| b.union(o)))
+                .collect();
+            levels.push(up);
+        }
         Self {
             values,
             row_stride,
@@ -261,6 +309,7 @@ impl WindowIndex {
             row_len,
             basis,
             leaves,
+            levels,
             blocks,
             origins: block_origins,
         }
@@ -293,34 +342,35 @@ impl WindowIndex {
     pub fn nearest_below(&self, query: &[f32], best: f32, scratch: &mut IndexScratch) -> f32 {
         assert_eq!(query.len(), self.n * self.row_len, "query size");
         let q = project(query, &self.basis);
-        scratch.order.clear();
-        scratch
-            .order
-            .extend(self.leaves.iter().enumerate().map(|(i, leaf)| {
-                let d: f32 = (leaf.lo.iter().zip(&leaf.hi).zip(&q))
-                    .map(|((lo, hi), x)| {
-                        let gap = (lo - x).max(x - hi).max(0.0);
-                        gap * gap
-                    })
-                    .sum();
-                (d, i as u32)
-            }));
         let mut best = best;
-        // The nearest box first: its windows give a good bound to prune by.
-        if let Some(&(_, first)) = scratch.order.iter().min_by(|a, b| a.0.total_cmp(&b.0)) {
-            best = self.scan_leaf(first as usize, query, &q, best);
+        let stack = &mut scratch.stack;
+        stack.clear();
+        if let Some(root) = self.levels.last().and_then(|l| l.first()) {
+            stack.push((root.distance(&q), self.levels.len() as u32 - 1, 0));
         }
-        let kept = {
-            let order = &mut scratch.order;
-            order.retain(|&(bound, _)| !prunes(bound, best));
-            order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-            &scratch.order[..]
-        };
-        for &(bound, leaf) in kept {
+        // Depth first, the nearer box of each pair first.
+        while let Some((bound, level, i)) = stack.pop() {
             if prunes(bound, best) {
-                break;
+                continue;
             }
-            best = self.scan_leaf(leaf as usize, query, &q, best);
+            if level == 0 {
+                best = self.scan_leaf(i as usize, query, &q, best);
+                continue;
+            }
+            let below = &self.levels[level as usize - 1];
+            let (a, b) = (2 * i as usize, 2 * i as usize + 1);
+            let da = below[a].distance(&q);
+            match below.get(b).map(|bb| bb.distance(&q)) {
+                Some(db) if db < da => {
+                    stack.push((da, level - 1, a as u32));
+                    stack.push((db, level - 1, b as u32));
+                }
+                Some(db) => {
+                    stack.push((db, level - 1, b as u32));
+                    stack.push((da, level - 1, a as u32));
+                }
+                None => stack.push((da, level - 1, a as u32)),
+            }
         }
         best
     }
