@@ -20,6 +20,7 @@ use super::quality::{
 use super::window_index::{IndexScratch, WindowIndex};
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
+use crate::image::sample::floor_f32;
 use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
@@ -131,32 +132,40 @@ pub fn continuous_mean_gradient(img: &Image, k: u32) -> f32 {
     let (fw, fh) = ((w - 1) * k as usize, (h - 1) * k as usize);
     let lerp_at = |f: usize, n: usize| -> (usize, usize, f32) {
         let t = (f as f32 + 0.5) / kf;
-        let i = (t.floor() as usize).min(n - 2);
+        let i = (floor_f32(t) as usize).min(n - 2);
         (i, i + 1, t - i as f32)
     };
-    let at = |fx: usize, fy: usize| -> f32 {
-        let (x, x1, tx) = lerp_at(fx, w);
+    // The interpolant along x, once per column: its pixels and weight.
+    let columns: Vec<(usize, usize, f32)> = (0..fw).map(|fx| lerp_at(fx, w)).collect();
+    // Row `fy` of the dense grid into `out`.
+    let dense_row = |fy: usize, out: &mut Vec<f32>| {
         let (y, y1, ty) = lerp_at(fy, h);
-        let top = l[y * w + x] * (1.0 - tx) + l[y * w + x1] * tx;
-        let bottom = l[y1 * w + x] * (1.0 - tx) + l[y1 * w + x1] * tx;
-        top * (1.0 - ty) + bottom * ty
+        out.clear();
+        out.extend(columns.iter().map(|&(x, x1, tx)| {
+            let top = l[y * w + x] * (1.0 - tx) + l[y * w + x1] * tx;
+            let bottom = l[y1 * w + x] * (1.0 - tx) + l[y1 * w + x1] * tx;
+            top * (1.0 - ty) + bottom * ty
+        }));
     };
     let sum: f64 = (1..fh - 1)
         .into_par_iter()
-        .map(|y| {
-            let mut row = 0.0f64;
-            for x in 1..fw - 1 {
-                let v = |dx: isize, dy: isize| {
-                    at((x as isize + dx) as usize, (y as isize + dy) as usize)
-                };
-                let gx =
-                    (v(1, -1) + 2.0 * v(1, 0) + v(1, 1)) - (v(-1, -1) + 2.0 * v(-1, 0) + v(-1, 1));
-                let gy =
-                    (v(-1, 1) + 2.0 * v(0, 1) + v(1, 1)) - (v(-1, -1) + 2.0 * v(0, -1) + v(1, -1));
-                row += f64::from((gx * gx + gy * gy).sqrt() / 8.0);
-            }
-            row
-        })
+        .map_init(
+            || [Vec::new(), Vec::new(), Vec::new()],
+            |[up, mid, down], y| {
+                dense_row(y - 1, up);
+                dense_row(y, mid);
+                dense_row(y + 1, down);
+                let mut row = 0.0f64;
+                for x in 1..fw - 1 {
+                    let gx = (up[x + 1] + 2.0 * mid[x + 1] + down[x + 1])
+                        - (up[x - 1] + 2.0 * mid[x - 1] + down[x - 1]);
+                    let gy = (down[x - 1] + 2.0 * down[x] + down[x + 1])
+                        - (up[x - 1] + 2.0 * up[x] + up[x + 1]);
+                    row += f64::from((gx * gx + gy * gy).sqrt() / 8.0);
+                }
+                row
+            },
+        )
         .sum();
     (sum / ((fw - 2) * (fh - 2)) as f64 * f64::from(kf)) as f32
 }
