@@ -235,9 +235,10 @@ pub fn stream_pastes_obj(
          mtllib {mtl}",
         pastes.pastes.len()
     )?;
-    for p in &mesh.positions {
-        writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
-    }
+    super::obj::write_items(w, mesh.vertex_count(), |v, buf| {
+        let p = mesh.positions[v];
+        writeln!(buf, "v {} {} {}", p.x, p.y, p.z)
+    })?;
     super::obj::write_vertex_normals(w, mesh)?;
     for paste in &pastes.pastes {
         for uv in &paste.uvs {
