@@ -321,17 +321,17 @@ pub fn resample_neighbourhood(
         let [a, b, c] = tri.p;
         let mn = a.min(b).min(c);
         let mx = a.max(b).max(c);
-        let i0 = to_index(mn.x).ceil().max(0.0);
-        let i1 = to_index(mx.x).floor().min(n as f32 - 1.0);
-        let j0 = to_index(mn.y).ceil().max(0.0);
-        let j1 = to_index(mx.y).floor().min(n as f32 - 1.0);
-        // Tolerance: points a hair outside the bounding box still count.
-        let (i0, i1, j0, j1) = (
-            (i0 - 1.0).max(0.0),
-            (i1 + 1.0).min(n as f32 - 1.0),
-            (j0 - 1.0).max(0.0),
-            (j1 + 1.0).min(n as f32 - 1.0),
-        );
+        // Points a hair outside the bounding box still count: a point
+        // whose weights are all at least −INSIDE_EPS lies within
+        // 3·INSIDE_EPS of the triangle's extent beyond it on each axis, so
+        // a margin of 10⁻⁴ of the extent (plus 10⁻³ of a lattice step for
+        // rounding) keeps every point the test below can accept.
+        let extent = (mx - mn) / spacing;
+        let margin = 1e-3 + 1e-4 * extent.x.max(extent.y);
+        let i0 = (to_index(mn.x) - margin).ceil().max(0.0);
+        let i1 = (to_index(mx.x) + margin).floor().min(n as f32 - 1.0);
+        let j0 = (to_index(mn.y) - margin).ceil().max(0.0);
+        let j1 = (to_index(mx.y) + margin).floor().min(n as f32 - 1.0);
         if i0 > i1 || j0 > j1 {
             continue;
         }
