@@ -82,14 +82,7 @@ impl<const D: usize> Knn<D> {
     /// Builds the subtree over `order` (a slice of the point indices) and
     /// returns its node index.
     fn build(&mut self, points: &[[f32; D]], order: &mut [u32], depth: u32) -> u32 {
-        let mut lo = [f32::INFINITY; D];
-        let mut hi = [f32::NEG_INFINITY; D];
-        for &i in order.iter() {
-            for ((l, h), &v) in lo.iter_mut().zip(&mut hi).zip(&points[i as usize]) {
-                *l = l.min(v);
-                *h = h.max(v);
-            }
-        }
+        let (lo, hi) = bounding_box::<D, D>(points, order);
         let at = self.nodes.len() as u32;
         if order.len() <= LEAF || depth >= 48 {
             let first = self.blocks.len() as u32;
@@ -191,18 +184,41 @@ impl<const D: usize> Knn<D> {
         &scratch.best
     }
 
-    /// Squared distance from `query` to the box of `node` (a lower bound of
-    /// every point's under it: each term is at most the point's).
+    /// Squared distance from `query` to the box of `node` ([`box_distance`]).
     #[inline]
     fn box_distance(&self, node: u32, query: &[f32; D]) -> f32 {
         let n = &self.nodes[node as usize];
-        let mut d = 0.0f32;
-        for ((lo, hi), x) in n.lo.iter().zip(&n.hi).zip(query) {
-            let gap = (lo - x).max(x - hi).max(0.0);
-            d += gap * gap;
-        }
-        d
+        box_distance(&n.lo, &n.hi, query)
     }
+}
+
+/// The bounding box of `points[members]` over their first `B` coordinates.
+pub(crate) fn bounding_box<const D: usize, const B: usize>(
+    points: &[[f32; D]],
+    members: &[u32],
+) -> ([f32; B], [f32; B]) {
+    let mut lo = [f32::INFINITY; B];
+    let mut hi = [f32::NEG_INFINITY; B];
+    for &i in members {
+        for ((l, h), &v) in lo.iter_mut().zip(&mut hi).zip(&points[i as usize]) {
+            *l = l.min(v);
+            *h = h.max(v);
+        }
+    }
+    (lo, hi)
+}
+
+/// Squared distance from `query` to the box `lo..hi` over the box's
+/// coordinates: a lower bound of every point's in it (each term is at most
+/// the point's).
+#[inline]
+pub(crate) fn box_distance(lo: &[f32], hi: &[f32], query: &[f32]) -> f32 {
+    let mut d = 0.0f32;
+    for ((lo, hi), x) in lo.iter().zip(hi).zip(query) {
+        let gap = (lo - x).max(x - hi).max(0.0);
+        d += gap * gap;
+    }
+    d
 }
 
 /// Splits `order` at the median of the widest of the first `lo.len()`

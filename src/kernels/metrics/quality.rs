@@ -155,9 +155,17 @@ pub fn completeness(output: &Image, exemplar: &Image, n: u32) -> f32 {
         WindowIndex::interior(output, n as u32, rows)
     });
     let dim = n * n * ch;
-    let values = search.nearest(&completeness_queries(exemplar, n), dim);
-    let sum: f64 = values.iter().map(|&v| f64::from(v)).sum();
-    (sum / values.len().max(1) as f64 / dim as f64) as f32
+    mean_per_value(
+        &search.nearest(&completeness_queries(exemplar, n), dim),
+        dim,
+    )
+}
+
+/// The mean of squared distances between windows of `dim` values, per
+/// value (completeness's units).
+pub(super) fn mean_per_value(distances: &[f32], dim: usize) -> f32 {
+    let sum: f64 = distances.iter().map(|&v| f64::from(v)).sum();
+    (sum / distances.len().max(1) as f64 / dim as f64) as f32
 }
 
 /// The exemplar windows [`completeness`] compares

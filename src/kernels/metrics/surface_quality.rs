@@ -14,10 +14,10 @@ use rayon::prelude::*;
 
 use super::energy::sample_indices;
 use super::quality::{
-    VerbatimStats, completeness_queries, luma, mean_gradient, normalised_l1, structure_features,
-    structure_scales,
+    VerbatimStats, completeness_queries, luma, mean_gradient, mean_per_value, normalised_l1,
+    structure_features, structure_scales,
 };
-use super::window_index::{IndexScratch, WindowIndex};
+use super::window_index::WindowIndex;
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
 use crate::image::sample::floor_f32;
@@ -309,13 +309,9 @@ fn completeness_against(templates: &[f32], n: usize, exemplar: &Image) -> f32 {
     let per = n * n * ch;
     let search = WindowIndex::vectors(templates.to_vec(), n as u32, ch as u32);
     let queries = completeness_queries(exemplar, n);
-    let values: Vec<f64> = queries
-        .par_chunks_exact(per)
-        .map_init(IndexScratch::default, |scratch, q| {
-            f64::from(search.nearest_sq_distance(q, scratch))
-        })
-        .collect();
-    (values.iter().sum::<f64>() / values.len().max(1) as f64 / per as f64) as f32
+    let mut values = vec![f32::INFINITY; queries.len() / per];
+    search.lower_all(&queries, &mut values);
+    mean_per_value(&values, per)
 }
 
 /// Verbatim copying on a surface: vertices `a`, `b` joined by an edge belong

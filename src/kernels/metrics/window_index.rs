@@ -26,7 +26,7 @@ use rayon::prelude::*;
 use wide::f32x8;
 
 use crate::image::Image;
-use crate::kernels::knn::split_widest;
+use crate::kernels::knn::{bounding_box, box_distance, split_widest};
 
 /// Principal axes the windows are projected on (fewer when a window has
 /// fewer values).
@@ -74,16 +74,10 @@ struct Bounds {
 }
 
 impl Bounds {
-    /// Squared distance from `q` to the box: a lower bound of every
-    /// projected window's in it.
+    /// Squared distance from `q` to the box ([`box_distance`]).
     #[inline]
     fn distance(&self, q: &[f32; AXES]) -> f32 {
-        (self.lo.iter().zip(&self.hi).zip(q))
-            .map(|((lo, hi), x)| {
-                let gap = (lo - x).max(x - hi).max(0.0);
-                gap * gap
-            })
-            .sum()
+        box_distance(&self.lo, &self.hi, q)
     }
 
     /// The smallest box holding both.
@@ -95,12 +89,12 @@ impl Bounds {
     }
 }
 
+/// A leaf's blocks of eight windows (its box is in level 0 of
+/// [`WindowIndex::levels`]).
 #[derive(Clone, Copy, Debug)]
 struct Leaf {
     first_block: u32,
     blocks: u32,
-    lo: [f32; BOX_AXES],
-    hi: [f32; BOX_AXES],
 }
 
 /// Reusable buffers of a query, one per thread.
@@ -164,18 +158,11 @@ impl<F: Fn(Range<usize>) -> WindowIndex> BandedIndex<F> {
     /// not change the values: each is the minimum over all windows.
     pub fn nearest(&self, queries: &[f32], dim: usize) -> Vec<f32> {
         let mut best = vec![f32::INFINITY; queries.len() / dim.max(1)];
-        let mut lower = |index: &WindowIndex| {
-            best.par_iter_mut()
-                .zip(queries.par_chunks_exact(dim.max(1)))
-                .for_each_init(IndexScratch::default, |scratch, (b, q)| {
-                    *b = index.nearest_below(q, *b, scratch);
-                });
-        };
         match &self.single {
-            Some(index) => lower(index),
+            Some(index) => index.lower_all(queries, &mut best),
             None => {
                 for band in &self.bands {
-                    lower(&(self.make)(band.clone()));
+                    (self.make)(band.clone()).lower_all(queries, &mut best);
                 }
             }
         }
@@ -256,44 +243,32 @@ impl WindowIndex {
         split(&points, &mut order, &mut leaves);
         let mut blocks = Vec::new();
         let mut block_origins = Vec::new();
-        let leaves: Vec<Leaf> = leaves
+        let (leaves, leaf_bounds): (Vec<Leaf>, Vec<Bounds>) = leaves
             .into_iter()
             .map(|(start, end)| {
                 let members = &order[start..end];
                 let first_block = blocks.len() as u32;
-                let mut lo = [f32::INFINITY; BOX_AXES];
-                let mut hi = [f32::NEG_INFINITY; BOX_AXES];
                 for chunk in members.chunks(8) {
                     let mut lanes = [[FAR; 8]; AXES];
                     let mut lane_origins = [usize::MAX; 8];
                     for (l, &i) in chunk.iter().enumerate() {
-                        let p = &points[i as usize];
-                        for a in 0..AXES {
-                            lanes[a][l] = p[a];
-                        }
-                        for a in 0..BOX_AXES {
-                            lo[a] = lo[a].min(p[a]);
-                            hi[a] = hi[a].max(p[a]);
+                        for (row, &v) in lanes.iter_mut().zip(&points[i as usize]) {
+                            row[l] = v;
                         }
                         lane_origins[l] = origins[i as usize];
                     }
                     blocks.push(lanes.map(f32x8::new));
                     block_origins.push(lane_origins);
                 }
-                Leaf {
+                let (lo, hi) = bounding_box(&points, members);
+                let leaf = Leaf {
                     first_block,
                     blocks: blocks.len() as u32 - first_block,
-                    lo,
-                    hi,
-                }
+                };
+                (leaf, Bounds { lo, hi })
             })
-            .collect();
-        let mut levels: Vec<Vec<Bounds>> = vec![
-            leaves
-                .iter()
-                .map(|l: &Leaf| Bounds { lo: l.lo, hi: l.hi })
-                .collect(),
-        ];
+            .unzip();
+        let mut levels = vec![leaf_bounds];
         while levels.last().is_some_and(|l| l.len() > 1) {
             let below = levels.last().expect("a level");
             let up = below
@@ -335,6 +310,18 @@ impl WindowIndex {
     /// rounding of the sums (which run in another order).
     pub fn nearest_sq_distance(&self, query: &[f32], scratch: &mut IndexScratch) -> f32 {
         self.nearest_below(query, f32::INFINITY, scratch)
+    }
+
+    /// Lowers each query's `best` (one per query, `queries` one after
+    /// another) to its distance to the nearest indexed window
+    /// ([`Self::nearest_below`]), in parallel over queries.
+    pub fn lower_all(&self, queries: &[f32], best: &mut [f32]) {
+        let dim = (self.n * self.row_len).max(1);
+        best.par_iter_mut()
+            .zip(queries.par_chunks_exact(dim))
+            .for_each_init(IndexScratch::default, |scratch, (b, q)| {
+                *b = self.nearest_below(q, *b, scratch);
+            });
     }
 
     /// The smaller of `best` and the smallest squared distance from `query`
@@ -561,14 +548,7 @@ fn split(points: &[[f32; AXES]], order: &mut [u32], leaves: &mut Vec<(usize, usi
             continue;
         }
         let members = &mut order[start..end];
-        let mut lo = [f32::INFINITY; BOX_AXES];
-        let mut hi = [f32::NEG_INFINITY; BOX_AXES];
-        for &i in members.iter() {
-            for ((l, h), &v) in lo.iter_mut().zip(&mut hi).zip(&points[i as usize]) {
-                *l = l.min(v);
-                *h = h.max(v);
-            }
-        }
+        let (lo, hi) = bounding_box::<AXES, BOX_AXES>(points, members);
         let mid = split_widest(points, members, &lo, &hi);
         // Right half pushed first so leaves come out left to right.
         stack.push((start + mid, end));
