@@ -35,8 +35,20 @@ pub fn write_export_titled(
         files.push(path);
         progress.inc(1);
     }
+    // The stem whose `.obj` holds the baked triangles, once written: formats
+    // `obj` (blended) and `baked` write the same mesh, so the second copies.
+    let mut baked_stem: Option<String> = None;
+    let mut write_baked = |dir: &Path, stem: String, image: &crate::image::Image| {
+        let files = match &baked_stem {
+            Some(from) => super::obj::copy_obj(dir, from, &stem, image),
+            None => write_baked_triangles(dir, &stem, &job.mesh, image),
+        };
+        baked_stem.get_or_insert(stem);
+        files
+    };
     for format in &job.formats {
         progress.set_part(format);
+        let _span = tracing::debug_span!("write_format", format = format.as_str()).entered();
         match format.as_str() {
             "ply" => {
                 let path = dir.join(format!("{}.ply", job.stem));
@@ -61,7 +73,7 @@ pub fn write_export_titled(
                     (Some(image), true) => {
                         // The blended result as `<stem>.obj`; the raw
                         // coordinates for a shader that blends itself.
-                        files.extend(write_baked_triangles(dir, &job.stem, &job.mesh, image)?);
+                        files.extend(write_baked(dir, job.stem.clone(), image)?);
                         let stem = format!("{}_corner_uvs", job.stem);
                         files.extend(super::obj::write_obj(
                             dir, &stem, &job.mesh, uvs, texture, colours,
@@ -74,8 +86,7 @@ pub fn write_export_titled(
             }
             "baked" => {
                 if let Some(image) = &job.baked {
-                    let stem = format!("{}_baked", job.stem);
-                    files.extend(write_baked_triangles(dir, &stem, &job.mesh, image)?);
+                    files.extend(write_baked(dir, format!("{}_baked", job.stem), image)?);
                 }
             }
             "glb" => {

@@ -7,6 +7,7 @@
 
 mod bitmap_font;
 pub mod contact_sheet;
+pub mod decimal;
 mod error;
 pub mod export;
 pub mod gltf;
@@ -51,6 +52,7 @@ pub fn write_atomic(
         let mut buf = std::io::BufWriter::new(file);
         write(&mut buf)?;
         let file = buf.into_inner().map_err(|e| e.into_error())?;
+        let _span = tracing::debug_span!("sync_file").entered();
         file.sync_all()?;
         staging::guarded(|| std::fs::rename(&tmp, path))
     })();

@@ -229,11 +229,17 @@ fn neighbourhoods(
     // allocation per vertex); concatenated in vertex order.
     // `seen[w] == v + 1`: w is already in v's rings (a stamp per searched
     // vertex, so the per-thread array is never cleared).
+    // The stamps are kept in a pool, not made per rayon split: a mesh-sized
+    // array per split is zeroed again and again (`Pool`).
+    let pool = crate::kernels::surface::flatten::Pool::<Vec<u32>>::new();
     let chunks: Vec<(Vec<u32>, Vec<Vec2>, Vec<u32>)> = (0..n.div_ceil(NEIGHBOURHOOD_CHUNK))
         .into_par_iter()
-        .map_init(
-            || vec![0u32; positions.len()],
-            |seen, c| {
+        .map(|c| {
+            pool.with(|seen| {
+                if seen.len() != positions.len() {
+                    seen.clear();
+                    seen.resize(positions.len(), 0);
+                }
                 let vs = (c * NEIGHBOURHOOD_CHUNK..((c + 1) * NEIGHBOURHOOD_CHUNK).min(n))
                     .map(vertex_of);
                 let mut found: Vec<u32> = Vec::new();
@@ -276,8 +282,8 @@ fn neighbourhoods(
                     counts.push(near.len() as u32);
                 }
                 (vertex, offset, counts)
-            },
-        )
+            })
+        })
         .collect();
     let total: usize = chunks.iter().map(|c| c.0.len()).sum();
     let mut start = Vec::with_capacity(n + 1);

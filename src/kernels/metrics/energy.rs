@@ -10,6 +10,7 @@ use super::nearest::{ExemplarNeighbourhoods, QueryScratch};
 use super::window_index::{BandedIndex, WindowIndex};
 use super::{EnergySettings, EnergyStats, SurfaceSignal};
 use crate::image::{Image, sample::Wrap};
+use crate::kernels::surface::flatten::Pool;
 use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
@@ -85,6 +86,133 @@ pub fn image_texture_energy(
     EnergyStats::from_values(&values)
 }
 
+/// The `n`×`n` templates of a signal over a surface at the sampled
+/// vertices, resampled once ([`resample_neighbourhood`]) and read by both
+/// the texture energy ([`surface_energy_of`]) and the surface measures
+/// ([`super::surface_quality::surface_quality`]), which sample the same
+/// vertices with the same template.
+pub struct SampledTemplates {
+    /// Points per side.
+    pub n: usize,
+    /// Values per point.
+    pub channels: usize,
+    /// The sampled vertices, in sample order (a vertex may repeat).
+    pub vertices: Vec<u32>,
+    /// Per sample, its `n²·channels` values (uncovered points hold the
+    /// default).
+    pub values: Vec<f32>,
+    /// Per sample, its covered points.
+    pub covered: Vec<u32>,
+    /// Per sample, `n²` flags: point covered by a face.
+    pub coverage: Vec<bool>,
+}
+
+impl SampledTemplates {
+    /// Samples `samples` vertices that have faces with `seed` (every such
+    /// vertex once when there are fewer) and resamples the `n`×`n`
+    /// template of each in its frame, `spacing` world units between
+    /// points, uncovered points taking `default`. Parallel over samples;
+    /// the result does not depend on the thread count.
+    #[allow(clippy::too_many_arguments)]
+    pub fn resample(
+        mesh: &PolyMesh,
+        topo: &Topology,
+        frames: &[TangentFrame],
+        spacing: f32,
+        signal: &SurfaceSignal,
+        default: &[f32],
+        n: usize,
+        samples: usize,
+        seed: u64,
+    ) -> Self {
+        let ch = signal.channels();
+        let candidates: Vec<u32> = (0..mesh.vertex_count() as u32)
+            .filter(|&v| !topo.vertex_faces(v).is_empty())
+            .collect();
+        let vertices: Vec<u32> = sample_indices(candidates.len(), samples, seed)
+            .into_iter()
+            .map(|k| candidates[k])
+            .collect();
+        let dim = n * n * ch;
+        let mut values = vec![0.0f32; vertices.len() * dim];
+        let mut coverage = vec![false; vertices.len() * n * n];
+        let pool = Pool::<ResampleScratch>::new();
+        let covered: Vec<u32> = values
+            .par_chunks_exact_mut(dim.max(1))
+            .zip(coverage.par_chunks_exact_mut((n * n).max(1)))
+            .zip(&vertices)
+            .map(|((out, mask), &v)| {
+                pool.with(|resample| {
+                    let covered = resample_neighbourhood(
+                        mesh,
+                        topo,
+                        v,
+                        &frames[v as usize],
+                        spacing,
+                        n as u32,
+                        signal,
+                        default,
+                        out,
+                        resample,
+                    );
+                    mask.copy_from_slice(resample.coverage());
+                    covered as u32
+                })
+            })
+            .collect();
+        Self {
+            n,
+            channels: ch,
+            vertices,
+            values,
+            covered,
+            coverage,
+        }
+    }
+
+    /// [`Self::resample`] as the texture energy reads the result: the
+    /// settings' neighbourhood, samples and seed, the exemplar's mean as
+    /// the default.
+    #[allow(clippy::too_many_arguments)]
+    pub fn for_energy(
+        mesh: &PolyMesh,
+        topo: &Topology,
+        frames: &[TangentFrame],
+        spacing: f32,
+        signal: &SurfaceSignal,
+        exemplar: &Image,
+        settings: &EnergySettings,
+    ) -> Self {
+        Self::resample(
+            mesh,
+            topo,
+            frames,
+            spacing,
+            signal,
+            &exemplar.mean(),
+            settings.neighbourhood as usize,
+            settings.samples,
+            settings.seed,
+        )
+    }
+
+    /// Samples.
+    pub fn len(&self) -> usize {
+        self.vertices.len()
+    }
+
+    /// Whether there are no samples.
+    pub fn is_empty(&self) -> bool {
+        self.vertices.is_empty()
+    }
+
+    /// The values of sample `i`.
+    pub fn template(&self, i: usize) -> &[f32] {
+        let dim = self.n * self.n * self.channels;
+        &self.values[i * dim..(i + 1) * dim]
+    }
+}
+
 /// Texture energy of a signal over a surface against `exemplar`.
 ///
 /// Samples `settings.samples` vertices that have faces (every such vertex
@@ -111,66 +239,62 @@ pub fn surface_texture_energy(
     exemplar: &Image,
     settings: &EnergySettings,
 ) -> EnergyStats {
+    assert_eq!(frames.len(), mesh.vertex_count(), "one frame per vertex");
+    let templates =
+        SampledTemplates::for_energy(mesh, topo, frames, spacing, signal, exemplar, settings);
+    surface_energy_of(&templates, exemplar, settings)
+}
+
+/// [`surface_texture_energy`] of templates already resampled (with
+/// `settings.neighbourhood`, `settings.samples` and `settings.seed`, and the
+/// exemplar's mean as the default).
+pub fn surface_energy_of(
+    templates: &SampledTemplates,
+    exemplar: &Image,
+    settings: &EnergySettings,
+) -> EnergyStats {
     let ch = exemplar.channels as usize;
     assert_eq!(
-        signal.channels(),
-        ch,
+        templates.channels, ch,
         "signal and exemplar channel counts differ"
     );
-    assert_eq!(frames.len(), mesh.vertex_count(), "one frame per vertex");
-    let n = settings.neighbourhood as usize;
+    let n = templates.n;
     let dim = n * n * ch;
     let search = exemplar_windows(exemplar, n);
     // Templates partly covered compare only their covered points: the
     // exhaustive search, made when the first one comes.
     let masked = std::sync::OnceLock::new();
-    let default = exemplar.mean();
-    let candidates: Vec<u32> = (0..mesh.vertex_count() as u32)
-        .filter(|&v| !topo.vertex_faces(v).is_empty())
-        .collect();
-    let picks = sample_indices(candidates.len(), settings.samples, settings.seed);
     let min_covered = (settings.min_coverage * (n * n) as f32).ceil().max(1.0) as usize;
-    let mut queries = Vec::new();
-    let mut values = Vec::with_capacity(picks.len());
-    for chunk in picks.chunks(QUERY_CHUNK) {
-        queries.resize(chunk.len() * dim, 0.0);
-        // Per sample: the covered points, and the distance when the template
-        // is only partly covered (else its query is searched below).
-        let taken: Vec<(usize, Option<f32>)> = queries
-            .par_chunks_exact_mut(dim)
-            .zip(chunk)
-            .map_init(
-                || (ResampleScratch::new(), QueryScratch::default()),
-                |(resample, scratch), (query, &k)| {
-                    let v = candidates[k];
-                    let covered = resample_neighbourhood(
-                        mesh,
-                        topo,
-                        v,
-                        &frames[v as usize],
-                        spacing,
-                        n as u32,
-                        signal,
-                        &default,
-                        query,
-                        resample,
-                    );
-                    let partial = (covered >= min_covered && covered < n * n).then(|| {
-                        masked
-                            .get_or_init(|| ExemplarNeighbourhoods::new(exemplar, n as u32))
-                            .nearest_sq_distance(query, Some(resample.coverage()), scratch)
-                    });
-                    (covered, partial)
-                },
-            )
+    let mut values = Vec::with_capacity(templates.len());
+    for first in (0..templates.len()).step_by(QUERY_CHUNK) {
+        let samples = first..(first + QUERY_CHUNK).min(templates.len());
+        let queries = &templates.values[samples.start * dim..samples.end * dim];
+        // The distance of a partly covered template (else its query is
+        // searched below).
+        let partial: Vec<Option<f32>> = samples
+            .clone()
+            .into_par_iter()
+            .map_init(QueryScratch::default, |scratch, i| {
+                let covered = templates.covered[i] as usize;
+                (covered >= min_covered && covered < n * n).then(|| {
+                    masked
+                        .get_or_init(|| ExemplarNeighbourhoods::new(exemplar, n as u32))
+                        .nearest_sq_distance(
+                            templates.template(i),
+                            Some(&templates.coverage[i * n * n..(i + 1) * n * n]),
+                            scratch,
+                        )
+                })
+            })
             .collect();
-        let full = search.nearest(&queries, dim);
+        let full = search.nearest(queries, dim);
         values.extend(
-            taken
-                .iter()
+            samples
+                .zip(partial)
                 .zip(full)
-                .filter(|((covered, _), _)| *covered >= min_covered)
-                .map(|(&(covered, partial), d)| partial.unwrap_or(d) / (covered * ch) as f32),
+                .map(|((i, partial), d)| (templates.covered[i] as usize, partial, d))
+                .filter(|&(covered, ..)| covered >= min_covered)
+                .map(|(covered, partial, d)| partial.unwrap_or(d) / (covered * ch) as f32),
         );
     }
     EnergyStats::from_values(&values)

@@ -14,7 +14,7 @@
 //!   measure it (energy and surface measures in one pass, histogram
 //!   samples).
 
-mod energy;
+pub mod energy;
 mod histogram;
 mod nearest;
 pub mod quality;

@@ -122,15 +122,31 @@ pub fn image_quality(
     sources: Option<&SourceMap>,
     settings: &EnergySettings,
 ) -> ImageQuality {
-    let coherence = image_texture_energy(output, exemplar, settings, Wrap::Clamp);
+    // Each measure in a span of its own (`--trace`).
+    fn timed<T>(span: tracing::Span, f: impl FnOnce() -> T) -> T {
+        let _s = span.entered();
+        f()
+    }
+    use tracing::debug_span as span;
+    let coherence = timed(span!("image_energy"), || {
+        image_texture_energy(output, exemplar, settings, Wrap::Clamp)
+    });
     ImageQuality {
         coherence_mean: coherence.mean,
         coherence_p90: coherence.p90,
-        completeness: completeness(output, exemplar, settings.neighbourhood),
-        sharpness: sharpness(output, exemplar),
-        structure: structure_distance(output, exemplar),
-        histogram: histogram_wasserstein_mean(output, exemplar),
-        verbatim: sources.map(|s| verbatim_copying(s, exemplar.width, exemplar.height)),
+        completeness: timed(span!("image_completeness"), || {
+            completeness(output, exemplar, settings.neighbourhood)
+        }),
+        sharpness: timed(span!("image_sharpness"), || sharpness(output, exemplar)),
+        structure: timed(span!("image_structure"), || {
+            structure_distance(output, exemplar)
+        }),
+        histogram: timed(span!("image_histogram"), || {
+            histogram_wasserstein_mean(output, exemplar)
+        }),
+        verbatim: timed(span!("image_verbatim"), || {
+            sources.map(|s| verbatim_copying(s, exemplar.width, exemplar.height))
+        }),
     }
 }
 

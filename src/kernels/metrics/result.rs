@@ -7,10 +7,9 @@
 use crate::image::Image;
 use crate::image::sample::Wrap;
 use crate::kernels::lapped::coverage::{lattice_level, lattice_samples_into};
-use crate::kernels::metrics::surface_quality::{SurfaceQuality, SurfaceResult, surface_quality};
-use crate::kernels::metrics::{
-    EnergySettings, EnergyStats, SurfaceSignal, histogram_wasserstein, surface_texture_energy,
-};
+use crate::kernels::metrics::energy::{SampledTemplates, surface_energy_of};
+use crate::kernels::metrics::surface_quality::{SurfaceQuality, SurfaceResult, surface_quality_of};
+use crate::kernels::metrics::{EnergySettings, EnergyStats, SurfaceSignal, histogram_wasserstein};
 use crate::kernels::surface::frames::TangentFrame;
 use crate::mesh::{PolyMesh, Topology};
 use crate::progress::Progress;
@@ -19,13 +18,14 @@ use glam::Vec2;
 /// Histogram samples a result is read at, about this many spread by area.
 pub const HISTOGRAM_SAMPLES: f32 = 20_000.0;
 
-/// The texture energy ([`surface_texture_energy`]) and the surface
-/// measures ([`surface_quality`]) of `signal` on `mesh`, in `frames` at
+/// The texture energy ([`surface_energy_of`]) and the surface measures
+/// ([`surface_quality_of`]) of `signal` on `mesh`, from one set of
+/// templates ([`SampledTemplates`]), in `frames` at
 /// `spacing` world units per exemplar pixel; `sources` are the per-vertex
 /// exemplar pixels, when known. Parts `"texture energy"` (one step) and
 /// `"quality"` of `progress`.
 ///
-/// Preconditions: as [`surface_texture_energy`] and [`surface_quality`].
+/// Preconditions: as [`surface_energy_of`] and [`surface_quality_of`].
 #[allow(clippy::too_many_arguments)]
 pub fn measure_surface(
     mesh: &PolyMesh,
@@ -40,7 +40,13 @@ pub fn measure_surface(
     progress.set_part("texture energy");
     // The metrics read only the edges and the faces of each vertex.
     let topo = Topology::build_edges_and_vertex_faces(mesh);
-    let stats = surface_texture_energy(mesh, &topo, frames, spacing, signal, exemplar, settings);
+    let span = tracing::debug_span!("surface_texture_energy").entered();
+    // The energy's templates are the surface measures' small ones: resampled
+    // once for both.
+    let small =
+        SampledTemplates::for_energy(mesh, &topo, frames, spacing, signal, exemplar, settings);
+    let stats = surface_energy_of(&small, exemplar, settings);
+    drop(span);
     progress.inc(1);
     progress.set_part("quality");
     let result = SurfaceResult {
@@ -50,7 +56,10 @@ pub fn measure_surface(
         spacing,
         signal,
     };
-    (stats, surface_quality(&result, exemplar, settings, sources))
+    (
+        stats,
+        surface_quality_of(&result, exemplar, settings, sources, &small),
+    )
 }
 
 /// Samples per unit area for a histogram of about [`HISTOGRAM_SAMPLES`]

@@ -12,7 +12,7 @@
 
 use rayon::prelude::*;
 
-use super::energy::sample_indices;
+use super::energy::SampledTemplates;
 use super::quality::{
     VerbatimStats, completeness_queries, luma, mean_gradient, mean_per_value, normalised_l1,
     structure_features, structure_scales,
@@ -21,6 +21,7 @@ use super::window_index::WindowIndex;
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
 use crate::image::sample::floor_f32;
+use crate::kernels::surface::flatten::Pool;
 use crate::kernels::surface::frames::TangentFrame;
 use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
@@ -92,22 +93,25 @@ fn templates(
     let ch = r.signal.channels();
     let len = (size * size) as usize * ch;
     let min_covered = ((min_cover * (size * size) as f32).ceil() as usize).max(1);
+    let pool = Pool::<ResampleScratch>::new();
     let kept: Vec<Option<Vec<f32>>> = picks
         .par_iter()
-        .map_init(ResampleScratch::new, |scratch, &v| {
+        .map(|&v| {
             let mut out = vec![0.0f32; len];
-            let covered = resample_neighbourhood(
-                r.mesh,
-                r.topo,
-                v,
-                &r.frames[v as usize],
-                r.spacing,
-                size,
-                r.signal,
-                default,
-                &mut out,
-                scratch,
-            );
+            let covered = pool.with(|scratch| {
+                resample_neighbourhood(
+                    r.mesh,
+                    r.topo,
+                    v,
+                    &r.frames[v as usize],
+                    r.spacing,
+                    size,
+                    r.signal,
+                    default,
+                    &mut out,
+                    scratch,
+                )
+            });
             (covered >= min_covered).then_some(out)
         })
         .collect();
@@ -183,22 +187,44 @@ pub fn surface_quality(
     settings: &EnergySettings,
     sources: Option<&[glam::Vec2]>,
 ) -> SurfaceQuality {
+    let small = SampledTemplates::for_energy(
+        r.mesh, r.topo, r.frames, r.spacing, r.signal, exemplar, settings,
+    );
+    surface_quality_of(r, exemplar, settings, sources, &small)
+}
+
+/// [`surface_quality`] at the vertices of `small` (the
+/// `settings.neighbourhood` templates the texture energy resampled there:
+/// [`SampledTemplates`], `settings.samples` vertices with faces drawn with
+/// `settings.seed`); `sources` are per-vertex level-0 exemplar pixel
+/// coordinates (NaN where unknown). Deterministic for any number of threads.
+///
+/// Preconditions: as [`super::surface_texture_energy`]; the exemplar is at
+/// least `settings.neighbourhood` pixels on each side; `small` was resampled
+/// from `r` with the exemplar's mean as the default.
+pub fn surface_quality_of(
+    r: &SurfaceResult,
+    exemplar: &Image,
+    settings: &EnergySettings,
+    sources: Option<&[glam::Vec2]>,
+    small: &SampledTemplates,
+) -> SurfaceQuality {
     let ch = exemplar.channels as usize;
     assert_eq!(
         r.signal.channels(),
         ch,
         "signal and exemplar channels differ"
     );
+    assert_eq!(small.n as u32, settings.neighbourhood, "template size");
     let default = exemplar.mean();
-    let candidates: Vec<u32> = (0..r.mesh.vertex_count() as u32)
-        .filter(|&v| !r.topo.vertex_faces(v).is_empty())
-        .collect();
-    let picks: Vec<u32> = sample_indices(candidates.len(), settings.samples, settings.seed)
-        .into_iter()
-        .map(|k| candidates[k])
-        .collect();
+    let picks = &small.vertices;
     let n = settings.neighbourhood;
-    let small = templates(r, &picks, n, 1.0, &default);
+    let span = tracing::debug_span!("completeness").entered();
+    // The templates the faces cover wholly.
+    let small: Vec<f32> = (0..small.len())
+        .filter(|&i| small.covered[i] as usize == small.n * small.n)
+        .flat_map(|i| small.template(i).iter().copied())
+        .collect();
     let count = small.len() / ((n * n) as usize * ch).max(1);
 
     // Completeness: each exemplar window against every kept template.
@@ -207,9 +233,11 @@ pub fn surface_quality(
     } else {
         completeness_against(&small, n as usize, exemplar)
     };
+    drop(span);
 
     // Sharpness: the continuous texture's gradient, from templates sampled
     // SHARPNESS_OVERSAMPLING times denser over the same footprint.
+    let span = tracing::debug_span!("sharpness").entered();
     let sharpness = if count == 0 {
         f32::NAN
     } else {
@@ -219,7 +247,7 @@ pub fn surface_quality(
             spacing: r.spacing / k as f32,
             ..*r
         };
-        let fine = templates(&dense, &picks, side, 1.0, &default);
+        let fine = templates(&dense, picks, side, 1.0, &default);
         let per = (side * side) as usize * ch;
         let fcount = fine.len() / per.max(1);
         let g_ex = continuous_mean_gradient(exemplar, k);
@@ -238,7 +266,9 @@ pub fn surface_quality(
         }
     };
 
+    drop(span);
     // Structure: larger templates against exemplar windows of the same size.
+    let span = tracing::debug_span!("structure").entered();
     let side = STRUCTURE_TEMPLATE.min(exemplar.width).min(exemplar.height);
     let spicks: Vec<u32> = picks.iter().take(STRUCTURE_SAMPLES).copied().collect();
     let large = templates(r, &spicks, side, STRUCTURE_MIN_COVERAGE, &default);
@@ -288,7 +318,9 @@ pub fn surface_quality(
         }));
         normalised_l1(&f_out, &f_ex)
     };
+    drop(span);
 
+    let _span = tracing::debug_span!("verbatim").entered();
     let verbatim = sources.map(|s| surface_verbatim(r, s, exemplar.width, exemplar.height));
     SurfaceQuality {
         completeness,

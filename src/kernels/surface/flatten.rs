@@ -296,22 +296,33 @@ impl FlattenScratch {
     }
 }
 
-/// Scratches of [`flatten_stencil`] shared by the chunks of a parallel loop:
-/// a chunk takes one (or makes one when all are in use) and gives it back,
-/// so there are at most as many as threads and each keeps its mesh-sized
-/// buffers from chunk to chunk (a scratch per chunk would clear a
-/// mesh-sized buffer per chunk: quadratic in the mesh). Dropped with the pool.
-#[derive(Debug, Default)]
-pub struct ScratchPool(std::sync::Mutex<Vec<FlattenScratch>>);
+/// Scratches of [`flatten_stencil`] shared by the chunks of a parallel loop
+/// ([`Pool`]).
+pub type ScratchPool = Pool<FlattenScratch>;
 
-impl ScratchPool {
+/// Mesh-sized scratches shared by the tasks of a parallel loop: a task takes
+/// one (or makes one when all are in use) and gives it back, so there are at
+/// most as many as threads and each keeps its mesh-sized buffers from task
+/// to task. A scratch per task (rayon's `map_init`, which makes one per
+/// split) clears a mesh-sized buffer per task: on a million-vertex mesh
+/// that was gigabytes of zeroing. Dropped with the pool.
+#[derive(Debug)]
+pub struct Pool<T>(std::sync::Mutex<Vec<T>>);
+
+impl<T> Default for Pool<T> {
+    fn default() -> Self {
+        Self(std::sync::Mutex::new(Vec::new()))
+    }
+}
+
+impl<T: Default> Pool<T> {
     /// An empty pool.
     pub fn new() -> Self {
         Self::default()
     }
 
     /// Runs `f` with a scratch of the pool.
-    pub fn with<R>(&self, f: impl FnOnce(&mut FlattenScratch) -> R) -> R {
+    pub fn with<R>(&self, f: impl FnOnce(&mut T) -> R) -> R {
         let taken = self.0.lock().map(|mut p| p.pop()).unwrap_or_default();
         let mut scratch = taken.unwrap_or_default();
         let r = f(&mut scratch);

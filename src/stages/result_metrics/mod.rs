@@ -276,6 +276,7 @@ impl Measure<'_> {
         }
         progress.inc(1);
         progress.set_part("histogram");
+        let span = tracing::debug_span!("histogram_samples").entered();
         let values = match (colours, &composite) {
             (Some(c), _) => Some((c.values.clone(), c.channels)),
             (None, Some(c)) => {
@@ -284,6 +285,7 @@ impl Measure<'_> {
             }
             _ => None,
         };
+        drop(span);
         if let Some((values, channels)) = values {
             record_histogram(metrics, values, channels, &exemplar.image);
         }
@@ -359,6 +361,7 @@ fn frames_carried_onto(
 /// exemplar's, per channel (`histogram_wasserstein`) and their mean
 /// (`histogram`).
 fn record_histogram(metrics: &mut Metrics, values: Vec<f32>, channels: usize, exemplar: &Image) {
+    let _span = tracing::debug_span!("histogram").entered();
     if let Some((w, mean)) = histogram_distance(values, channels, exemplar) {
         metrics
             .result
@@ -424,6 +427,7 @@ fn plane_quality(
         height: img.height,
         texels: t.clone(),
     });
+    let _span = tracing::debug_span!("plane_quality").entered();
     let q = image_quality(img, &rgb, sources.as_ref(), settings);
     metrics.result.insert("plane".into(), to_json(&q));
 }
