@@ -251,7 +251,10 @@ impl Stage for Match {
 
     /// The exemplar side of the finest level's search
     /// ([`crate::kernels::wei_levoy::wl_match::search_bytes`]: its
-    /// neighbourhood vectors and search structure) and, per vertex of the
+    /// neighbourhood vectors and search structure), the finest level's
+    /// kept stencils
+    /// ([`crate::kernels::wei_levoy::wl_match::stored_stencil_bytes`]) and,
+    /// per vertex of the
     /// finest level, the flattened templates, queries and results of every
     /// level, about 600 bytes (measured: `tests/memory_estimates.rs`).
     fn memory_estimate(settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
@@ -265,10 +268,20 @@ impl Stage for Match {
                 &ks.search,
             )
         });
+        // The finest level's flattened stencils, kept between the schedule
+        // and the queries when they fit (at its largest template).
+        let points = ks
+            .neighbourhoods
+            .iter()
+            .map(|spec| u64::from(spec.size) * u64::from(spec.size))
+            .max()
+            .unwrap_or(0);
+        let stencils =
+            crate::kernels::wei_levoy::wl_match::stored_stencil_bytes(sizes.vertices, points);
         MemoryEstimate::per_vertex(
-            "the exemplar's neighbourhood search and the templates of every vertex",
+            "the exemplar's neighbourhood search, the kept stencils and the templates of every vertex",
             sizes,
-            exemplar,
+            exemplar + stencils,
             PER_VERTEX,
         )
     }

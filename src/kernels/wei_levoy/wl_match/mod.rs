@@ -234,6 +234,30 @@ const PASS1_CHUNK: usize = 64;
 const FLATTEN_CHUNK: usize = 256;
 /// Queries per parallel task within a pass-2 batch.
 const PASS2_CHUNK: usize = 64;
+/// Per chunk of [`FLATTEN_CHUNK`] vertices: the vertices each reads (one
+/// flat list and each vertex's start in it) and its uncovered stencil
+/// points.
+type ReadLists = (Vec<u32>, Vec<u32>, usize);
+
+/// Most bytes of flattened pass-2 stencils kept from the schedule for the
+/// queries ([`stored_stencil_bytes`]); a level whose stencils take more
+/// flattens each again when its query is built (the same stencil: the
+/// flattening is deterministic).
+pub const STORED_STENCIL_BYTES: u64 = 256 << 20;
+
+/// Bytes of the pass-2 stencils of `vertices` vertices with `points`
+/// template points each that a level keeps, 0 when they exceed
+/// [`STORED_STENCIL_BYTES`] (then none is kept).
+pub fn stored_stencil_bytes(vertices: u64, points: u64) -> u64 {
+    let bytes = vertices
+        .saturating_mul(points)
+        .saturating_mul(std::mem::size_of::<StencilPoint>() as u64);
+    if bytes <= STORED_STENCIL_BYTES {
+        bytes
+    } else {
+        0
+    }
+}
 
 /// The parts of a level's neighbourhood: the level itself, then each coarser level.
 pub fn neighbourhood_parts(spec: NeighbourhoodSpec, available_levels: usize) -> Vec<Part> {
@@ -452,8 +476,10 @@ pub fn wei_levoy_synthesis_with_progress(
             let tp = template.points();
             let stencil_span = tracing::info_span!("wl_stencils", level = l).entered();
             // The stencils are flattened here to find which vertices each
-            // vertex reads, and again when its query is built: storing them
-            // would cost `points × 24` bytes per vertex (1.2 KB for 7 × 7).
+            // vertex reads, and kept for the queries when they fit
+            // STORED_STENCIL_BYTES (`points × 24` bytes per vertex, 1.2 KB
+            // for 7 × 7); otherwise flattened again when a query is built.
+            let store = stored_stencil_bytes(nv as u64, tp as u64) > 0;
             let pool = ScratchPool::new();
             let stencil_of = |v: usize, st: &mut [StencilPoint], scratch: &mut FlattenScratch| {
                 flatten_stencil(
@@ -470,12 +496,14 @@ pub fn wei_levoy_synthesis_with_progress(
             // per fixed chunk of vertices, one flat list and each vertex's
             // offsets into it, read in place. (Copied into one list they
             // were held twice at the level's peak: ~230 bytes per vertex.)
-            let chunks: Vec<(Vec<u32>, Vec<u32>, usize)> = (0..nv.div_ceil(FLATTEN_CHUNK))
+            let (chunks, stored): (Vec<ReadLists>, Vec<Vec<StencilPoint>>) = (0..nv
+                .div_ceil(FLATTEN_CHUNK))
                 .into_par_iter()
                 .map(|c| {
                     let vs = c * FLATTEN_CHUNK..((c + 1) * FLATTEN_CHUNK).min(nv);
                     pool.with(|scratch| {
                         let mut st = vec![StencilPoint::UNCOVERED; tp];
+                        let mut kept = Vec::with_capacity(if store { vs.len() * tp } else { 0 });
                         let mut flat = Vec::with_capacity(vs.len() * tp);
                         let mut starts = Vec::with_capacity(vs.len() + 1);
                         starts.push(0u32);
@@ -483,6 +511,9 @@ pub fn wei_levoy_synthesis_with_progress(
                         let mut uncovered = 0;
                         for v in vs {
                             uncovered += tp - stencil_of(v, &mut st, scratch).covered;
+                            if store {
+                                kept.extend_from_slice(&st);
+                            }
                             one.clear();
                             for s in st.iter().filter(|s| s.is_covered()) {
                                 for k in 0..3 {
@@ -497,10 +528,10 @@ pub fn wei_levoy_synthesis_with_progress(
                             starts.push(flat.len() as u32);
                         }
                         flat.shrink_to_fit();
-                        (flat, starts, uncovered)
+                        ((flat, starts, uncovered), kept)
                     })
                 })
-                .collect();
+                .unzip();
             drop(stencil_span);
             let schedule_span = tracing::info_span!("wl_schedule", level = l).entered();
             let uncovered: usize = chunks.iter().map(|c| c.2).sum();
@@ -532,9 +563,15 @@ pub fn wei_levoy_synthesis_with_progress(
                         pool.with(|scratch| {
                             for (&v, row) in vs.iter().zip(q.chunks_exact_mut(dim)) {
                                 let v = v as usize;
-                                stencil_of(v, &mut st, scratch);
+                                let points = if store {
+                                    let c = &stored[v / FLATTEN_CHUNK];
+                                    &c[v % FLATTEN_CHUNK * tp..][..tp]
+                                } else {
+                                    stencil_of(v, &mut st, scratch);
+                                    &st[..]
+                                };
                                 resample_stencil(
-                                    &st,
+                                    points,
                                     &colours,
                                     ch,
                                     &geo.default,
