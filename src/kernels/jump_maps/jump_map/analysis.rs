@@ -132,7 +132,10 @@ pub fn analysis_bytes(width: u32, height: u32, channels: u32, settings: &JumpMap
     let tree = if may_use_tree { 72 * n } else { 0 };
     let q = KnnSearch::BLOCK as u64;
     let per_thread = q * m * 8 * 5 + (q + 512) * (components + 1) * 4 + q * 512 * 4;
-    let neighbours = n * components * 4 + n * per_source + tree + ESTIMATE_THREADS * per_thread;
+    // The points' squared norms of the exhaustive search (4 bytes each).
+    let norms = if may_use_tree { 0 } else { 4 * n };
+    let neighbours =
+        n * components * 4 + n * per_source + tree + norms + ESTIMATE_THREADS * per_thread;
     let map = (big_n * per_source + n * per_source)
         .max(big_n * (5 + 24 * k))
         .max(2 * big_n * per_source);

@@ -116,6 +116,9 @@ pub fn all_knn_with_progress(
 /// holding `m` neighbours of every pixel).
 pub struct KnnSearch<'a> {
     points: &'a [f32],
+    /// Per point, `|p|²` (the exhaustive search's augmented column),
+    /// computed once rather than per block of queries; empty with the tree.
+    norms: Vec<f32>,
     dim: usize,
     n: usize,
     m: usize,
@@ -136,8 +139,17 @@ impl<'a> KnnSearch<'a> {
             AnnSearch::Exhaustive => false,
         };
         let m = m.min(n);
+        let norms = if kd || m == 0 {
+            Vec::new()
+        } else {
+            points
+                .par_chunks_exact(dim)
+                .map(|p| p.iter().map(|x| x * x).sum())
+                .collect()
+        };
         Self {
             points,
+            norms,
             dim,
             n,
             m,
@@ -189,7 +201,7 @@ impl<'a> KnnSearch<'a> {
                     row.copy_from_slice(&list);
                 }
             }
-            None => exhaustive_block(self.points, self.dim, m, b, out),
+            None => exhaustive_block(self.points, &self.norms, self.dim, m, b, out),
         }
     }
 }
@@ -200,11 +212,19 @@ impl<'a> KnnSearch<'a> {
 /// Ranking uses the score `|p|² − 2 q·p` (the squared distance minus the
 /// constant `|q|²`), obtained for a whole tile by one product of the augmented
 /// matrices `[−2q, 1]` and `[p, |p|²]` (a tile's `[p, |p|²]` built as it is
-/// visited, not held for all points); the scan over a tile is then a
+/// visited from the points and their `norms`, not held for all points);
+/// the scan over a tile is then a
 /// vectorised compare against the current m-th best. Tiles are visited
 /// starting with the query block's own (image neighbours are similar, so the
 /// threshold drops fast).
-fn exhaustive_block(points: &[f32], dim: usize, m: usize, b: usize, o: &mut [Neighbour]) {
+fn exhaustive_block(
+    points: &[f32],
+    norms: &[f32],
+    dim: usize,
+    m: usize,
+    b: usize,
+    o: &mut [Neighbour],
+) {
     let n = points.len() / dim;
     let da = dim + 1;
     let tiles = n.div_ceil(POINT_TILE);
@@ -229,33 +249,19 @@ fn exhaustive_block(points: &[f32], dim: usize, m: usize, b: usize, o: &mut [Nei
     for t in 0..tiles {
         let t0 = ((first + t) % tiles) * POINT_TILE;
         let tn = POINT_TILE.min(n - t0);
-        for (a, p) in aug_p[..tn * da]
+        for ((a, p), &norm) in aug_p[..tn * da]
             .chunks_exact_mut(da)
             .zip(points[t0 * dim..(t0 + tn) * dim].chunks_exact(dim))
+            .zip(&norms[t0..t0 + tn])
         {
             a[..dim].copy_from_slice(p);
-            a[dim] = p.iter().map(|x| x * x).sum();
+            a[dim] = norm;
         }
         let p = MatRef::from_row_major_slice(&aug_p[..tn * da], tn, da);
         let gm = MatMut::from_row_major_slice_mut(&mut g[..qn * tn], qn, tn);
         faer::linalg::matmul::matmul(gm, Accum::Replace, q, p.transpose(), 1.0f32, Par::Seq);
         crate::kernels::simd_state::after_faer();
-        for (i, (list, thr)) in lists.iter_mut().zip(&mut thrs).enumerate() {
-            let row = &g[i * tn..][..tn];
-            let mut chunks = row.chunks_exact(16);
-            let mut j0 = t0;
-            for c in &mut chunks {
-                let mut any = false;
-                for &x in c {
-                    any |= x < *thr;
-                }
-                if any {
-                    scan(c, j0, list, m, thr);
-                }
-                j0 += 16;
-            }
-            scan(chunks.remainder(), j0, list, m, thr);
-        }
+        scan_tile(&g[..qn * tn], tn, t0, &mut lists, &mut thrs, m);
     }
     // Re-rank with directly computed distances (the expansion above loses
     // precision for near neighbours).
@@ -270,11 +276,85 @@ fn exhaustive_block(points: &[f32], dim: usize, m: usize, b: usize, o: &mut [Nei
     }
 }
 
+/// Scans a tile of scores (`g`: one row of `tn` per query, points from
+/// `t0` on) into the queries' candidate lists ([`scan`]).
+///
+/// Compiled twice, for the baseline and for AVX2 (chosen by the processor):
+/// compares only, so the results are identical; AVX2 tests sixteen scores
+/// in two instructions instead of four.
+fn scan_tile(
+    g: &[f32],
+    tn: usize,
+    t0: usize,
+    lists: &mut [Vec<Neighbour>],
+    thrs: &mut [f32],
+    m: usize,
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor supports AVX2 (checked just above).
+            unsafe { scan_tile_avx2(g, tn, t0, lists, thrs, m) };
+            return;
+        }
+    }
+    scan_tile_generic(g, tn, t0, lists, thrs, m);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn scan_tile_avx2(
+    g: &[f32],
+    tn: usize,
+    t0: usize,
+    lists: &mut [Vec<Neighbour>],
+    thrs: &mut [f32],
+    m: usize,
+) {
+    scan_tile_generic(g, tn, t0, lists, thrs, m);
+}
+
+#[inline(always)]
+fn scan_tile_generic(
+    g: &[f32],
+    tn: usize,
+    t0: usize,
+    lists: &mut [Vec<Neighbour>],
+    thrs: &mut [f32],
+    m: usize,
+) {
+    for (row, (list, thr)) in g.chunks_exact(tn).zip(lists.iter_mut().zip(thrs)) {
+        let mut chunks = row.chunks_exact(16);
+        let mut j0 = t0;
+        for c in &mut chunks {
+            let mut any = false;
+            for &x in c {
+                any |= x < *thr;
+            }
+            if any {
+                scan(c, j0, list, m, thr);
+            }
+            j0 += 16;
+        }
+        scan(chunks.remainder(), j0, list, m, thr);
+    }
+}
+
 /// Pushes the scores of `c` (points from `j0` on) that beat `thr`; when the
 /// buffer holds `4m`, keeps its `m` best and lowers `thr` to the worst of them.
-#[inline]
+#[inline(always)]
 fn scan(c: &[f32], j0: usize, list: &mut Vec<Neighbour>, m: usize, thr: &mut f32) {
-    for (jj, &x) in c.iter().enumerate() {
+    // The scores below the threshold as a bit mask (compares that
+    // vectorise), then only those.
+    let mut below = c
+        .iter()
+        .enumerate()
+        .fold(0u32, |mask, (jj, &x)| mask | (u32::from(x < *thr) << jj));
+    while below != 0 {
+        let jj = below.trailing_zeros() as usize;
+        below &= below - 1;
+        let x = c[jj];
+        // The threshold may have dropped since the mask was taken.
         if x < *thr {
             list.push(Neighbour {
                 index: (j0 + jj) as u32,
