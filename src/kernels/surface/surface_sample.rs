@@ -145,9 +145,12 @@ pub struct ResampleScratch {
     hits: Vec<Option<Hit>>,
     /// Per template point: covered by a projected face.
     covered: Vec<bool>,
-    /// Per vertex: projected position and height, valid when `vstamp` matches.
-    vproj: Vec<(Vec2, f32)>,
+    /// Per vertex: projected position, height and whether it is near the
+    /// centre, valid when `vstamp` matches.
+    vproj: Vec<(Vec2, f32, bool)>,
     vstamp: Vec<u32>,
+    /// Per vertex: its faces were queued, when equal to `generation`.
+    vqueued: Vec<u32>,
 }
 
 impl ResampleScratch {
@@ -168,13 +171,16 @@ impl ResampleScratch {
             self.stamp.resize(faces, 0);
             self.vstamp.clear();
             self.vstamp.resize(vertices, 0);
-            self.vproj.resize(vertices, (Vec2::ZERO, 0.0));
+            self.vqueued.clear();
+            self.vqueued.resize(vertices, 0);
+            self.vproj.resize(vertices, (Vec2::ZERO, 0.0, false));
             self.generation = 0;
         }
         self.generation = self.generation.wrapping_add(1);
         if self.generation == 0 {
             self.stamp.fill(0);
             self.vstamp.fill(0);
+            self.vqueued.fill(0);
             self.generation = 1;
         }
         self.queue.clear();
@@ -246,15 +252,20 @@ pub fn resample_neighbourhood(
         covered,
         vproj,
         vstamp,
+        vqueued,
         ..
     } = scratch;
 
-    let mut project = |v: u32| -> (Vec2, f32) {
+    let mut project = |v: u32| -> (Vec2, f32, bool) {
         let vi = v as usize;
         if vstamp[vi] != gen_ {
             let d: Vec3 = mesh.positions[vi] - p0;
             // (d·s, −d·t): image x right, image y down.
-            vproj[vi] = (Vec2::new(d.dot(frame.s), -d.dot(frame.t)), d.dot(frame.n));
+            vproj[vi] = (
+                Vec2::new(d.dot(frame.s), -d.dot(frame.t)),
+                d.dot(frame.n),
+                d.length_squared() <= radius_sq,
+            );
             vstamp[vi] = gen_;
         }
         vproj[vi]
@@ -276,8 +287,8 @@ pub fn resample_neighbourhood(
         let mut bb_min = Vec2::splat(f32::INFINITY);
         let mut bb_max = Vec2::splat(f32::NEG_INFINITY);
         for &v in face {
-            let (q, _) = project(v);
-            near |= (mesh.positions[v as usize] - p0).length_squared() <= radius_sq;
+            let (q, _, v_near) = project(v);
+            near |= v_near;
             bb_min = bb_min.min(q);
             bb_max = bb_max.max(q);
         }
@@ -305,7 +316,14 @@ pub fn resample_neighbourhood(
         if !(near || overlaps) {
             continue;
         }
+        // A vertex's faces are queued once: after that every one of them
+        // is stamped, so going over them again would queue nothing (the
+        // queue, and the faces found, are those of going over them again).
         for &v in face {
+            if vqueued[v as usize] == gen_ {
+                continue;
+            }
+            vqueued[v as usize] = gen_;
             for &g in topo.vertex_faces(v) {
                 if stamp[g as usize] != gen_ {
                     stamp[g as usize] = gen_;
