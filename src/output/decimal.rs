@@ -30,6 +30,12 @@ pub fn push_f32(out: &mut Vec<u8>, x: f32) {
     }
     let mut buffer = zmij::Buffer::new();
     let text = buffer.format_finite(x).as_bytes();
+    // Most floats cannot be a tie (below) and `zmij` writes them as
+    // `Display` does, positionally: copied as they are.
+    if !may_tie(x) && !text.contains(&b'e') && !text.ends_with(b".0") {
+        out.extend_from_slice(text);
+        return;
+    }
     let Some((mut digits, mut exp)) = parse_digits(text) else {
         let _ = write!(out, "{x}");
         return;
@@ -105,6 +111,25 @@ fn parse_digits(text: &[u8]) -> Option<(u64, i32)> {
         e += 1;
     }
     Some((digits, e))
+}
+
+/// Whether the finite, non-zero `x` can lie exactly halfway between two
+/// shortest candidates of at most 9 digits. With `|x| = m·2^q`, `m` odd, a
+/// tie `2|x| = (2D + 1)·10^e` with `q + 1 < 0` needs `e = q + 1` and
+/// `2D + 1 = m·5^(−q−1)`, which is below 2·10⁹ only when `q ≥ −14`; so a
+/// float with `q < −14` (most coordinates: a long mantissa, a small
+/// exponent) never ties.
+#[inline]
+fn may_tie(x: f32) -> bool {
+    let bits = x.to_bits() & 0x7FFF_FFFF;
+    let biased = (bits >> 23) as i32;
+    let fraction = bits & 0x7F_FFFF;
+    let (m, q) = if biased == 0 {
+        (fraction, -149)
+    } else {
+        (fraction | 0x80_0000, biased - 150)
+    };
+    q + m.trailing_zeros() as i32 >= -14
 }
 
 /// Whether `v` (positive, finite) is exactly `(digits + ½)·10^exp`, the tie
