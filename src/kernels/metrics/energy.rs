@@ -53,13 +53,27 @@ pub fn image_texture_energy(
         output.channels, exemplar.channels,
         "output and exemplar channel counts differ"
     );
+    let windows = ExemplarWindows::new(exemplar, settings.neighbourhood as usize);
+    image_texture_energy_in(output, &windows, settings, wrap)
+}
+
+/// [`image_texture_energy`] against the exemplar's windows already
+/// indexed (`windows.n()` is `settings.neighbourhood`; the exemplar has the
+/// output's channels).
+pub fn image_texture_energy_in(
+    output: &Image,
+    windows: &ExemplarWindows,
+    settings: &EnergySettings,
+    wrap: Wrap,
+) -> EnergyStats {
     let n = settings.neighbourhood as usize;
+    assert_eq!(windows.n(), n, "windows of the metric neighbourhood");
     let ch = output.channels as usize;
     let r = (n / 2) as i64;
     let picks = sample_indices(output.pixel_count(), settings.samples, settings.seed);
     let width = output.width as usize;
     let dim = n * n * ch;
-    let search = exemplar_windows(exemplar, n);
+    let search = windows;
     let mut queries = Vec::new();
     let mut values = Vec::with_capacity(picks.len());
     for chunk in picks.chunks(QUERY_CHUNK) {
@@ -253,14 +267,27 @@ pub fn surface_energy_of(
     exemplar: &Image,
     settings: &EnergySettings,
 ) -> EnergyStats {
+    let windows = ExemplarWindows::new(exemplar, settings.neighbourhood as usize);
+    surface_energy_in(templates, exemplar, &windows, settings)
+}
+
+/// [`surface_energy_of`] against `exemplar`'s windows already indexed
+/// (`windows`, of `exemplar` or of an image with its values).
+pub fn surface_energy_in(
+    templates: &SampledTemplates,
+    exemplar: &Image,
+    windows: &ExemplarWindows,
+    settings: &EnergySettings,
+) -> EnergyStats {
     let ch = exemplar.channels as usize;
     assert_eq!(
         templates.channels, ch,
         "signal and exemplar channel counts differ"
     );
     let n = templates.n;
+    assert_eq!(windows.n(), n, "windows of the templates' size");
     let dim = n * n * ch;
-    let search = exemplar_windows(exemplar, n);
+    let search = windows;
     // Templates partly covered compare only their covered points: the
     // exhaustive search, made when the first one comes.
     let masked = std::sync::OnceLock::new();
@@ -304,17 +331,39 @@ pub fn surface_energy_of(
 /// windows take `QUERY_CHUNK · n² · channels` values).
 const QUERY_CHUNK: usize = 1 << 16;
 
-/// Every `n`×`n` window of `exemplar`, toroidally, for exact nearest-window
-/// queries (one index, or bands of one for a large exemplar).
-fn exemplar_windows(
-    exemplar: &Image,
+/// Every `n`×`n` window of an exemplar, toroidally, indexed for exact
+/// nearest-window queries (one index, or bands of one for a large
+/// exemplar): the exemplar side of the texture energy, built once per run
+/// and shared by the plane's energy and the surface's
+/// ([`image_texture_energy_in`], [`surface_energy_in`]).
+pub struct ExemplarWindows<'a> {
     n: usize,
-) -> BandedIndex<impl Fn(Range<usize>) -> WindowIndex + '_> {
-    BandedIndex::new(
-        exemplar.height as usize,
-        exemplar.width as usize,
-        move |rows| WindowIndex::toroidal(exemplar, n as u32, rows),
-    )
+    index: BandedIndex<Box<dyn Fn(Range<usize>) -> WindowIndex + Send + Sync + 'a>>,
+}
+
+impl<'a> ExemplarWindows<'a> {
+    /// The `n`×`n` windows of `exemplar`, toroidally.
+    ///
+    /// Preconditions: `n >= 1`; the exemplar has pixels.
+    pub fn new(exemplar: &'a Image, n: usize) -> Self {
+        Self {
+            n,
+            index: BandedIndex::new(
+                exemplar.height as usize,
+                exemplar.width as usize,
+                Box::new(move |rows| WindowIndex::toroidal(exemplar, n as u32, rows)),
+            ),
+        }
+    }
+
+    /// Window side.
+    pub fn n(&self) -> usize {
+        self.n
+    }
+
+    fn nearest(&self, queries: &[f32], dim: usize) -> Vec<f32> {
+        self.index.nearest(queries, dim)
+    }
 }
 
 #[cfg(test)]

@@ -8,6 +8,7 @@
 
 use rayon::prelude::*;
 
+use super::energy::{ExemplarWindows, image_texture_energy_in};
 use super::window_index::{BandedIndex, WindowIndex};
 use super::{EnergySettings, histogram_wasserstein_mean, image_texture_energy};
 use crate::image::pyramid::gaussian_pyramid;
@@ -122,14 +123,28 @@ pub fn image_quality(
     sources: Option<&SourceMap>,
     settings: &EnergySettings,
 ) -> ImageQuality {
+    image_quality_in(output, exemplar, None, sources, settings)
+}
+
+/// [`image_quality`], its texture energy against `windows` when given (the
+/// exemplar's windows already indexed, [`ExemplarWindows`]: of `exemplar`
+/// or of an image with its values, at `settings.neighbourhood`).
+pub fn image_quality_in(
+    output: &Image,
+    exemplar: &Image,
+    windows: Option<&ExemplarWindows>,
+    sources: Option<&SourceMap>,
+    settings: &EnergySettings,
+) -> ImageQuality {
     // Each measure in a span of its own (`--trace`).
     fn timed<T>(span: tracing::Span, f: impl FnOnce() -> T) -> T {
         let _s = span.entered();
         f()
     }
     use tracing::debug_span as span;
-    let coherence = timed(span!("image_energy"), || {
-        image_texture_energy(output, exemplar, settings, Wrap::Clamp)
+    let coherence = timed(span!("image_energy"), || match windows {
+        Some(w) => image_texture_energy_in(output, w, settings, Wrap::Clamp),
+        None => image_texture_energy(output, exemplar, settings, Wrap::Clamp),
     });
     ImageQuality {
         coherence_mean: coherence.mean,

@@ -7,7 +7,9 @@
 use crate::image::Image;
 use crate::image::sample::Wrap;
 use crate::kernels::lapped::coverage::{lattice_level, lattice_samples_into};
-use crate::kernels::metrics::energy::{SampledTemplates, surface_energy_of};
+use crate::kernels::metrics::energy::{
+    ExemplarWindows, SampledTemplates, surface_energy_in, surface_energy_of,
+};
 use crate::kernels::metrics::surface_quality::{SurfaceQuality, SurfaceResult, surface_quality_of};
 use crate::kernels::metrics::{EnergySettings, EnergyStats, SurfaceSignal, histogram_wasserstein};
 use crate::kernels::surface::frames::TangentFrame;
@@ -22,7 +24,8 @@ pub const HISTOGRAM_SAMPLES: f32 = 20_000.0;
 /// ([`surface_quality_of`]) of `signal` on `mesh`, from one set of
 /// templates ([`SampledTemplates`]), in `frames` at
 /// `spacing` world units per exemplar pixel; `sources` are the per-vertex
-/// exemplar pixels, when known. Parts `"texture energy"` (one step) and
+/// exemplar pixels, when known; `windows` the exemplar's windows already
+/// indexed, when the caller has them (else indexed here). Parts `"texture energy"` (one step) and
 /// `"quality"` of `progress`.
 ///
 /// Preconditions: as [`surface_energy_of`] and [`surface_quality_of`].
@@ -35,6 +38,7 @@ pub fn measure_surface(
     exemplar: &Image,
     settings: &EnergySettings,
     sources: Option<&[Vec2]>,
+    windows: Option<&ExemplarWindows>,
     progress: &Progress,
 ) -> (EnergyStats, SurfaceQuality) {
     progress.set_part("texture energy");
@@ -45,7 +49,10 @@ pub fn measure_surface(
     // once for both.
     let small =
         SampledTemplates::for_energy(mesh, &topo, frames, spacing, signal, exemplar, settings);
-    let stats = surface_energy_of(&small, exemplar, settings);
+    let stats = match windows {
+        Some(w) => surface_energy_in(&small, exemplar, w, settings),
+        None => surface_energy_of(&small, exemplar, settings),
+    };
     drop(span);
     progress.inc(1);
     progress.set_part("quality");

@@ -19,11 +19,13 @@
 use crate::config::params::to_json;
 use crate::image::Image;
 use crate::kernels::lapped::composite::{LappedComposite, PasteRecord};
+use crate::kernels::metrics::energy::ExemplarWindows;
+use crate::kernels::metrics::quality::image_quality_in;
 use crate::kernels::metrics::result::{
     atlas_samples, histogram_density, histogram_distance, measure_surface,
 };
 use crate::kernels::metrics::surface_quality::{SurfaceResult, surface_verbatim};
-use crate::kernels::metrics::{EnergySettings, SourceMap, SurfaceSignal, image_quality};
+use crate::kernels::metrics::{EnergySettings, SourceMap, SurfaceSignal};
 use crate::kernels::surface::frames::frames_from_global_direction;
 use crate::kernels::surface::surface_sample::CornerFn;
 use crate::kernels::wei_levoy::retile::{ResultAttributes, map_back};
@@ -81,14 +83,21 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
         let progress = Progress::new(5, "result_metrics");
         let _finish = progress.finish_on_drop();
         progress.set_part("plane");
+        // The exemplar's windows, indexed once for the plane's texture
+        // energy and the surface's (the plane measures the RGB exemplar: the
+        // same values when it has three channels).
+        let n = settings.neighbourhood;
+        let image = &exemplar.image;
+        let shared =
+            (plane.is_some() && image.channels == 3 && image.width >= n && image.height >= n)
+                .then(|| ExemplarWindows::new(image, n as usize));
         if let Some(plane) = plane.as_deref() {
-            plane_quality(plane, &exemplar.image, &settings, &mut metrics);
+            plane_quality(plane, image, &settings, shared.as_ref(), &mut metrics);
         }
         progress.inc(1);
         let Ok(result) = meshes.get(active.0) else {
             return;
         };
-        let n = settings.neighbourhood;
         if exemplar.image.width < n || exemplar.image.height < n {
             metrics.result.insert(
                 "texture_energy".into(),
@@ -102,6 +111,7 @@ pub fn system(settings: EnergySettings) -> ScheduleConfigs<ScheduleSystem> {
             exemplar: &exemplar,
             spacing: spacing.0,
             settings: &settings,
+            windows: shared.as_ref(),
         };
         if let (Some(asset), Ok(source)) = (baked.as_deref(), source.single()) {
             measure.baked(result, asset, source, &mut metrics);
@@ -141,6 +151,8 @@ struct Measure<'a> {
     exemplar: &'a Exemplar,
     spacing: f32,
     settings: &'a EnergySettings,
+    /// The exemplar's windows, indexed once when the plane measured them.
+    windows: Option<&'a ExemplarWindows<'a>>,
 }
 
 impl Measure<'_> {
@@ -262,6 +274,7 @@ impl Measure<'_> {
             &exemplar.image,
             self.settings,
             sources,
+            self.windows,
             progress,
         );
         record_surface_measures(
@@ -321,7 +334,15 @@ fn baked_quality(
     let (spacing, settings) = (measure.spacing, measure.settings);
     let hidden = Progress::hidden();
     let (stats, q) = measure_surface(
-        mesh, frames, spacing, &signal, &rgb, settings, None, &hidden,
+        mesh,
+        frames,
+        spacing,
+        &signal,
+        &rgb,
+        settings,
+        None,
+        measure.windows,
+        &hidden,
     );
     record_surface_measures(metrics, &stats, &q, settings.neighbourhood, spacing);
     // The histogram of the atlas as the mesh shows it.
@@ -408,6 +429,7 @@ fn plane_quality(
     plane: &PlaneImage,
     exemplar: &Image,
     settings: &EnergySettings,
+    windows: Option<&ExemplarWindows>,
     metrics: &mut Metrics,
 ) {
     let n = settings.neighbourhood;
@@ -428,6 +450,6 @@ fn plane_quality(
         texels: t.clone(),
     });
     let _span = tracing::debug_span!("plane_quality").entered();
-    let q = image_quality(img, &rgb, sources.as_ref(), settings);
+    let q = image_quality_in(img, &rgb, windows, sources.as_ref(), settings);
     metrics.result.insert("plane".into(), to_json(&q));
 }
