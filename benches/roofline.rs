@@ -46,7 +46,7 @@ use surfsynth::kernels::bangay_morkel::max_flow::FlowGraph;
 #[path = "common/transfer_patch.rs"]
 mod transfer;
 use surfsynth::kernels::coherent::appearance::{AppearanceSpec, appearance_level};
-use surfsynth::kernels::jump_maps::jump_map::ann::{AnnSearch, all_knn};
+use surfsynth::kernels::jump_maps::jump_map::ann::{AnnSearch, POINT_TILE, all_knn};
 use surfsynth::kernels::jump_maps::jump_map::neighbourhoods::{
     Neighbourhoods, source_region, vector_len, wrap_for,
 };
@@ -346,8 +346,8 @@ fn ceilings(ann_dim: usize, wl_dim: usize, app_dim: usize, app_dims: usize) -> C
     );
     let ann = add(
         "sgemm, jump-map all-kNN's shape".into(),
-        format!("256 × {ann_dim} · {ann_dim} × 512"),
-        sgemm_rate(256, ann_dim, 512, 16),
+        format!("256 × {ann_dim} · {ann_dim} × {POINT_TILE}"),
+        sgemm_rate(256, ann_dim, POINT_TILE, 16),
         "GFLOP/s",
     );
     let proj = add(
@@ -669,7 +669,7 @@ fn kernels(ex: &Image) -> (Vec<CeilingRow>, Vec<Row>, Vec<String>) {
         extra: String::new(),
         time: t,
         ceiling: cl.sgemm_ann,
-        limit: "faer products of 256 × 512 tiles, then a scalar scan of every score",
+        limit: "faer products of 256 × 256 tiles, then a scan of every score",
     });
 
     // Wei–Levoy exhaustive.

@@ -131,7 +131,8 @@ pub fn analysis_bytes(width: u32, height: u32, channels: u32, settings: &JumpMap
     };
     let tree = if may_use_tree { 72 * n } else { 0 };
     let q = KnnSearch::BLOCK as u64;
-    let per_thread = q * m * 8 * 5 + (q + 512) * (components + 1) * 4 + q * 512 * 4;
+    let tile = super::ann::POINT_TILE as u64;
+    let per_thread = q * m * 8 * 5 + (q + tile) * (components + 1) * 4 + q * tile * 4;
     // The points' squared norms of the exhaustive search (4 bytes each).
     let norms = if may_use_tree { 0 } else { 4 * n };
     let neighbours =
