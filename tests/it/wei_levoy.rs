@@ -239,23 +239,22 @@ fn synthesize(
     search: SearchKind,
     seed: u64,
 ) -> Vec<LevelResult> {
+    let settings = WlSettings {
+        search,
+        seed,
+        ..Default::default()
+    };
+    synthesize_with(case, exemplar, &settings)
+}
+
+fn synthesize_with(case: &PlanarCase, exemplar: &Image, settings: &WlSettings) -> Vec<LevelResult> {
     let levels: Vec<SynthesisLevel> = case
         .meshes
         .iter()
         .zip(&case.frames)
         .map(|(mesh, frames)| SynthesisLevel { mesh, frames })
         .collect();
-    wei_levoy_synthesis(
-        &levels,
-        exemplar,
-        &WlSettings {
-            search,
-            seed,
-            ..Default::default()
-        },
-        None,
-    )
-    .expect("synthesis runs")
+    wei_levoy_synthesis(&levels, exemplar, settings, None).expect("synthesis runs")
 }
 
 fn energy(case: &PlanarCase, colours: &[f32], exemplar: &Image) -> f32 {
@@ -405,6 +404,31 @@ fn synthesis_is_deterministic_at_one_and_two_threads() {
         // Another seed gives another texture.
         let c = synthesize(&case, &exemplar, kind, 12);
         assert_ne!(a[0].texels, c[0].texels);
+    }
+}
+
+/// Keeping the pass-2 stencils from the schedule for the queries (the
+/// default budget) and flattening each again for its query (budget 0) give
+/// the same synthesis, bit for bit.
+#[test]
+fn kept_stencils_give_the_synthesis_of_stencils_flattened_again() {
+    let case = planar_case();
+    let exemplar = texture_crop("stones", 32);
+    for search in [SearchKind::Exhaustive, PCA] {
+        let run = |stencil_budget: u64| {
+            let settings = WlSettings {
+                search,
+                seed: 5,
+                stencil_budget,
+                ..Default::default()
+            };
+            synthesize_with(&case, &exemplar, &settings)
+        };
+        let (kept, again) = (run(WlSettings::default().stencil_budget), run(0));
+        for (l, (a, b)) in kept.iter().zip(&again).enumerate() {
+            assert_eq!(a.texels, b.texels, "{search:?} level {l}");
+            assert_eq!(a.colours, b.colours, "{search:?} level {l}");
+        }
     }
 }
 

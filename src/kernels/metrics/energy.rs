@@ -408,6 +408,30 @@ mod tests {
         assert!(a.mean > 0.0 && a.p90 >= a.mean * 0.5);
     }
 
+    /// One index of the exemplar's windows, shared, gives each energy the
+    /// value it gets with an index of its own.
+    #[test]
+    fn shared_exemplar_windows_give_the_same_energy() {
+        let ex = ramp(19, 13);
+        let mut out = ramp(23, 17);
+        for (i, v) in out.data.iter_mut().enumerate() {
+            *v = (*v + (i % 7) as f32 * 0.11).fract();
+        }
+        let settings = EnergySettings {
+            neighbourhood: 5,
+            samples: 150,
+            seed: 9,
+            ..Default::default()
+        };
+        let windows = ExemplarWindows::new(&ex, 5);
+        for wrap in [Wrap::Clamp, Wrap::Repeat] {
+            assert_eq!(
+                image_texture_energy_in(&out, &windows, &settings, wrap),
+                image_texture_energy(&out, &ex, &settings, wrap)
+            );
+        }
+    }
+
     #[test]
     fn all_pixels_when_samples_exceed_them() {
         assert_eq!(sample_indices(5, 10, 0), vec![0, 1, 2, 3, 4]);

@@ -176,6 +176,7 @@ impl MatchSettings {
             seed,
             wrap,
             parent_reach: self.parent_reach,
+            stencil_budget: crate::kernels::wei_levoy::wl_match::STORED_STENCIL_BYTES,
         }
     }
 }
@@ -276,8 +277,11 @@ impl Stage for Match {
             .map(|spec| u64::from(spec.size) * u64::from(spec.size))
             .max()
             .unwrap_or(0);
-        let stencils =
-            crate::kernels::wei_levoy::wl_match::stored_stencil_bytes(sizes.vertices, points);
+        let stencils = crate::kernels::wei_levoy::wl_match::stored_stencil_bytes(
+            sizes.vertices,
+            points,
+            ks.stencil_budget,
+        );
         MemoryEstimate::per_vertex(
             "the exemplar's neighbourhood search, the kept stencils and the templates of every vertex",
             sizes,

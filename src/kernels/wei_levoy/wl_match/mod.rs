@@ -93,6 +93,11 @@ pub struct WlSettings {
     /// How far along the normal a parent face may be, in template spacings
     /// of the coarser level; > 0.
     pub parent_reach: f32,
+    /// Most bytes of a level's flattened pass-2 stencils kept from its
+    /// schedule for its queries ([`STORED_STENCIL_BYTES`] by default); a
+    /// level whose stencils take more flattens each again for its query.
+    /// The result is the same either way.
+    pub stencil_budget: u64,
 }
 
 impl Default for WlSettings {
@@ -104,6 +109,7 @@ impl Default for WlSettings {
             seed: 0,
             wrap: Wrap::Repeat,
             parent_reach: 4.0,
+            stencil_budget: STORED_STENCIL_BYTES,
         }
     }
 }
@@ -246,17 +252,13 @@ type ReadLists = (Vec<u32>, Vec<u32>, usize);
 pub const STORED_STENCIL_BYTES: u64 = 256 << 20;
 
 /// Bytes of the pass-2 stencils of `vertices` vertices with `points`
-/// template points each that a level keeps, 0 when they exceed
-/// [`STORED_STENCIL_BYTES`] (then none is kept).
-pub fn stored_stencil_bytes(vertices: u64, points: u64) -> u64 {
+/// template points each that a level keeps, 0 when they exceed `budget`
+/// (then none is kept; the default budget is [`STORED_STENCIL_BYTES`]).
+pub fn stored_stencil_bytes(vertices: u64, points: u64, budget: u64) -> u64 {
     let bytes = vertices
         .saturating_mul(points)
         .saturating_mul(std::mem::size_of::<StencilPoint>() as u64);
-    if bytes <= STORED_STENCIL_BYTES {
-        bytes
-    } else {
-        0
-    }
+    if bytes <= budget { bytes } else { 0 }
 }
 
 /// The parts of a level's neighbourhood: the level itself, then each coarser level.
@@ -479,7 +481,7 @@ pub fn wei_levoy_synthesis_with_progress(
             // vertex reads, and kept for the queries when they fit
             // STORED_STENCIL_BYTES (`points × 24` bytes per vertex, 1.2 KB
             // for 7 × 7); otherwise flattened again when a query is built.
-            let store = stored_stencil_bytes(nv as u64, tp as u64) > 0;
+            let store = stored_stencil_bytes(nv as u64, tp as u64, settings.stencil_budget) > 0;
             let pool = ScratchPool::new();
             let stencil_of = |v: usize, st: &mut [StencilPoint], scratch: &mut FlattenScratch| {
                 flatten_stencil(
