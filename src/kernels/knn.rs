@@ -90,15 +90,9 @@ impl<const D: usize> Knn<D> {
         if order.len() <= LEAF || depth >= 48 {
             let first = self.blocks.len() as u32;
             for chunk in order.chunks(8) {
-                let mut lanes = [[FAR; 8]; D];
                 let mut ids = [u32::MAX; 8];
-                for (l, &i) in chunk.iter().enumerate() {
-                    for (row, &v) in lanes.iter_mut().zip(&points[i as usize]) {
-                        row[l] = v;
-                    }
-                    ids[l] = i;
-                }
-                self.blocks.push(lanes);
+                ids[..chunk.len()].copy_from_slice(chunk);
+                self.blocks.push(lanes(points, chunk, FAR));
                 self.ids.push(ids);
             }
             self.nodes.push(Node {
@@ -226,6 +220,18 @@ impl<const D: usize> Knn<D> {
         let n = &self.nodes[node as usize];
         box_distance(&n.lo, &n.hi, query)
     }
+}
+
+/// The coordinates of the (at most eight) points `chunk` as `D` rows of
+/// eight lanes, one lane per point; the lanes beyond them at `far`.
+pub(crate) fn lanes<const D: usize>(points: &[[f32; D]], chunk: &[u32], far: f32) -> [[f32; 8]; D] {
+    let mut lanes = [[far; 8]; D];
+    for (l, &i) in chunk.iter().enumerate() {
+        for (row, &v) in lanes.iter_mut().zip(&points[i as usize]) {
+            row[l] = v;
+        }
+    }
+    lanes
 }
 
 /// The bounding box of `points[members]` over their first `B` coordinates.

@@ -121,30 +121,29 @@ fn parse_digits(text: &[u8]) -> Option<(u64, i32)> {
 /// exponent) never ties.
 #[inline]
 fn may_tie(x: f32) -> bool {
+    let (m, q) = mantissa_exponent(x);
+    q + m.trailing_zeros() as i32 >= -14
+}
+
+/// `|x| = m·2^q` exactly, `m` the integer significand (with the implicit
+/// bit for a normal float).
+#[inline]
+fn mantissa_exponent(x: f32) -> (u32, i32) {
     let bits = x.to_bits() & 0x7FFF_FFFF;
     let biased = (bits >> 23) as i32;
     let fraction = bits & 0x7F_FFFF;
-    let (m, q) = if biased == 0 {
+    if biased == 0 {
         (fraction, -149)
     } else {
         (fraction | 0x80_0000, biased - 150)
-    };
-    q + m.trailing_zeros() as i32 >= -14
+    }
 }
 
 /// Whether `v` (positive, finite) is exactly `(digits + ½)·10^exp`, the tie
 /// `core` rounds up and `zmij` down; `None` when the exact test would
 /// overflow 128 bits.
 fn is_upper_tie(v: f32, digits: u64, exp: i32) -> Option<bool> {
-    // v = m·2^q exactly.
-    let bits = v.to_bits();
-    let biased = (bits >> 23) & 0xFF;
-    let fraction = bits & 0x7F_FFFF;
-    let (m, q) = if biased == 0 {
-        (fraction, -149)
-    } else {
-        (fraction | 0x80_0000, biased as i32 - 150)
-    };
+    let (m, q) = mantissa_exponent(v);
     let (m, t) = (u128::from(m), u128::from(2 * digits + 1));
     // 2v = t·10^exp  ⇔  m·2^(q+1) = t·5^exp·2^exp.
     let pow5 = |k: u32| 5u128.checked_pow(k);

@@ -246,14 +246,16 @@ pub fn stream_pastes_obj(
          mtllib {mtl}",
         pastes.pastes.len()
     )?;
-    super::obj::write_items(w, mesh.vertex_count(), |v, buf| {
-        let p = mesh.positions[v];
-        writeln!(buf, "v {} {} {}", p.x, p.y, p.z)
-    })?;
+    super::obj::write_positions(w, mesh, None)?;
     super::obj::write_vertex_normals(w, mesh)?;
+    let mut line = Vec::new();
     for paste in &pastes.pastes {
         for uv in &paste.uvs {
-            writeln!(w, "vt {} {}", uv.x, 1.0 - uv.y)?;
+            line.clear();
+            line.extend_from_slice(b"vt");
+            super::obj::push_floats(&mut line, [uv.x, 1.0 - uv.y]);
+            line.push(b'\n');
+            w.write_all(&line)?;
         }
     }
     let mut vt = 1usize;

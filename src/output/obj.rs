@@ -100,18 +100,7 @@ pub fn stream_obj(
     mtl: Option<&str>,
 ) -> std::io::Result<()> {
     w.write_all(&obj_header(mtl))?;
-    write_items(w, mesh.vertex_count(), |v, buf| {
-        buf.push(b'v');
-        push_floats(buf, mesh.positions[v].to_array());
-        if let Some((values, channels)) = vertex_colours {
-            push_floats(
-                buf,
-                crate::image::pixel_rgb(&values[v * channels..(v + 1) * channels]),
-            );
-        }
-        buf.push(b'\n');
-        Ok(())
-    })?;
+    write_positions(w, mesh, vertex_colours)?;
     write_vertex_normals(w, mesh)?;
     if let Some(uvs) = corner_uvs {
         write_items(w, uvs.len(), |c, buf| {
@@ -156,7 +145,7 @@ fn obj_header(mtl: Option<&str>) -> Vec<u8> {
 /// Appends each value of `values` after a space, as `Display` writes it
 /// ([`push_f32`]: the same bytes as `write!(buf, " {}", x)`, faster).
 #[inline]
-fn push_floats<const N: usize>(buf: &mut Vec<u8>, values: [f32; N]) {
+pub(crate) fn push_floats<const N: usize>(buf: &mut Vec<u8>, values: [f32; N]) {
     for x in values {
         buf.push(b' ');
         push_f32(buf, x);
@@ -174,7 +163,7 @@ const BLOCK_GROUP: usize = 16;
 /// parallel into buffers, then written one after another, so the bytes are
 /// those of writing them one by one (float formatting is most of a large
 /// OBJ's writing time).
-pub(crate) fn write_items(
+fn write_items(
     w: &mut dyn Write,
     count: usize,
     item: impl Fn(usize, &mut Vec<u8>) -> std::io::Result<()> + Sync,
@@ -197,6 +186,27 @@ pub(crate) fn write_items(
         }
     }
     Ok(())
+}
+
+/// Writes one `v` line per vertex, with its RGB when `vertex_colours` are
+/// given (see [`encode_obj`]).
+pub(crate) fn write_positions(
+    w: &mut dyn Write,
+    mesh: &PolyMesh,
+    vertex_colours: Option<(&[f32], usize)>,
+) -> std::io::Result<()> {
+    write_items(w, mesh.vertex_count(), |v, buf| {
+        buf.push(b'v');
+        push_floats(buf, mesh.positions[v].to_array());
+        if let Some((values, channels)) = vertex_colours {
+            push_floats(
+                buf,
+                crate::image::pixel_rgb(&values[v * channels..(v + 1) * channels]),
+            );
+        }
+        buf.push(b'\n');
+        Ok(())
+    })
 }
 
 /// Writes one `vn` line per vertex: the mesh's area-weighted unit vertex

@@ -73,7 +73,6 @@ pub fn image_texture_energy_in(
     let picks = sample_indices(output.pixel_count(), settings.samples, settings.seed);
     let width = output.width as usize;
     let dim = n * n * ch;
-    let search = windows;
     let mut queries = Vec::new();
     let mut values = Vec::with_capacity(picks.len());
     for chunk in picks.chunks(QUERY_CHUNK) {
@@ -91,7 +90,7 @@ pub fn image_texture_energy_in(
                 }
             });
         values.extend(
-            search
+            windows
                 .nearest(&queries, dim)
                 .into_iter()
                 .map(|d| d / dim as f32),
@@ -122,31 +121,22 @@ pub struct SampledTemplates {
 }
 
 impl SampledTemplates {
-    /// Samples `samples` vertices that have faces with `seed` (every such
-    /// vertex once when there are fewer) and resamples the `n`×`n`
-    /// template of each in its frame, `spacing` world units between
-    /// points, uncovered points taking `default`. Parallel over samples;
-    /// the result does not depend on the thread count.
+    /// Resamples the `n`×`n` template of each of `vertices` (repeats
+    /// allowed) in its frame, `spacing` world units between points,
+    /// uncovered points taking `default`. Parallel over vertices; the result
+    /// does not depend on the thread count.
     #[allow(clippy::too_many_arguments)]
-    pub fn resample(
+    pub fn at(
         mesh: &PolyMesh,
         topo: &Topology,
         frames: &[TangentFrame],
         spacing: f32,
         signal: &SurfaceSignal,
         default: &[f32],
+        vertices: Vec<u32>,
         n: usize,
-        samples: usize,
-        seed: u64,
     ) -> Self {
         let ch = signal.channels();
-        let candidates: Vec<u32> = (0..mesh.vertex_count() as u32)
-            .filter(|&v| !topo.vertex_faces(v).is_empty())
-            .collect();
-        let vertices: Vec<u32> = sample_indices(candidates.len(), samples, seed)
-            .into_iter()
-            .map(|k| candidates[k])
-            .collect();
         let dim = n * n * ch;
         let mut values = vec![0.0f32; vertices.len() * dim];
         let mut coverage = vec![false; vertices.len() * n * n];
@@ -184,9 +174,10 @@ impl SampledTemplates {
         }
     }
 
-    /// [`Self::resample`] as the texture energy reads the result: the
-    /// settings' neighbourhood, samples and seed, the exemplar's mean as
-    /// the default.
+    /// [`Self::at`] as the texture energy reads the result: at
+    /// `settings.samples` vertices that have faces drawn with
+    /// `settings.seed` (every such vertex once when there are fewer), with
+    /// the settings' neighbourhood and the exemplar's mean as the default.
     #[allow(clippy::too_many_arguments)]
     pub fn for_energy(
         mesh: &PolyMesh,
@@ -197,16 +188,22 @@ impl SampledTemplates {
         exemplar: &Image,
         settings: &EnergySettings,
     ) -> Self {
-        Self::resample(
+        let candidates: Vec<u32> = (0..mesh.vertex_count() as u32)
+            .filter(|&v| !topo.vertex_faces(v).is_empty())
+            .collect();
+        let vertices = sample_indices(candidates.len(), settings.samples, settings.seed)
+            .into_iter()
+            .map(|k| candidates[k])
+            .collect();
+        Self::at(
             mesh,
             topo,
             frames,
             spacing,
             signal,
             &exemplar.mean(),
+            vertices,
             settings.neighbourhood as usize,
-            settings.samples,
-            settings.seed,
         )
     }
 
@@ -224,6 +221,15 @@ impl SampledTemplates {
     pub fn template(&self, i: usize) -> &[f32] {
         let dim = self.n * self.n * self.channels;
         &self.values[i * dim..(i + 1) * dim]
+    }
+
+    /// The values of the samples covered at `min_covered` points or more,
+    /// one after another in sample order.
+    pub fn kept(&self, min_covered: usize) -> Vec<f32> {
+        (0..self.len())
+            .filter(|&i| self.covered[i] as usize >= min_covered)
+            .flat_map(|i| self.template(i).iter().copied())
+            .collect()
     }
 }
 
@@ -287,7 +293,6 @@ pub fn surface_energy_in(
     let n = templates.n;
     assert_eq!(windows.n(), n, "windows of the templates' size");
     let dim = n * n * ch;
-    let search = windows;
     // Templates partly covered compare only their covered points: the
     // exhaustive search, made when the first one comes.
     let masked = std::sync::OnceLock::new();
@@ -314,7 +319,7 @@ pub fn surface_energy_in(
                 })
             })
             .collect();
-        let full = search.nearest(queries, dim);
+        let full = windows.nearest(queries, dim);
         values.extend(
             samples
                 .zip(partial)

@@ -21,9 +21,7 @@ use super::window_index::WindowIndex;
 use super::{EnergySettings, SurfaceSignal};
 use crate::image::Image;
 use crate::image::sample::floor_f32;
-use crate::kernels::surface::flatten::Pool;
 use crate::kernels::surface::frames::TangentFrame;
-use crate::kernels::surface::surface_sample::{ResampleScratch, resample_neighbourhood};
 use crate::mesh::{PolyMesh, Topology};
 
 /// Side of the structure templates (points one exemplar pixel apart), or the
@@ -90,32 +88,18 @@ fn templates(
     min_cover: f32,
     default: &[f32],
 ) -> Vec<f32> {
-    let ch = r.signal.channels();
-    let len = (size * size) as usize * ch;
     let min_covered = ((min_cover * (size * size) as f32).ceil() as usize).max(1);
-    let pool = Pool::<ResampleScratch>::new();
-    let kept: Vec<Option<Vec<f32>>> = picks
-        .par_iter()
-        .map(|&v| {
-            let mut out = vec![0.0f32; len];
-            let covered = pool.with(|scratch| {
-                resample_neighbourhood(
-                    r.mesh,
-                    r.topo,
-                    v,
-                    &r.frames[v as usize],
-                    r.spacing,
-                    size,
-                    r.signal,
-                    default,
-                    &mut out,
-                    scratch,
-                )
-            });
-            (covered >= min_covered).then_some(out)
-        })
-        .collect();
-    kept.into_iter().flatten().flatten().collect()
+    SampledTemplates::at(
+        r.mesh,
+        r.topo,
+        r.frames,
+        r.spacing,
+        r.signal,
+        default,
+        picks.to_vec(),
+        size as usize,
+    )
+    .kept(min_covered)
 }
 
 /// Mean Sobel gradient magnitude, per pixel, of the luminance of `img`'s
@@ -221,10 +205,7 @@ pub fn surface_quality_of(
     let n = settings.neighbourhood;
     let span = tracing::debug_span!("completeness").entered();
     // The templates the faces cover wholly.
-    let small: Vec<f32> = (0..small.len())
-        .filter(|&i| small.covered[i] as usize == small.n * small.n)
-        .flat_map(|i| small.template(i).iter().copied())
-        .collect();
+    let small = small.kept(small.n * small.n);
     let count = small.len() / ((n * n) as usize * ch).max(1);
 
     // Completeness: each exemplar window against every kept template.

@@ -26,7 +26,7 @@ use rayon::prelude::*;
 use wide::f32x8;
 
 use crate::image::Image;
-use crate::kernels::knn::{bounding_box, box_distance, split_widest};
+use crate::kernels::knn::{bounding_box, box_distance, lanes, split_widest};
 
 /// Principal axes the windows are projected on (fewer when a window has
 /// fewer values).
@@ -246,15 +246,11 @@ impl WindowIndex {
                 let members = &order[start..end];
                 let first_block = blocks.len() as u32;
                 for chunk in members.chunks(8) {
-                    let mut lanes = [[FAR; 8]; AXES];
                     let mut lane_origins = [usize::MAX; 8];
-                    for (l, &i) in chunk.iter().enumerate() {
-                        for (row, &v) in lanes.iter_mut().zip(&points[i as usize]) {
-                            row[l] = v;
-                        }
-                        lane_origins[l] = origins[i as usize];
+                    for (o, &i) in lane_origins.iter_mut().zip(chunk) {
+                        *o = origins[i as usize];
                     }
-                    blocks.push(lanes.map(f32x8::new));
+                    blocks.push(lanes(&points, chunk, FAR).map(f32x8::new));
                     block_origins.push(lane_origins);
                 }
                 let (lo, hi) = bounding_box(&points, members);
