@@ -234,20 +234,21 @@ pub fn check_metrics(
     Ok(e.bytes)
 }
 
-/// [`check_stages`] for the loaded `input` of a run of `seed`: its sizes
-/// under `raw`'s texture scale, a stage whose analysis of the exemplar is
-/// cached already not checked. What a run checks before its first stage.
+/// [`check_stages`] for the loaded `input` of a run of `seed`: its `sizes`
+/// (`InputSizes::of(input, raw)`, under `raw`'s texture scale), a stage
+/// whose analysis of the exemplar is cached already not checked. What a run
+/// checks before its first stage.
 ///
 /// # Errors
 /// As [`check_stages`].
 pub fn check_loaded(
     stages: &[Box<dyn StagePlan>],
     input: &super::LoadedInput,
+    sizes: &InputSizes,
     raw: &RawInput,
     seed: u64,
     limit: &MemoryLimit,
 ) -> Result<Vec<StageEstimate>, Refusal> {
-    let sizes = InputSizes::of(input, raw);
     let cached: Vec<bool> = stages
         .iter()
         .enumerate()
@@ -260,7 +261,7 @@ pub fn check_loaded(
             )
         })
         .collect();
-    check_stages(stages, &sizes, limit, &cached)
+    check_stages(stages, sizes, limit, &cached)
 }
 
 /// The sizes each stage sees: the input's, then what each stage before it

@@ -305,6 +305,7 @@ impl Pipeline {
                         memory_budget::check_loaded(
                             &stages,
                             &input,
+                            &crate::stage::memory::InputSizes::of(&input, &raw.input),
                             &raw.input,
                             raw.seed,
                             &memory_limit,

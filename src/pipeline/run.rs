@@ -184,11 +184,14 @@ fn run_schedule(
     keep: Keep,
 ) -> Result<(), PipelineError> {
     super::plane_check::check_plane_requests(pipeline, &input.mesh)?;
-    super::stage_check::check_stage_inputs(pipeline, &input)?;
+    // The loaded input's sizes, which the checks below all read.
+    let sizes = crate::stage::memory::InputSizes::of(&input, &pipeline.input);
+    super::stage_check::check_stage_inputs(pipeline, &input, &sizes)?;
     // Every stage's memory estimate for the loaded input, before any work.
     let estimates = super::memory_budget::check_loaded(
         &pipeline.stages,
         &input,
+        &sizes,
         &pipeline.input,
         pipeline.seed,
         &pipeline.memory_limit,
@@ -201,7 +204,7 @@ fn run_schedule(
     super::memory_budget::check_metrics(
         &pipeline.output,
         &pipeline.stages,
-        &crate::stage::memory::InputSizes::of(&input, &pipeline.input),
+        &sizes,
         &pipeline.memory_limit,
         &pipeline.source.file,
     )?;

@@ -15,13 +15,16 @@ use crate::stage::{InputView, StageError};
 ///
 /// # Errors
 /// [`StageError`] of the first stage that refuses, with its message.
-pub fn check_stage_inputs(pipeline: &Pipeline, input: &LoadedInput) -> Result<(), PipelineError> {
-    let sizes = InputSizes::of(input, &pipeline.input);
+pub fn check_stage_inputs(
+    pipeline: &Pipeline,
+    input: &LoadedInput,
+    sizes: &InputSizes,
+) -> Result<(), PipelineError> {
     let mut key_vertices = Some(sizes.vertices);
     for (i, (stage, sizes)) in pipeline
         .stages
         .iter()
-        .zip(stage_sizes(&pipeline.stages, &sizes))
+        .zip(stage_sizes(&pipeline.stages, sizes))
         .enumerate()
     {
         let view = InputView {
