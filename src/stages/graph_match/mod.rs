@@ -465,15 +465,22 @@ impl Stage for GraphMatch {
     type Settings = GraphMatchStageSettings;
 
     /// The exemplar's Gaussian stack and search planes, about 540 bytes an
-    /// exemplar pixel, and the per-vertex colours, texels, regions and
-    /// cut graphs, about 240 bytes a vertex (measured:
-    /// `tests/memory_estimates.rs`).
+    /// exemplar pixel, the spectra of the levels the FFT search uses (at
+    /// most 32 bytes an RGB pixel per level, exemplars up to 512²), and the
+    /// per-vertex colours, texels, regions and cut graphs, about 240 bytes
+    /// a vertex (measured: `tests/memory_estimates.rs`).
     fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
         const PER_VERTEX: u64 = 240;
         MemoryEstimate::per_vertex(
             "the exemplar stack and the per-vertex synthesis state",
             sizes,
-            sizes.exemplar_pixels() * 540,
+            sizes.exemplar_pixels() * 540
+                + MatchImages::spectra_bytes(
+                    sizes.exemplar_width,
+                    sizes.exemplar_height,
+                    sizes.exemplar_channels,
+                    MatchImages::default_levels_for(sizes.exemplar_width, sizes.exemplar_height),
+                ),
             PER_VERTEX,
         )
     }

@@ -41,6 +41,7 @@
 pub mod hierarchy;
 mod region;
 mod search;
+mod spectral;
 mod stack;
 
 pub use region::{KRegion, RegionScratch, k_for_side, k_region, mean_edge_lengths, region_k};

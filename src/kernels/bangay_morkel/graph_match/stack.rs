@@ -2,6 +2,7 @@
 //! laid out as padded channel planes, and the anti-aliasing level choice of
 //! Bangay & Morkel 2006 §3.3.4.
 
+use super::spectral::LevelSpectra;
 use crate::image::pyramid::{gaussian_pyramid, gaussian_stack};
 use crate::image::{Image, sample::Wrap};
 use crate::kernels::coherent::appearance::{AppearanceLevel, AppearanceSpec, appearance_level};
@@ -95,6 +96,8 @@ pub struct MatchImages {
     /// Per level, appearance vectors and k-coherence sets, where prepared
     /// ([`MatchImages::prepare_similar`]).
     similar: Vec<Option<AppearanceLevel>>,
+    /// Per level, its spectra for the FFT search, computed on first use.
+    spectra: Vec<std::sync::OnceLock<LevelSpectra>>,
 }
 
 impl MatchImages {
@@ -117,6 +120,7 @@ impl MatchImages {
             wrap,
             channels: exemplar.channels as usize,
             similar: vec![None; images.len()],
+            spectra: vec![std::sync::OnceLock::new(); images.len()],
             images,
             planes,
         }
@@ -157,10 +161,26 @@ impl MatchImages {
         self.similar.get(l)?.as_ref()
     }
 
+    /// Bytes the FFT search's spectra take at most for an exemplar of
+    /// `width × height × channels` with `levels` levels (each level's are
+    /// computed on first use; none above [`super::spectral::MAX_TEXELS`]).
+    pub fn spectra_bytes(width: u32, height: u32, channels: u32, levels: usize) -> u64 {
+        let (w, h) = (width as usize, height as usize);
+        if w * h > super::spectral::MAX_TEXELS {
+            return 0;
+        }
+        levels as u64 * LevelSpectra::bytes(w, h, channels as usize)
+    }
+
     /// The largest useful level count: levels until the blur (or the
     /// pyramid level) spans the exemplar's smaller side.
     pub fn default_levels(exemplar: &Image) -> usize {
-        let side = exemplar.width.min(exemplar.height).max(1);
+        Self::default_levels_for(exemplar.width, exemplar.height)
+    }
+
+    /// [`Self::default_levels`] of a `width × height` exemplar.
+    pub fn default_levels_for(width: u32, height: u32) -> usize {
+        let side = width.min(height).max(1);
         (32 - side.leading_zeros()) as usize
     }
 
@@ -191,6 +211,12 @@ impl MatchImages {
 
     pub(super) fn planes(&self, l: usize) -> &Planes {
         &self.planes[l]
+    }
+
+    /// The spectra of level `l` ([`super::spectral`]), computed on first
+    /// use.
+    pub(super) fn spectra(&self, l: usize) -> &LevelSpectra {
+        self.spectra[l].get_or_init(|| LevelSpectra::new(&self.images[l]))
     }
 
     /// Texels of level 0 per texel of level `l`: `aˡ` of §3.3.2.
