@@ -150,7 +150,7 @@ struct SweepArgs {
 /// free, and every page it grows back into comes zeroed by a page fault:
 /// 36 000 faults, about a tenth of the CPU time, in a planar jump-map run.
 /// Keeping [`HEAP_TOP_PAD`] at the top, and trimming only beyond twice
-/// that, removes two thirds of them: planar runs take 6–12 % less CPU for
+/// that, removes two thirds of them: planar runs take up to 13 % less CPU for
 /// a few MB more resident memory (`docs/notes/whole_run_speed.md`).
 fn tune_allocator() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
