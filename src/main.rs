@@ -150,8 +150,10 @@ struct SweepArgs {
 /// free, and every page it grows back into comes zeroed by a page fault:
 /// 36 000 faults, about a tenth of the CPU time, in a planar jump-map run.
 /// Keeping [`HEAP_TOP_PAD`] at the top, and trimming only beyond twice
-/// that, removes two thirds of them: planar runs take up to 13 % less CPU for
-/// a few MB more resident memory (`docs/notes/whole_run_speed.md`).
+/// that, removes up to half of them: planar runs take up to 10 % less CPU
+/// for 1–10 MB more resident memory (`docs/notes/whole_run_speed.md`). A
+/// pad of 16 MiB saved little more and held 16 MB more at the peak of a
+/// 137 k-vertex bake (`tests/it/memory.rs` caught it).
 fn tune_allocator() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets a malloc parameter; called first thing in
@@ -165,7 +167,7 @@ fn tune_allocator() {
 
 /// Bytes of free heap kept at its top ([`tune_allocator`]).
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
-const HEAP_TOP_PAD: i32 = 16 << 20;
+const HEAP_TOP_PAD: i32 = 4 << 20;
 
 fn main() -> ExitCode {
     tune_allocator();
