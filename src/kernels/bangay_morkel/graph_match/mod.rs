@@ -45,7 +45,10 @@ mod spectral;
 mod stack;
 
 pub use region::{KRegion, RegionScratch, k_for_side, k_region, mean_edge_lengths, region_k};
-pub use search::{BestMatch, MatchGroups, Sample, best_candidate, best_candidate_with, best_match};
+pub use search::{
+    BestMatch, MatchGroups, Sample, Search, best_candidate, best_candidate_with, best_match,
+    best_match_by,
+};
 pub use stack::{ImageLevels, MatchImages};
 
 use crate::image::sample::Wrap;

@@ -177,9 +177,11 @@ pub fn best_match(
 }
 
 /// How [`best_match_by`] scores the candidates; the winner is the same.
+/// (Public for the roofline bench, which times the tiles and the search
+/// as run.)
+#[doc(hidden)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[cfg_attr(not(test), allow(dead_code))]
-pub(super) enum Search {
+pub enum Search {
     /// Spectral where [`spectral::levels_to_transform`] expects it to be
     /// faster, else tiles.
     Auto,
@@ -192,7 +194,8 @@ pub(super) enum Search {
 }
 
 /// [`best_match`] with the scoring chosen by `search`.
-pub(super) fn best_match_by(
+#[doc(hidden)]
+pub fn best_match_by(
     images: &MatchImages,
     level: usize,
     groups: &MatchGroups,
