@@ -140,30 +140,38 @@ impl SampledTemplates {
         let dim = n * n * ch;
         let mut values = vec![0.0f32; vertices.len() * dim];
         let mut coverage = vec![false; vertices.len() * n * n];
-        let pool = Pool::<ResampleScratch>::new();
-        let covered: Vec<u32> = values
-            .par_chunks_exact_mut(dim.max(1))
-            .zip(coverage.par_chunks_exact_mut((n * n).max(1)))
-            .zip(&vertices)
-            .map(|((out, mask), &v)| {
-                pool.with(|resample| {
-                    let covered = resample_neighbourhood(
-                        mesh,
-                        topo,
-                        v,
-                        &frames[v as usize],
-                        spacing,
-                        n as u32,
-                        signal,
-                        default,
-                        out,
-                        resample,
-                    );
-                    mask.copy_from_slice(resample.coverage());
-                    covered as u32
-                })
-            })
+        let mut covered = vec![0u32; vertices.len()];
+        // Resampled in order of vertex index, each into its own slot: nearby
+        // vertices share faces, which then are still in cache (meshes number
+        // their vertices with some locality). The values do not depend on
+        // the order.
+        let mut jobs: Vec<(u32, &mut [f32], &mut [bool], &mut u32)> = vertices
+            .iter()
+            .zip(values.chunks_exact_mut(dim.max(1)))
+            .zip(coverage.chunks_exact_mut((n * n).max(1)))
+            .zip(covered.iter_mut())
+            .map(|(((&v, out), mask), c)| (v, out, mask, c))
             .collect();
+        jobs.sort_by_key(|job| job.0);
+        let pool = Pool::<ResampleScratch>::new();
+        jobs.par_iter_mut().for_each(|(v, out, mask, c)| {
+            pool.with(|resample| {
+                **c = resample_neighbourhood(
+                    mesh,
+                    topo,
+                    *v,
+                    &frames[*v as usize],
+                    spacing,
+                    n as u32,
+                    signal,
+                    default,
+                    out,
+                    resample,
+                ) as u32;
+                mask.copy_from_slice(resample.coverage());
+            })
+        });
+        drop(jobs);
         Self {
             n,
             channels: ch,
@@ -435,6 +443,47 @@ mod tests {
                 image_texture_energy(&out, &ex, &settings, wrap)
             );
         }
+    }
+
+    /// Templates are resampled in order of vertex index into their own
+    /// slots: listing the same vertices in another order (with repeats)
+    /// gives each sample the same values, coverage and count.
+    #[test]
+    fn sampled_templates_do_not_depend_on_the_order_of_the_vertices() {
+        use crate::mesh::builtin::{BuiltinOptions, builtin_mesh};
+        let opts = BuiltinOptions {
+            resolution: [14, 11],
+            size: 13.0,
+            ..Default::default()
+        };
+        let mesh = builtin_mesh("jittered_plane", &opts).unwrap();
+        let topo = Topology::build(&mesh);
+        let frames =
+            vec![TangentFrame::from_direction(glam::Vec3::Z, glam::Vec3::X); mesh.vertex_count()];
+        let values: Vec<f32> = (0..mesh.vertex_count())
+            .map(|v| ((v * 7) % 13) as f32 / 13.0)
+            .collect();
+        let signal = SurfaceSignal::VertexColours {
+            values: &values,
+            channels: 1,
+        };
+        let list: Vec<u32> = vec![100, 3, 77, 3, 150, 0, 64, 121];
+        let at = |vertices: Vec<u32>| {
+            SampledTemplates::at(&mesh, &topo, &frames, 1.0, &signal, &[0.5], vertices, 5)
+        };
+        let forward = at(list.clone());
+        let reversed = at(list.iter().rev().copied().collect());
+        let k = list.len();
+        for i in 0..k {
+            let j = k - 1 - i;
+            assert_eq!(forward.template(i), reversed.template(j), "sample {i}");
+            assert_eq!(forward.covered[i], reversed.covered[j]);
+            assert_eq!(
+                forward.coverage[i * 25..(i + 1) * 25],
+                reversed.coverage[j * 25..(j + 1) * 25]
+            );
+        }
+        assert!(forward.covered.contains(&25) && forward.covered.iter().any(|&c| c < 25));
     }
 
     #[test]
