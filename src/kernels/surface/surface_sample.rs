@@ -294,6 +294,7 @@ pub fn resample_neighbourhood(
         }
         let c0 = corners.start;
         let mut any_front = false;
+        let first_tri = tris.len();
         for c in (corners.start + 1)..(corners.end - 1) {
             let ids = [c0, c, c + 1];
             let pr = ids.map(|k| project(mesh.corner_vertex[k]));
@@ -313,6 +314,20 @@ pub fn resample_neighbourhood(
         }
         let overlaps =
             any_front && bb_max.x >= lo && bb_min.x <= hi && bb_max.y >= lo && bb_min.y <= hi;
+        // Its triangles are kept only where the rasteriser below could
+        // place a lattice point in them: within its margin (for the face's
+        // extent, at least that of any of its triangles) of the lattice,
+        // and never less than the one spacing `overlaps` allows. The
+        // triangles kept keep their order, so ties fall as before.
+        let reach =
+            spacing * (1.0 + 1e-3 + 1e-4 * ((bb_max - bb_min).max_element() / spacing)).max(1.0);
+        let (first, last) = (
+            -half * spacing - reach,
+            (n as f32 - 1.0 - half) * spacing + reach,
+        );
+        if !(bb_max.x >= first && bb_min.x <= last && bb_max.y >= first && bb_min.y <= last) {
+            tris.truncate(first_tri);
+        }
         if !(near || overlaps) {
             continue;
         }
