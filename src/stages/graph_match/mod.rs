@@ -465,8 +465,9 @@ impl Stage for GraphMatch {
     type Settings = GraphMatchStageSettings;
 
     /// The exemplar's Gaussian stack and search planes, about 540 bytes an
-    /// exemplar pixel, the spectra of the levels the FFT search uses (at
-    /// most 32 bytes an RGB pixel per level, exemplars up to 512²), and the
+    /// exemplar pixel; the FFT search's spectra of the levels it uses (at
+    /// most 32 bytes an RGB pixel per level) and each thread's buffers
+    /// (about 48 bytes a pixel), for exemplars up to 512²; and the
     /// per-vertex colours, texels, regions and cut graphs, about 240 bytes
     /// a vertex (measured: `tests/memory_estimates.rs`).
     fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
@@ -475,11 +476,12 @@ impl Stage for GraphMatch {
             "the exemplar stack and the per-vertex synthesis state",
             sizes,
             sizes.exemplar_pixels() * 540
-                + MatchImages::spectra_bytes(
+                + MatchImages::spectral_bytes(
                     sizes.exemplar_width,
                     sizes.exemplar_height,
                     sizes.exemplar_channels,
                     MatchImages::default_levels_for(sizes.exemplar_width, sizes.exemplar_height),
+                    rayon::current_num_threads(),
                 ),
             PER_VERTEX,
         )

@@ -174,6 +174,12 @@ impl LevelSpectra {
         ((channels + 2) / 2 * width * height * std::mem::size_of::<Complex64>()) as u64
     }
 
+    /// Bytes of one thread's search buffers for `width × height` levels
+    /// (the sums, a kernel's spectrum, the columns), kept by the thread.
+    pub(super) fn scratch_bytes(width: usize, height: usize) -> u64 {
+        (3 * width * (height + COLUMN_PAD) * std::mem::size_of::<Complex64>()) as u64
+    }
+
     /// The 2-D DFT, by rows into `out`, of the plane whose only non-zero
     /// columns are `scratch`'s live columns. The columns are overwritten.
     fn forward(&self, scratch: &mut Scratch, out: &mut [Complex64]) {

@@ -161,15 +161,23 @@ impl MatchImages {
         self.similar.get(l)?.as_ref()
     }
 
-    /// Bytes the FFT search's spectra take at most for an exemplar of
-    /// `width × height × channels` with `levels` levels (each level's are
-    /// computed on first use; none above [`super::spectral::MAX_TEXELS`]).
-    pub fn spectra_bytes(width: u32, height: u32, channels: u32, levels: usize) -> u64 {
+    /// Bytes the FFT search takes at most for an exemplar of `width ×
+    /// height × channels` with `levels` levels searched by `threads`
+    /// threads: every level's spectra (each computed on first use) and each
+    /// thread's buffers; none above [`super::spectral::MAX_TEXELS`].
+    pub fn spectral_bytes(
+        width: u32,
+        height: u32,
+        channels: u32,
+        levels: usize,
+        threads: usize,
+    ) -> u64 {
         let (w, h) = (width as usize, height as usize);
         if w * h > super::spectral::MAX_TEXELS {
             return 0;
         }
         levels as u64 * LevelSpectra::bytes(w, h, channels as usize)
+            + threads as u64 * LevelSpectra::scratch_bytes(w, h)
     }
 
     /// The largest useful level count: levels until the blur (or the
