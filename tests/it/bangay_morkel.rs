@@ -941,6 +941,11 @@ fn graph_cut_config_runs_end_to_end_at_small_size() {
         dir.path().to_str().unwrap(),
         "--set",
         "stage.1.target_vertices=4000",
+        // The command line builds its thread pool after validating the
+        // config: a stage's memory estimate must not start rayon's pool
+        // first (it did, and the run failed "already initialized").
+        "--threads",
+        "2",
     ]);
     assert_eq!(code, 0, "{stderr}");
     for name in ["result.ply", "result.obj", "preview_0.png", "metrics.json"] {

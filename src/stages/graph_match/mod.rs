@@ -467,7 +467,8 @@ impl Stage for GraphMatch {
     /// The exemplar's Gaussian stack and search planes, about 540 bytes an
     /// exemplar pixel; the FFT search's spectra of the levels it uses (at
     /// most 32 bytes an RGB pixel per level) and each thread's buffers
-    /// (about 48 bytes a pixel), for exemplars up to 512²; and the
+    /// (about 48 bytes a pixel, counted per core: `--threads` above the
+    /// core count is not), for exemplars up to 512²; and the
     /// per-vertex colours, texels, regions and cut graphs, about 240 bytes
     /// a vertex (measured: `tests/memory_estimates.rs`).
     fn memory_estimate(_settings: &Self::Settings, sizes: &InputSizes) -> Vec<MemoryEstimate> {
@@ -481,7 +482,10 @@ impl Stage for GraphMatch {
                     sizes.exemplar_height,
                     sizes.exemplar_channels,
                     MatchImages::default_levels_for(sizes.exemplar_width, sizes.exemplar_height),
-                    rayon::current_num_threads(),
+                    // The cores, as rayon's default pool has: asking rayon
+                    // would start its global pool before the command line
+                    // sets `--threads` (validation comes first).
+                    std::thread::available_parallelism().map_or(1, |n| n.get()),
                 ),
             PER_VERTEX,
         )
