@@ -523,7 +523,7 @@ const OVERSAMPLING: usize = 8;
 /// principal ones changes no result, only how much is skipped. `None`
 /// when the decomposition fails.
 fn leading_axes_randomised(rows: faer::MatRef<f64>, axes: usize) -> Option<faer::Mat<f64>> {
-    use faer::{Accum, Mat, Par, linalg::matmul::matmul};
+    use faer::Mat;
     let (m, dim) = (rows.nrows(), rows.ncols());
     let l = (axes + OVERSAMPLING).min(dim).min(m);
     // A fixed pseudo-random test matrix: the axes do not depend on a seed.
@@ -534,41 +534,30 @@ fn leading_axes_randomised(rows: faer::MatRef<f64>, axes: usize) -> Option<faer:
         state ^= state << 17;
         (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
     });
-    let mut y = Mat::<f64>::zeros(m, l);
-    matmul(
-        y.as_mut(),
-        Accum::Replace,
-        rows,
-        omega.as_ref(),
-        1.0,
-        Par::Seq,
-    );
-    let q = y.qr().compute_thin_Q();
-    let mut z = Mat::<f64>::zeros(dim, l);
-    matmul(
-        z.as_mut(),
-        Accum::Replace,
-        rows.transpose(),
-        q.as_ref(),
-        1.0,
-        Par::Seq,
-    );
-    let z = z.qr().compute_thin_Q();
-    matmul(y.as_mut(), Accum::Replace, rows, z.as_ref(), 1.0, Par::Seq);
-    let q = y.qr().compute_thin_Q();
-    let mut b = Mat::<f64>::zeros(l, dim);
-    matmul(
-        b.as_mut(),
-        Accum::Replace,
-        q.transpose(),
-        rows,
-        1.0,
-        Par::Seq,
-    );
+    let q = product(rows, omega.as_ref(), 1.0).qr().compute_thin_Q();
+    let z = product(rows.transpose(), q.as_ref(), 1.0)
+        .qr()
+        .compute_thin_Q();
+    let q = product(rows, z.as_ref(), 1.0).qr().compute_thin_Q();
+    let b = product(q.transpose(), rows, 1.0);
     let svd = b.thin_svd().ok()?;
     let v = svd.V();
     let ok = v.ncols() >= axes && (0..axes).all(|a| (0..dim).all(|j| v[(j, a)].is_finite()));
     ok.then(|| Mat::<f64>::from_fn(dim, axes, |j, a| v[(j, a)]))
+}
+
+/// `alpha · a · b`, one faer product on this thread.
+fn product(a: faer::MatRef<f64>, b: faer::MatRef<f64>, alpha: f64) -> faer::Mat<f64> {
+    let mut c = faer::Mat::<f64>::zeros(a.nrows(), b.ncols());
+    faer::linalg::matmul::matmul(
+        c.as_mut(),
+        faer::Accum::Replace,
+        a,
+        b,
+        alpha,
+        faer::Par::Seq,
+    );
+    c
 }
 
 /// [`leading_axes_randomised`] for a small sample: the eigenvectors of the
@@ -578,15 +567,7 @@ fn leading_axes_eigen(rows: faer::MatRef<f64>, axes: usize) -> Option<faer::Mat<
     if m == 0 {
         return None;
     }
-    let mut cov = faer::Mat::<f64>::zeros(dim, dim);
-    faer::linalg::matmul::matmul(
-        cov.as_mut(),
-        faer::Accum::Replace,
-        rows.transpose(),
-        rows,
-        1.0 / m as f64,
-        faer::Par::Seq,
-    );
+    let cov = product(rows.transpose(), rows, 1.0 / m as f64);
     let e = cov.self_adjoint_eigen(faer::Side::Lower).ok()?;
     // Eigenvalues ascend: the leading axes are the last columns.
     let u = e.U();

@@ -319,8 +319,7 @@ pub fn resample_neighbourhood(
         // extent, at least that of any of its triangles) of the lattice,
         // and never less than the one spacing `overlaps` allows. The
         // triangles kept keep their order, so ties fall as before.
-        let reach =
-            spacing * (1.0 + 1e-3 + 1e-4 * ((bb_max - bb_min).max_element() / spacing)).max(1.0);
+        let reach = spacing * (1.0 + 1e-3 + 1e-4 * ((bb_max - bb_min).max_element() / spacing));
         let (first, last) = (
             -half * spacing - reach,
             (n as f32 - 1.0 - half) * spacing + reach,

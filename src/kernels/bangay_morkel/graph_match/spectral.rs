@@ -148,7 +148,7 @@ impl LevelSpectra {
             .map(|p| p.iter().map(|v| v * v).sum::<f64>().sqrt())
             .collect();
         let mut scratch = Scratch::default();
-        scratch.start(width, height);
+        scratch.start(width);
         for x in 0..width {
             scratch.column(x, height);
         }
@@ -222,13 +222,12 @@ impl LevelSpectra {
 }
 
 impl Scratch {
-    /// No live column, for planes of `width × height`.
-    fn start(&mut self, width: usize, height: usize) {
+    /// No live column, for planes `width` wide.
+    fn start(&mut self, width: usize) {
         self.slot.clear();
         self.slot.resize(width, u32::MAX);
         self.live.clear();
         self.columns.clear();
-        let _ = height;
     }
 
     /// The slot of column `x`, made live (zero) if it was not.
@@ -362,7 +361,7 @@ fn best_match_generic<'a>(
             let mut l1 = vec![0.0f64; ch + 1];
             for (pair, p) in sp.pairs.iter().enumerate() {
                 let (a, b) = (2 * pair, 2 * pair + 1);
-                scratch.start(fw, fh);
+                scratch.start(fw);
                 for (g, s) in groups.samples().iter().enumerate() {
                     if s.level != l {
                         continue;
@@ -383,6 +382,9 @@ fn best_match_generic<'a>(
                     if b <= ch {
                         l1[b] += im.abs();
                     }
+                    if pair == 0 {
+                        constant += m * colour.iter().map(|&v| v as f64 * v as f64).sum::<f64>();
+                    }
                 }
                 sp.forward(scratch, &mut spectrum);
                 for ((t, z), p) in scratch.sum.iter_mut().zip(&spectrum).zip(p) {
@@ -390,13 +392,6 @@ fn best_match_generic<'a>(
                 }
             }
             bound += sp.error(&l1);
-            for (g, s) in groups.samples().iter().enumerate() {
-                if s.level == l {
-                    let colour = &groups.colour()[g * ch..(g + 1) * ch];
-                    constant += groups.weight()[g] as f64
-                        * colour.iter().map(|&v| v as f64 * v as f64).sum::<f64>();
-                }
-            }
         }
         bound += 1e-12 * constant;
         scratch.spectrum = spectrum;
