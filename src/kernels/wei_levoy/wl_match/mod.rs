@@ -478,9 +478,10 @@ pub fn wei_levoy_synthesis_with_progress(
             let tp = template.points();
             let stencil_span = tracing::info_span!("wl_stencils", level = l).entered();
             // The stencils are flattened here to find which vertices each
-            // vertex reads, and kept for the queries when they fit
-            // STORED_STENCIL_BYTES (`points × 24` bytes per vertex, 1.2 KB
-            // for 7 × 7); otherwise flattened again when a query is built.
+            // vertex reads, and kept for the queries when they fit the
+            // settings' `stencil_budget` (STORED_STENCIL_BYTES by default;
+            // `points × 24` bytes per vertex, 1.2 KB for 7 × 7); otherwise
+            // flattened again when a query is built.
             let store = stored_stencil_bytes(nv as u64, tp as u64, settings.stencil_budget) > 0;
             let pool = ScratchPool::new();
             let stencil_of = |v: usize, st: &mut [StencilPoint], scratch: &mut FlattenScratch| {
